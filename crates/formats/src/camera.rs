@@ -1,0 +1,160 @@
+//! The camera file (TOML, `conventions.md`): `[sensor]`, `[interior]`,
+//! optional `[distortion]`. Unknown keys and missing required keys are errors
+//! that name the file and the key.
+
+use crate::FormatError;
+use photopose_geometry::{Camera, Distortion, Interior, Sensor};
+use serde::Deserialize;
+use std::path::Path;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    sensor: SensorToml,
+    interior: InteriorToml,
+    #[serde(default)]
+    distortion: DistortionToml,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorToml {
+    width: i64,
+    height: i64,
+    pixel_size: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InteriorToml {
+    c: f64,
+    x0: f64,
+    y0: f64,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+struct DistortionToml {
+    k1: f64,
+    k2: f64,
+    k3: f64,
+    p1: f64,
+    p2: f64,
+    b1: f64,
+    b2: f64,
+}
+
+/// Parses camera TOML text; `origin` names the file in errors.
+pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
+    let err = |what: String| FormatError::Camera {
+        origin: origin.into(),
+        what,
+    };
+    let f: File = toml::from_str(text).map_err(|e| {
+        // toml's message names the key and shows the line; keep it on one line.
+        let msg = e.message().to_string();
+        let at = e
+            .span()
+            .map(|s| {
+                let line = text[..s.start.min(text.len())].matches('\n').count() + 1;
+                format!("line {line}: ")
+            })
+            .unwrap_or_default();
+        err(format!("{at}{msg}"))
+    })?;
+    let dim = |key: &str, v: i64| -> Result<u32, FormatError> {
+        u32::try_from(v).map_err(|_| err(format!("{key} = {v} must be a positive pixel count")))
+    };
+    let sensor = Sensor {
+        width: dim("sensor.width", f.sensor.width)?,
+        height: dim("sensor.height", f.sensor.height)?,
+        pixel_size: f.sensor.pixel_size,
+    };
+    let d = f.distortion;
+    Camera::new(
+        sensor,
+        Interior {
+            c: f.interior.c,
+            x0: f.interior.x0,
+            y0: f.interior.y0,
+        },
+        Distortion {
+            k1: d.k1,
+            k2: d.k2,
+            k3: d.k3,
+            p1: d.p1,
+            p2: d.p2,
+            b1: d.b1,
+            b2: d.b2,
+        },
+    )
+    .map_err(|e| err(e.to_string()))
+}
+
+/// Loads a camera file.
+pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
+    let text = crate::read_text(path)?;
+    parse_camera(&text, &path.display().to_string())
+}
+
+/// The TOML text of a camera (round-trips through [`parse_camera`]).
+pub fn camera_to_toml(cam: &Camera) -> String {
+    let d = &cam.distortion;
+    format!(
+        "[sensor]\nwidth = {}          # px\nheight = {}         # px\npixel_size = {:?}   # mm\n\n\
+         [interior]\nc = {:?}              # principal distance, mm\nx0 = {:?}             # principal point, mm from the image centre\ny0 = {:?}\n\n\
+         [distortion]          # Brown/Fraser parameters, mm-based\nk1 = {:?}\nk2 = {:?}\nk3 = {:?}\np1 = {:?}\np2 = {:?}\nb1 = {:?}\nb2 = {:?}\n",
+        cam.sensor.width,
+        cam.sensor.height,
+        cam.sensor.pixel_size,
+        cam.interior.c,
+        cam.interior.x0,
+        cam.interior.y0,
+        d.k1,
+        d.k2,
+        d.k3,
+        d.p1,
+        d.p2,
+        d.b1,
+        d.b2
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "[sensor]\nwidth = 1300\nheight = 1030\npixel_size = 0.0067\n[interior]\nc = 12.0\nx0 = 0.0\ny0 = 0.0\n";
+
+    #[test]
+    fn missing_distortion_means_zero_and_round_trips() {
+        let cam = parse_camera(GOOD, "cam.toml").unwrap();
+        assert!(cam.distortion.is_zero());
+        let mut strong = cam;
+        strong.distortion.k1 = -2.5e-3;
+        strong.distortion.b2 = 1.0 / 3.0;
+        assert_eq!(parse_camera(&camera_to_toml(&strong), "x").unwrap(), strong);
+    }
+
+    #[test]
+    fn errors_name_file_and_key() {
+        let cases = [
+            (
+                GOOD.replace("pixel_size = 0.0067", "pixel_size = -0.0067"),
+                "sensor.pixel_size",
+            ),
+            (GOOD.replace("c = 12.0", "c = 12.0\nfocal = 3.0"), "focal"),
+            (GOOD.replace("x0 = 0.0\n", ""), "x0"),
+            (GOOD.replace("width = 1300", "width = -5"), "sensor.width"),
+            (format!("{GOOD}[distortion]\nk4 = 1.0\n"), "k4"),
+            (GOOD.replace("c = 12.0", "c = \"twelve\""), "line 6"),
+        ];
+        for (text, want) in cases {
+            let e = parse_camera(&text, "cam.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("cam.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
+        }
+    }
+}

@@ -1,0 +1,350 @@
+//! The camera model of `conventions.md`: sensor, interior orientation and the
+//! Brown/Fraser correction of measured image coordinates, with its inverse.
+//!
+//! Measured (distorted) image coordinates `(x', y')` are corrected into ideal
+//! coordinates `(x_corr, y_corr)` that obey the collinearity equations; the
+//! inverse, used to project object points into the image, is solved by
+//! Newton's method on the correction.
+
+use crate::error::GeometryError;
+use nalgebra::{Matrix2, Vector2};
+
+/// The image sensor: size in pixels and pixel pitch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sensor {
+    /// Width in pixels (columns).
+    pub width: u32,
+    /// Height in pixels (rows).
+    pub height: u32,
+    /// Pixel pitch in mm (square pixels).
+    pub pixel_size: f64,
+}
+
+/// Interior orientation: principal distance and principal point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Interior {
+    /// Principal distance `c`, mm.
+    pub c: f64,
+    /// Principal point offset from the image centre, mm (`x'` right).
+    pub x0: f64,
+    /// Principal point offset from the image centre, mm (`y'` up).
+    pub y0: f64,
+}
+
+/// Brown/Fraser additional parameters, applied to measured coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Distortion {
+    /// Radial, `r^2` term.
+    pub k1: f64,
+    /// Radial, `r^4` term.
+    pub k2: f64,
+    /// Radial, `r^6` term.
+    pub k3: f64,
+    /// Decentring.
+    pub p1: f64,
+    /// Decentring.
+    pub p2: f64,
+    /// Affinity (scale difference).
+    pub b1: f64,
+    /// Shear.
+    pub b2: f64,
+}
+
+/// A calibrated camera: sensor, interior orientation and distortion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// The sensor.
+    pub sensor: Sensor,
+    /// Interior orientation.
+    pub interior: Interior,
+    /// Additional parameters.
+    pub distortion: Distortion,
+}
+
+/// Iterations allowed when inverting the correction.
+const INVERSE_MAX_ITER: usize = 20;
+/// Convergence of the inverse correction, mm.
+const INVERSE_TOL: f64 = 1e-12;
+
+impl Distortion {
+    /// Whether all parameters are zero (an ideal lens).
+    pub fn is_zero(&self) -> bool {
+        *self == Distortion::default()
+    }
+
+    /// The correction `(dx, dy)` at principal-point-reduced coordinates `(x, y)`.
+    #[inline]
+    pub fn correction(&self, x: f64, y: f64) -> Vector2<f64> {
+        let r2 = x * x + y * y;
+        let radial = r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let dx = x * radial
+            + (2.0 * x * x + r2) * self.p1
+            + 2.0 * self.p2 * x * y
+            + self.b1 * x
+            + self.b2 * y;
+        let dy = y * radial + 2.0 * self.p1 * x * y + (2.0 * y * y + r2) * self.p2;
+        Vector2::new(dx, dy)
+    }
+
+    /// Jacobian of `(x + dx, y + dy)` with respect to `(x, y)`.
+    #[inline]
+    pub fn corrected_jacobian(&self, x: f64, y: f64) -> Matrix2<f64> {
+        let r2 = x * x + y * y;
+        let f = r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let fp = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
+        let dxdx = f + 2.0 * x * x * fp + 6.0 * x * self.p1 + 2.0 * self.p2 * y + self.b1;
+        let dxdy = 2.0 * x * y * fp + 2.0 * y * self.p1 + 2.0 * self.p2 * x + self.b2;
+        let dydx = 2.0 * x * y * fp + 2.0 * self.p1 * y + 2.0 * x * self.p2;
+        let dydy = f + 2.0 * y * y * fp + 2.0 * self.p1 * x + 6.0 * y * self.p2;
+        Matrix2::new(1.0 + dxdx, dxdy, dydx, 1.0 + dydy)
+    }
+}
+
+impl Camera {
+    /// Builds a camera, checking every parameter (the key names are those of
+    /// the camera file).
+    pub fn new(
+        sensor: Sensor,
+        interior: Interior,
+        distortion: Distortion,
+    ) -> Result<Self, GeometryError> {
+        let bad = |key, value: f64, why| Err(GeometryError::InvalidCamera { key, value, why });
+        if sensor.width < 2 || sensor.width > 65_536 {
+            return bad(
+                "sensor.width",
+                sensor.width as f64,
+                "must be 2..=65536 pixels",
+            );
+        }
+        if sensor.height < 2 || sensor.height > 65_536 {
+            return bad(
+                "sensor.height",
+                sensor.height as f64,
+                "must be 2..=65536 pixels",
+            );
+        }
+        if !(sensor.pixel_size.is_finite() && sensor.pixel_size > 0.0 && sensor.pixel_size < 1.0) {
+            return bad(
+                "sensor.pixel_size",
+                sensor.pixel_size,
+                "must be a positive size in mm below 1",
+            );
+        }
+        if !(interior.c.is_finite() && interior.c > 0.0) {
+            return bad("interior.c", interior.c, "must be a positive length in mm");
+        }
+        let half_w = sensor.width as f64 * sensor.pixel_size / 2.0;
+        let half_h = sensor.height as f64 * sensor.pixel_size / 2.0;
+        if !(interior.x0.is_finite() && interior.x0.abs() < half_w) {
+            return bad("interior.x0", interior.x0, "must lie on the sensor");
+        }
+        if !(interior.y0.is_finite() && interior.y0.abs() < half_h) {
+            return bad("interior.y0", interior.y0, "must lie on the sensor");
+        }
+        let d = &distortion;
+        for (key, v) in [
+            ("distortion.k1", d.k1),
+            ("distortion.k2", d.k2),
+            ("distortion.k3", d.k3),
+            ("distortion.p1", d.p1),
+            ("distortion.p2", d.p2),
+            ("distortion.b1", d.b1),
+            ("distortion.b2", d.b2),
+        ] {
+            if !v.is_finite() {
+                return bad(key, v, "must be a finite number");
+            }
+        }
+        Ok(Camera {
+            sensor,
+            interior,
+            distortion,
+        })
+    }
+
+    /// Principal distance, mm.
+    #[inline]
+    pub fn c(&self) -> f64 {
+        self.interior.c
+    }
+
+    /// Pixel `(col, row)` to measured image coordinates `(x', y')` in mm.
+    #[inline]
+    pub fn pixel_to_image(&self, col: f64, row: f64) -> Vector2<f64> {
+        let s = &self.sensor;
+        Vector2::new(
+            (col - (s.width as f64 - 1.0) / 2.0) * s.pixel_size,
+            ((s.height as f64 - 1.0) / 2.0 - row) * s.pixel_size,
+        )
+    }
+
+    /// Measured image coordinates `(x', y')` in mm to pixel `(col, row)`.
+    #[inline]
+    pub fn image_to_pixel(&self, image: Vector2<f64>) -> Vector2<f64> {
+        let s = &self.sensor;
+        Vector2::new(
+            image.x / s.pixel_size + (s.width as f64 - 1.0) / 2.0,
+            (s.height as f64 - 1.0) / 2.0 - image.y / s.pixel_size,
+        )
+    }
+
+    /// Corrects measured image coordinates `(x', y')` into ideal coordinates
+    /// `(x_corr, y_corr)` (principal point removed, distortion applied).
+    #[inline]
+    pub fn correct(&self, measured: Vector2<f64>) -> Vector2<f64> {
+        let x = measured.x - self.interior.x0;
+        let y = measured.y - self.interior.y0;
+        Vector2::new(x, y) + self.distortion.correction(x, y)
+    }
+
+    /// Corrects a pixel position straight into ideal image coordinates.
+    #[inline]
+    pub fn correct_pixel(&self, col: f64, row: f64) -> Vector2<f64> {
+        self.correct(self.pixel_to_image(col, row))
+    }
+
+    /// The inverse of [`Camera::correct`]: the measured coordinates `(x', y')`
+    /// whose correction gives `ideal`. Newton's method on the correction;
+    /// returns `None` if it does not settle (a point far outside the field of
+    /// view of a strongly distorted lens).
+    pub fn distort(&self, ideal: Vector2<f64>) -> Option<Vector2<f64>> {
+        if self.distortion.is_zero() {
+            return Some(ideal + Vector2::new(self.interior.x0, self.interior.y0));
+        }
+        let mut p = ideal;
+        for _ in 0..INVERSE_MAX_ITER {
+            let f = p + self.distortion.correction(p.x, p.y) - ideal;
+            let j = self.distortion.corrected_jacobian(p.x, p.y);
+            let step = j.try_inverse()? * f;
+            p -= step;
+            if !(p.x.is_finite() && p.y.is_finite()) {
+                return None;
+            }
+            if step.norm() < INVERSE_TOL {
+                return Some(p + Vector2::new(self.interior.x0, self.interior.y0));
+            }
+        }
+        let f = p + self.distortion.correction(p.x, p.y) - ideal;
+        (f.norm() < 1e-9).then(|| p + Vector2::new(self.interior.x0, self.interior.y0))
+    }
+
+    /// Projects a point given in camera coordinates (camera frame of the
+    /// spec: `z` backwards) into measured image coordinates. `None` if the
+    /// point is not in front of the camera.
+    #[inline]
+    pub fn project_camera_point(&self, p: &nalgebra::Vector3<f64>) -> Option<Vector2<f64>> {
+        if p.z >= 0.0 {
+            return None;
+        }
+        let c = self.interior.c;
+        self.distort(Vector2::new(-c * p.x / p.z, -c * p.y / p.z))
+    }
+
+    /// Whether a pixel position lies on the sensor, `margin` pixels inside its edge.
+    #[inline]
+    pub fn contains_pixel(&self, px: Vector2<f64>, margin: f64) -> bool {
+        px.x >= -0.5 + margin
+            && px.y >= -0.5 + margin
+            && px.x <= self.sensor.width as f64 - 0.5 - margin
+            && px.y <= self.sensor.height as f64 - 0.5 - margin
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) fn strong_lens() -> Camera {
+        Camera::new(
+            Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            Interior {
+                c: 12.0,
+                x0: 0.05,
+                y0: -0.03,
+            },
+            Distortion {
+                k1: -2.5e-3,
+                k2: 2.0e-5,
+                k3: -1.0e-7,
+                p1: 3.0e-5,
+                p2: -2.0e-5,
+                b1: 1.0e-4,
+                b2: -5.0e-5,
+            },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn pixel_image_round_trip_and_centre() {
+        let cam = strong_lens();
+        let centre = cam.pixel_to_image(649.5, 514.5);
+        assert!(centre.norm() < 1e-15);
+        let tl = cam.pixel_to_image(0.0, 0.0);
+        assert!(tl.x < 0.0 && tl.y > 0.0, "top-left pixel is left and up");
+        let back = cam.image_to_pixel(cam.pixel_to_image(12.25, 1000.75));
+        assert!((back - Vector2::new(12.25, 1000.75)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn projection_then_correction_round_trips_over_the_whole_sensor() {
+        let cam = strong_lens();
+        // Check that the lens really is strong: tens of pixels at the corner.
+        let corner = cam.pixel_to_image(0.0, 0.0);
+        let d = cam.correct(corner) - (corner - Vector2::new(0.05, -0.03));
+        assert!(
+            d.norm() / 0.0067 > 20.0,
+            "distortion at corner {} px",
+            d.norm() / 0.0067
+        );
+        let mut worst: f64 = 0.0;
+        for row in (0..=1030).step_by(10) {
+            for col in (0..=1300).step_by(10) {
+                let measured = cam.pixel_to_image(col as f64 - 0.5, row as f64 - 0.5);
+                let ideal = cam.correct(measured);
+                let again = cam.distort(ideal).expect("inverse converges");
+                worst = worst.max((again - measured).norm());
+                let ideal_again = cam.correct(again);
+                worst = worst.max((ideal_again - ideal).norm());
+            }
+        }
+        assert!(worst < 1e-9, "worst round-trip error {worst} mm");
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let d = strong_lens().distortion;
+        let (x, y) = (3.1, -2.4);
+        let j = d.corrected_jacobian(x, y);
+        let h = 1e-6;
+        let f = |x: f64, y: f64| Vector2::new(x, y) + d.correction(x, y);
+        let cx = (f(x + h, y) - f(x - h, y)) / (2.0 * h);
+        let cy = (f(x, y + h) - f(x, y - h)) / (2.0 * h);
+        assert!((j.column(0) - cx).norm() < 1e-8);
+        assert!((j.column(1) - cy).norm() < 1e-8);
+    }
+
+    #[test]
+    fn invalid_parameters_are_named() {
+        let s = Sensor {
+            width: 1300,
+            height: 1030,
+            pixel_size: -0.0067,
+        };
+        let e = Camera::new(
+            s,
+            Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            Distortion::default(),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("sensor.pixel_size"), "{e}");
+    }
+}

@@ -1,0 +1,25 @@
+//! photopose-geometry: the pure mathematical core of photopose.
+//!
+//! Everything here follows `shared/spec/conventions.md` to the letter:
+//! millimetres, image coordinates with `y'` up, the Brown/Fraser correction
+//! applied to *measured* coordinates, the collinearity equations with `R`
+//! mapping object vectors into the camera frame, and the Cayley /
+//! Hamilton-normalised quaternion rotation `R = (I + S)(I - S)^-1`.
+//!
+//! Invariant: this crate does no IO (no files, sockets, threads or clocks) and
+//! its solvers do not allocate once their workspace exists.
+
+pub mod camera;
+pub mod closed_form;
+pub mod error;
+pub mod exterior;
+pub mod precision;
+pub mod resection;
+pub mod rng;
+pub mod rotation;
+
+pub use camera::{Camera, Distortion, Interior, Sensor};
+pub use error::GeometryError;
+pub use exterior::Exterior;
+pub use nalgebra::{Matrix3, Matrix6, Point3, Vector2, Vector3, Vector6};
+pub use resection::{Observation, Resection, ResectionOptions, ResectionReport};

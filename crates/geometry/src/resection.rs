@@ -1,0 +1,739 @@
+//! Single-image resection: hypothesise-and-verify over the closed form, then
+//! Gauss–Newton / Levenberg–Marquardt refinement of the collinearity
+//! equations with analytic Jacobians, data snooping of gross errors, and
+//! a-posteriori precision.
+//!
+//! The rotation is re-based at the current estimate each iteration:
+//! `R = R0 · cayley(a, b, c)` with the increments `(a, b, c)` solved around
+//! zero, so any attitude works although the Cayley form cannot express a
+//! half turn. Small rotations `ω = 2 (a, b, c)` are rotations of the camera
+//! about the axes of the object (field) frame.
+//!
+//! A [`Resection`] is a workspace: once it has seen an observation set of a
+//! given size, solving another of that size or smaller allocates nothing.
+
+use crate::camera::Camera;
+use crate::closed_form;
+use crate::error::GeometryError;
+use crate::exterior::Exterior;
+use crate::rng::SplitMix64;
+use crate::rotation::{cayley, cayley_derivatives};
+use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
+
+/// One control point seen in the image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// Target id (for reports).
+    pub id: u64,
+    /// Object (field) coordinates, mm.
+    pub object: Vector3<f64>,
+    /// Ideal (corrected) image coordinates, mm: see [`Camera::correct`].
+    pub image: Vector2<f64>,
+}
+
+impl Observation {
+    /// An observation from a measured pixel position, corrected with `camera`.
+    pub fn from_pixel(camera: &Camera, id: u64, object: Vector3<f64>, col: f64, row: f64) -> Self {
+        Observation {
+            id,
+            object,
+            image: camera.correct_pixel(col, row),
+        }
+    }
+}
+
+/// Tuning of the resection; the defaults suit the project's cameras.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResectionOptions {
+    /// Inlier gate of hypothesise-and-verify, pixels.
+    pub ransac_threshold_px: f64,
+    /// Confidence at which hypothesise-and-verify stops early.
+    pub ransac_confidence: f64,
+    /// Most hypotheses tried.
+    pub ransac_max_hypotheses: usize,
+    /// Smallest share of the observations that must agree with the pose.
+    pub min_inlier_ratio: f64,
+    /// Critical value of the standardised residual in data snooping.
+    pub snooping_critical: f64,
+    /// Floor of the a-posteriori σ0 used in snooping, pixels (keeps
+    /// noise-free data from turning rounding into "gross errors").
+    pub sigma_floor_px: f64,
+    /// Most points removed by data snooping, as a share of all points.
+    pub max_snooped_ratio: f64,
+    /// Iteration limit of the least-squares refinement.
+    pub max_iterations: usize,
+    /// Seed of the hypothesis sampler (the result is deterministic).
+    pub seed: u64,
+}
+
+impl Default for ResectionOptions {
+    fn default() -> Self {
+        ResectionOptions {
+            ransac_threshold_px: 4.0,
+            ransac_confidence: 0.9999,
+            ransac_max_hypotheses: 500,
+            min_inlier_ratio: 0.5,
+            snooping_critical: 4.5,
+            sigma_floor_px: 0.005,
+            max_snooped_ratio: 0.2,
+            max_iterations: 50,
+            seed: 0x5eed_0f_90_5e,
+        }
+    }
+}
+
+/// The result of a resection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResectionReport {
+    /// The exterior orientation.
+    pub exterior: Exterior,
+    /// A-posteriori covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (mm², rad²),
+    /// `ω` the small rotations of the camera about the field's axes.
+    pub covariance: Matrix6<f64>,
+    /// A-posteriori σ0 of an image coordinate, mm.
+    pub sigma0: f64,
+    /// σ0 in pixels.
+    pub sigma0_px: f64,
+    /// RMS of the image-coordinate residuals, pixels.
+    pub rms_px: f64,
+    /// Points used in the final adjustment.
+    pub n_points: usize,
+    /// Points rejected (hypothesise-and-verify and data snooping).
+    pub n_rejected: usize,
+    /// Gauss–Newton / LM iterations of the final adjustment.
+    pub iterations: usize,
+    /// Hypotheses tried.
+    pub hypotheses: usize,
+}
+
+impl ResectionReport {
+    /// Standard deviations of `Xc, Yc, Zc`, mm.
+    pub fn std_center(&self) -> Vector3<f64> {
+        Vector3::new(
+            self.covariance[(0, 0)].sqrt(),
+            self.covariance[(1, 1)].sqrt(),
+            self.covariance[(2, 2)].sqrt(),
+        )
+    }
+
+    /// Standard deviations of the rotations about the field's X, Y, Z axes, degrees.
+    pub fn std_rotation_deg(&self) -> Vector3<f64> {
+        Vector3::new(
+            self.covariance[(3, 3)].sqrt().to_degrees(),
+            self.covariance[(4, 4)].sqrt().to_degrees(),
+            self.covariance[(5, 5)].sqrt().to_degrees(),
+        )
+    }
+}
+
+/// What happened to an observation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// Used in the adjustment.
+    Used,
+    /// Did not agree with the closed-form hypothesis.
+    Outlier,
+    /// Removed by data snooping.
+    Snooped,
+}
+
+/// The resection workspace (see the module doc).
+#[derive(Debug, Clone)]
+pub struct Resection {
+    c: f64,
+    pixel_size: f64,
+    options: ResectionOptions,
+    status: Vec<Status>,
+    best: Vec<bool>,
+    rejected: Vec<u64>,
+}
+
+/// Normal equations of the six exterior unknowns.
+#[derive(Debug, Clone, Copy)]
+struct Normals {
+    n: Matrix6<f64>,
+    g: Vector6<f64>,
+    cost: f64,
+    count: usize,
+}
+
+/// Linearisation of one point: residual and the two Jacobian rows.
+#[inline(always)]
+fn linearise(
+    c: f64,
+    r: &Matrix3<f64>,
+    d: &[Matrix3<f64>; 3],
+    center: &Vector3<f64>,
+    o: &Observation,
+) -> Option<(Vector2<f64>, Vector6<f64>, Vector6<f64>)> {
+    let u = o.object - center;
+    let z = r * u;
+    if z.z >= 0.0 {
+        return None;
+    }
+    let inv_n = 1.0 / z.z;
+    let gx = z.x * inv_n;
+    let gy = z.y * inv_n;
+    let f = -c * inv_n;
+    let v = o.image - Vector2::new(-c * gx, -c * gy);
+    let mut ax = Vector6::zeros();
+    let mut ay = Vector6::zeros();
+    // Centre: dZ/dC = -R.
+    for k in 0..3 {
+        let dz = -r.column(k);
+        ax[k] = f * (dz.x - gx * dz.z);
+        ay[k] = f * (dz.y - gy * dz.z);
+    }
+    // Rotation increments: dZ/da_k = d_k u.
+    for k in 0..3 {
+        let dz = d[k] * u;
+        ax[3 + k] = f * (dz.x - gx * dz.z);
+        ay[3 + k] = f * (dz.y - gy * dz.z);
+    }
+    Some((v, ax, ay))
+}
+
+/// `R0 · dcayley/d(a,b,c)` at zero increments.
+#[inline]
+fn rotation_derivatives(r0: &Matrix3<f64>) -> [Matrix3<f64>; 3] {
+    let d = cayley_derivatives(0.0, 0.0, 0.0);
+    [r0 * d[0], r0 * d[1], r0 * d[2]]
+}
+
+/// Sum of squared residuals, `None` if a used point is behind the camera.
+fn cost_of(c: f64, e: &Exterior, obs: &[Observation], status: &[Status]) -> Option<f64> {
+    let mut cost = 0.0;
+    for (o, s) in obs.iter().zip(status) {
+        if *s != Status::Used {
+            continue;
+        }
+        let v = o.image - e.project_ideal(c, &o.object)?;
+        cost += v.norm_squared();
+    }
+    Some(cost)
+}
+
+fn normals(
+    c: f64,
+    e: &Exterior,
+    obs: &[Observation],
+    status: &[Status],
+) -> Result<Normals, GeometryError> {
+    let d = rotation_derivatives(&e.rotation);
+    let mut n = Matrix6::zeros();
+    let mut g = Vector6::zeros();
+    let mut cost = 0.0;
+    let mut count = 0;
+    let mut behind = 0;
+    for (o, s) in obs.iter().zip(status) {
+        if *s != Status::Used {
+            continue;
+        }
+        match linearise(c, &e.rotation, &d, &e.center, o) {
+            Some((v, ax, ay)) => {
+                n.syger(1.0, &ax, &ax, 1.0);
+                n.syger(1.0, &ay, &ay, 1.0);
+                g += ax * v.x + ay * v.y;
+                cost += v.norm_squared();
+                count += 1;
+            }
+            None => behind += 1,
+        }
+    }
+    if behind > 0 {
+        return Err(GeometryError::BehindCamera { count: behind });
+    }
+    n.fill_upper_triangle_with_lower_triangle();
+    Ok(Normals { n, g, cost, count })
+}
+
+/// Unit-weight normal matrix of the six unknowns at `e` over `points` seen
+/// by a camera of principal distance `c` (for precision prediction).
+pub fn normal_matrix(
+    c: f64,
+    e: &Exterior,
+    points: &[Vector3<f64>],
+) -> Result<Matrix6<f64>, GeometryError> {
+    let d = rotation_derivatives(&e.rotation);
+    let mut n = Matrix6::zeros();
+    for p in points {
+        let o = Observation {
+            id: 0,
+            object: *p,
+            image: Vector2::zeros(),
+        };
+        let (_, ax, ay) = linearise(c, &e.rotation, &d, &e.center, &o)
+            .ok_or(GeometryError::BehindCamera { count: 1 })?;
+        n.syger(1.0, &ax, &ax, 1.0);
+        n.syger(1.0, &ay, &ay, 1.0);
+    }
+    n.fill_upper_triangle_with_lower_triangle();
+    Ok(n)
+}
+
+/// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.
+fn to_omega(q: &Matrix6<f64>) -> Matrix6<f64> {
+    let t = Matrix6::from_diagonal(&Vector6::new(1.0, 1.0, 1.0, 2.0, 2.0, 2.0));
+    t * q * t
+}
+
+/// Inverse of the unit-weight normal matrix in `(C, ω)` units: multiply by
+/// σ² (mm²) for a covariance.
+pub fn cofactor(n: &Matrix6<f64>) -> Result<Matrix6<f64>, GeometryError> {
+    let q = n.cholesky().ok_or(GeometryError::Singular)?.inverse();
+    Ok(to_omega(&q))
+}
+
+impl Resection {
+    /// A workspace for `camera` (principal distance and pixel size are
+    /// taken from it).
+    pub fn new(camera: &Camera, options: ResectionOptions) -> Self {
+        Resection {
+            c: camera.interior.c,
+            pixel_size: camera.sensor.pixel_size,
+            options,
+            status: Vec::new(),
+            best: Vec::new(),
+            rejected: Vec::new(),
+        }
+    }
+
+    /// The options in force.
+    pub fn options(&self) -> &ResectionOptions {
+        &self.options
+    }
+
+    /// Ids of the observations rejected by the last solve, in input order.
+    pub fn rejected_ids(&self) -> &[u64] {
+        &self.rejected
+    }
+
+    /// What the last solve did with each observation.
+    pub fn status(&self) -> &[Status] {
+        &self.status
+    }
+
+    fn reset(&mut self, n: usize) {
+        self.status.clear();
+        self.status.resize(n, Status::Used);
+        self.best.clear();
+        self.best.resize(n, false);
+        self.rejected.clear();
+    }
+
+    /// Full resection: closed form inside hypothesise-and-verify, refinement,
+    /// re-classification, data snooping, precision.
+    pub fn solve(&mut self, obs: &[Observation]) -> Result<ResectionReport, GeometryError> {
+        self.reset(obs.len());
+        check_input(obs)?;
+        let (start, hypotheses) = self.hypothesise(obs)?;
+        // Refine on the consensus set, then re-classify every point with the
+        // refined pose (a closed form from four points extrapolates poorly).
+        let gate = self.options.ransac_threshold_px * self.pixel_size;
+        let mut e = start;
+        for _ in 0..3 {
+            self.adjust(obs, &mut e)?;
+            let mut changed = false;
+            for (k, o) in obs.iter().enumerate() {
+                let ok = e
+                    .project_ideal(self.c, &o.object)
+                    .is_some_and(|m| (o.image - m).norm() < gate);
+                let s = if ok { Status::Used } else { Status::Outlier };
+                changed |= s != self.status[k];
+                self.status[k] = s;
+            }
+            if !changed {
+                break;
+            }
+        }
+        self.check_consensus(obs.len(), hypotheses)?;
+        let mut report = self.snoop(obs, e)?;
+        report.hypotheses = hypotheses;
+        Ok(report)
+    }
+
+    /// Refinement from a given start, all observations used at first; data
+    /// snooping still removes gross errors.
+    pub fn refine(
+        &mut self,
+        obs: &[Observation],
+        start: Exterior,
+    ) -> Result<ResectionReport, GeometryError> {
+        self.reset(obs.len());
+        check_input(obs)?;
+        self.snoop(obs, start)
+    }
+
+    fn check_consensus(&self, total: usize, _hypotheses: usize) -> Result<(), GeometryError> {
+        let used = self.status.iter().filter(|s| **s == Status::Used).count();
+        let need = ((self.options.min_inlier_ratio * total as f64).ceil() as usize).max(4);
+        if used < need {
+            return Err(GeometryError::NoConsensus {
+                inliers: used,
+                total,
+            });
+        }
+        Ok(())
+    }
+
+    /// Hypothesise-and-verify over the closed form. Leaves the consensus set
+    /// in `status` and returns the best hypothesis.
+    fn hypothesise(&mut self, obs: &[Observation]) -> Result<(Exterior, usize), GeometryError> {
+        let n = obs.len();
+        let shape = Shape::of(obs)?;
+        let gate2 = (self.options.ransac_threshold_px * self.pixel_size).powi(2);
+        let mut rng = SplitMix64::new(self.options.seed);
+        let sample_size = if shape.planar { 4 } else { 6 };
+        let mut best: Option<(usize, f64, Exterior)> = None;
+        let mut needed = self.options.ransac_max_hypotheses;
+        let mut tried = 0;
+        let mut attempts = 0;
+        while tried < needed.min(self.options.ransac_max_hypotheses)
+            && attempts < 20 * self.options.ransac_max_hypotheses
+        {
+            attempts += 1;
+            let idx = if tried == 0 && attempts == 1 {
+                shape.spread_sample(obs)
+            } else {
+                let mut idx = [0usize; 6];
+                random_distinct(&mut rng, n, &mut idx[..sample_size]);
+                idx
+            };
+            let hyp = if shape.planar {
+                let ob = [0, 1, 2, 3].map(|k| obs[idx[k]].object);
+                let im = [0, 1, 2, 3].map(|k| obs[idx[k]].image);
+                if !shape.well_spread(&ob) {
+                    continue;
+                }
+                closed_form::resect_four_coplanar(self.c, &ob, &im)
+            } else {
+                let ob = [0, 1, 2, 3, 4, 5].map(|k| obs[idx[k]].object);
+                let im = [0, 1, 2, 3, 4, 5].map(|k| obs[idx[k]].image);
+                closed_form::dlt(self.c, &ob, &im)
+            };
+            tried += 1;
+            let Ok(e) = hyp else { continue };
+            // Verify: count points within the gate; ties broken by residual.
+            let mut inliers = 0;
+            let mut score = 0.0;
+            for o in obs {
+                let q = e.to_camera(&o.object);
+                if q.z >= 0.0 {
+                    continue;
+                }
+                let m = Vector2::new(-self.c * q.x / q.z, -self.c * q.y / q.z);
+                let r2 = (o.image - m).norm_squared();
+                if r2 < gate2 {
+                    inliers += 1;
+                    score += r2;
+                }
+            }
+            let better = match &best {
+                None => inliers > 0,
+                Some((bi, bs, _)) => inliers > *bi || (inliers == *bi && score < *bs),
+            };
+            if better {
+                best = Some((inliers, score, e));
+                let w = inliers as f64 / n as f64;
+                let p_fail = 1.0 - w.powi(sample_size as i32);
+                needed = if p_fail <= 1e-12 {
+                    0
+                } else {
+                    ((1.0 - self.options.ransac_confidence).ln() / p_fail.ln()).ceil() as usize
+                };
+            }
+        }
+        let Some((inliers, _, e)) = best else {
+            return Err(GeometryError::NoConsensus {
+                inliers: 0,
+                total: n,
+            });
+        };
+        for (k, o) in obs.iter().enumerate() {
+            let ok = e
+                .project_ideal(self.c, &o.object)
+                .is_some_and(|m| (o.image - m).norm_squared() < gate2);
+            self.status[k] = if ok { Status::Used } else { Status::Outlier };
+        }
+        if inliers < 4 {
+            return Err(GeometryError::NoConsensus { inliers, total: n });
+        }
+        self.check_consensus(n, tried)?;
+        Ok((e, tried))
+    }
+
+    /// Levenberg–Marquardt over the used observations, updating `e`.
+    fn adjust(&mut self, obs: &[Observation], e: &mut Exterior) -> Result<usize, GeometryError> {
+        let c = self.c;
+        let scale = e.center.norm().max(1.0);
+        let mut lambda = 1e-6;
+        let mut it = 0;
+        let mut current = normals(c, e, obs, &self.status)?;
+        if current.count < 4 {
+            return Err(GeometryError::TooFewPoints {
+                got: current.count,
+                need: 4,
+            });
+        }
+        while it < self.options.max_iterations {
+            it += 1;
+            let mut a = current.n;
+            for k in 0..6 {
+                a[(k, k)] *= 1.0 + lambda;
+            }
+            let Some(ch) = a.cholesky() else {
+                if lambda > 1e8 {
+                    return Err(GeometryError::Singular);
+                }
+                lambda = (lambda * 100.0).max(1e-6);
+                continue;
+            };
+            let delta = ch.solve(&current.g);
+            let candidate = Exterior {
+                rotation: e.rotation * cayley(delta[3], delta[4], delta[5]),
+                center: e.center + delta.fixed_rows::<3>(0),
+            };
+            let new_cost = cost_of(c, &candidate, obs, &self.status);
+            match new_cost {
+                Some(cost) if cost <= current.cost => {
+                    *e = candidate;
+                    let small_step = delta.fixed_rows::<3>(0).norm() <= 1e-10 * scale
+                        && delta.fixed_rows::<3>(3).norm() <= 1e-13;
+                    let small_gain = current.cost - cost <= 1e-14 * current.cost.max(1e-300);
+                    lambda = (lambda * 0.1).max(1e-12);
+                    current = normals(c, e, obs, &self.status)?;
+                    if small_step || small_gain {
+                        return Ok(it);
+                    }
+                }
+                _ => {
+                    lambda *= 10.0;
+                    if lambda > 1e10 {
+                        // No step lowers the cost: we sit at the minimum to
+                        // machine precision.
+                        return Ok(it);
+                    }
+                }
+            }
+        }
+        Err(GeometryError::NotConverged { iterations: it })
+    }
+
+    /// Adjust, then remove the worst standardised residual above the critical
+    /// value, one point at a time; finally compute the precision.
+    fn snoop(
+        &mut self,
+        obs: &[Observation],
+        mut e: Exterior,
+    ) -> Result<ResectionReport, GeometryError> {
+        let c = self.c;
+        let n_total = obs.len();
+        let max_snooped = (self.options.max_snooped_ratio * n_total as f64).floor() as usize;
+        let mut snooped = 0;
+        loop {
+            let iterations = self.adjust(obs, &mut e)?;
+            let nm = normals(c, &e, obs, &self.status)?;
+            let redundancy = 2 * nm.count - 6;
+            if redundancy == 0 {
+                return Err(GeometryError::TooFewPoints {
+                    got: nm.count,
+                    need: 4,
+                });
+            }
+            let q = nm.n.cholesky().ok_or(GeometryError::Singular)?.inverse();
+            let sigma0 = (nm.cost / redundancy as f64).sqrt();
+            let sigma_test = sigma0.max(self.options.sigma_floor_px * self.pixel_size);
+            // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)).
+            let d = rotation_derivatives(&e.rotation);
+            let mut worst: Option<(usize, f64)> = None;
+            for (k, o) in obs.iter().enumerate() {
+                if self.status[k] != Status::Used {
+                    continue;
+                }
+                let Some((v, ax, ay)) = linearise(c, &e.rotation, &d, &e.center, o) else {
+                    return Err(GeometryError::BehindCamera { count: 1 });
+                };
+                let qx = (1.0 - ax.dot(&(q * ax))).max(1e-12);
+                let qy = (1.0 - ay.dot(&(q * ay))).max(1e-12);
+                let w = (v.x.abs() / qx.sqrt()).max(v.y.abs() / qy.sqrt()) / sigma_test;
+                if w > self.options.snooping_critical && worst.is_none_or(|(_, ww)| w > ww) {
+                    worst = Some((k, w));
+                }
+            }
+            match worst {
+                Some((k, _)) if snooped < max_snooped && nm.count > 4 => {
+                    self.status[k] = Status::Snooped;
+                    snooped += 1;
+                }
+                _ => {
+                    for (o, s) in obs.iter().zip(&self.status) {
+                        if *s != Status::Used {
+                            self.rejected.push(o.id);
+                        }
+                    }
+                    let covariance = to_omega(&q) * (sigma0 * sigma0);
+                    return Ok(ResectionReport {
+                        exterior: e,
+                        covariance,
+                        sigma0,
+                        sigma0_px: sigma0 / self.pixel_size,
+                        rms_px: (nm.cost / (2 * nm.count) as f64).sqrt() / self.pixel_size,
+                        n_points: nm.count,
+                        n_rejected: n_total - nm.count,
+                        iterations,
+                        hypotheses: 0,
+                    });
+                }
+            }
+        }
+    }
+}
+
+/// Rejects inputs that no method can use.
+fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
+    if obs.len() < 4 {
+        return Err(GeometryError::TooFewPoints {
+            got: obs.len(),
+            need: 4,
+        });
+    }
+    for (index, o) in obs.iter().enumerate() {
+        if !o.object.iter().chain(o.image.iter()).all(|v| v.is_finite()) {
+            return Err(GeometryError::NonFinite { index });
+        }
+    }
+    Ok(())
+}
+
+/// The spatial layout of the control points: planar or not, and a frame to
+/// judge how well a sample spreads.
+#[derive(Debug, Clone, Copy)]
+struct Shape {
+    planar: bool,
+    centroid: Vector3<f64>,
+    axis1: Vector3<f64>,
+    axis2: Vector3<f64>,
+    /// Standard deviations of the points along `axis1` and `axis2`.
+    spread1: f64,
+    spread2: f64,
+}
+
+impl Shape {
+    fn of(obs: &[Observation]) -> Result<Self, GeometryError> {
+        let n = obs.len() as f64;
+        let centroid = obs.iter().fold(Vector3::zeros(), |a, o| a + o.object) / n;
+        let mut cov = Matrix3::zeros();
+        for o in obs {
+            let d = o.object - centroid;
+            cov += d * d.transpose();
+        }
+        cov /= n;
+        let eig = SymmetricEigen::new(cov);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
+        let l = order.map(|i| eig.eigenvalues[i].max(0.0));
+        if l[0] <= 0.0 {
+            return Err(GeometryError::Degenerate("all control points coincide"));
+        }
+        if l[1] < 1e-10 * l[0] {
+            return Err(GeometryError::Degenerate(
+                "all control points are collinear",
+            ));
+        }
+        // A plate with a few tenths of a millimetre of unevenness over half
+        // a metre is planar for the closed form; the refinement takes care of
+        // the rest. Non-coplanar closed forms need six points.
+        let planar = l[2] < 1e-4 * l[1] || obs.len() < 6;
+        Ok(Shape {
+            planar,
+            centroid,
+            axis1: eig.eigenvectors.column(order[0]).into_owned(),
+            axis2: eig.eigenvectors.column(order[1]).into_owned(),
+            spread1: l[0].sqrt(),
+            spread2: l[1].sqrt(),
+        })
+    }
+
+    #[inline]
+    fn local(&self, p: &Vector3<f64>) -> Vector2<f64> {
+        let d = p - self.centroid;
+        Vector2::new(
+            d.dot(&self.axis1) / self.spread1,
+            d.dot(&self.axis2) / self.spread2,
+        )
+    }
+
+    /// A sample whose smallest triangle is a fair share of the layout.
+    fn well_spread(&self, p: &[Vector3<f64>; 4]) -> bool {
+        let q = p.map(|x| self.local(&x));
+        [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)]
+            .iter()
+            .all(|&(a, b, c)| {
+                let e1 = q[b] - q[a];
+                let e2 = q[c] - q[a];
+                (e1.x * e2.y - e1.y * e2.x).abs() > 0.05
+            })
+    }
+
+    /// The first, deterministic sample: the points farthest out along the
+    /// four (or six) diagonal directions of the layout.
+    fn spread_sample(&self, obs: &[Observation]) -> [usize; 6] {
+        let dirs = [
+            Vector2::new(1.0, 1.0),
+            Vector2::new(-1.0, 1.0),
+            Vector2::new(-1.0, -1.0),
+            Vector2::new(1.0, -1.0),
+            Vector2::new(1.0, 0.0),
+            Vector2::new(-1.0, 0.0),
+        ];
+        let mut idx = [0usize; 6];
+        for (slot, d) in dirs.iter().enumerate() {
+            let mut best = f64::NEG_INFINITY;
+            for (k, o) in obs.iter().enumerate() {
+                if idx[..slot].contains(&k) {
+                    continue;
+                }
+                let s = self.local(&o.object).dot(d);
+                if s > best {
+                    best = s;
+                    idx[slot] = k;
+                }
+            }
+        }
+        if !self.planar {
+            // For the non-coplanar closed form prefer the two points farthest
+            // from the plane of the others.
+            let normal = self.axis1.cross(&self.axis2);
+            let mut hi = (f64::NEG_INFINITY, 0);
+            let mut lo = (f64::INFINITY, 0);
+            for (k, o) in obs.iter().enumerate() {
+                if idx[..4].contains(&k) {
+                    continue;
+                }
+                let h = (o.object - self.centroid).dot(&normal);
+                if h > hi.0 {
+                    hi = (h, k);
+                }
+                if h < lo.0 {
+                    lo = (h, k);
+                }
+            }
+            idx[4] = hi.1;
+            idx[5] = if lo.1 == hi.1 { idx[5] } else { lo.1 };
+        }
+        idx
+    }
+}
+
+/// Fills `out` with distinct indices below `n`.
+fn random_distinct(rng: &mut SplitMix64, n: usize, out: &mut [usize]) {
+    for k in 0..out.len() {
+        loop {
+            let i = rng.below(n);
+            if !out[..k].contains(&i) {
+                out[k] = i;
+                break;
+            }
+        }
+    }
+}
