@@ -1,0 +1,179 @@
+//! `photopose resect`: exterior orientation with precision from observation
+//! files (`id,col,row`), one JSON object per input per line, in input order.
+
+use crate::cmd::defaults;
+use anyhow::Result;
+use clap::Parser;
+use photopose_field::Field;
+use photopose_geometry::{Camera, Observation, Resection, ResectionOptions, ResectionReport};
+use serde::Serialize;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Arguments of `photopose resect`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// Camera file (TOML); default: the built-in camera.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Test field (CSV); default: the built-in plate.
+    #[arg(long)]
+    pub field: Option<PathBuf>,
+    /// Observation files, CSV `id,col,row` in pixels.
+    #[arg(long, num_args = 1..)]
+    pub observations: Vec<PathBuf>,
+    /// Inlier gate of the hypothesise-and-verify stage, pixels.
+    #[arg(long, default_value_t = ResectionOptions::default().ransac_threshold_px)]
+    pub gate_px: f64,
+    /// Critical value of the data-snooping test.
+    #[arg(long, default_value_t = ResectionOptions::default().snooping_critical)]
+    pub critical: f64,
+}
+
+/// One line of output for a successful resection (keys fixed by the CLI contract).
+#[derive(Serialize)]
+pub struct PoseLine<'a> {
+    /// The input path.
+    pub image: &'a str,
+    /// Always true here.
+    pub ok: bool,
+    /// Projection centre, mm.
+    pub center: [f64; 3],
+    /// `R`, object → camera.
+    pub rotation: [[f64; 3]; 3],
+    /// σ of the centre, mm.
+    pub std_center: [f64; 3],
+    /// σ of the rotations about the field's X, Y, Z axes, degrees.
+    pub std_rotation_deg: [f64; 3],
+    /// A-posteriori σ0 of an image coordinate, px.
+    pub sigma0_px: f64,
+    /// RMS image-coordinate residual, px.
+    pub rms_px: f64,
+    /// Points used.
+    pub n_points: usize,
+    /// Points rejected.
+    pub n_rejected: usize,
+    /// Ids rejected.
+    pub rejected_ids: &'a [u64],
+    /// Camera pose in the field as KUKA `X, Y, Z, A, B, C` (mm, degrees; `M = Rᵀ`).
+    pub pose_xyzabc: [f64; 6],
+    /// Unit quaternion `(w, x, y, z)` of `R`.
+    pub quaternion_wxyz: [f64; 4],
+    /// Iterations of the final adjustment.
+    pub iterations: usize,
+    /// Closed-form hypotheses tried.
+    pub hypotheses: usize,
+}
+
+/// The output line of a failed input.
+#[derive(Serialize)]
+pub struct ErrorLine<'a> {
+    /// The input path.
+    pub image: &'a str,
+    /// Always false.
+    pub ok: bool,
+    /// What and why.
+    pub error: String,
+}
+
+impl<'a> PoseLine<'a> {
+    /// The output line of a report.
+    pub fn new(image: &'a str, r: &ResectionReport, rejected_ids: &'a [u64]) -> Self {
+        let e = &r.exterior;
+        let rot = e.rotation;
+        let q = photopose_geometry::rotation::quaternion_from_matrix(&rot)
+            .map(|q| [q.w, q.i, q.j, q.k])
+            .unwrap_or([f64::NAN; 4]);
+        PoseLine {
+            image,
+            ok: true,
+            center: [e.center.x, e.center.y, e.center.z],
+            rotation: [
+                [rot[(0, 0)], rot[(0, 1)], rot[(0, 2)]],
+                [rot[(1, 0)], rot[(1, 1)], rot[(1, 2)]],
+                [rot[(2, 0)], rot[(2, 1)], rot[(2, 2)]],
+            ],
+            std_center: r.std_center().into(),
+            std_rotation_deg: r.std_rotation_deg().into(),
+            sigma0_px: r.sigma0_px,
+            rms_px: r.rms_px,
+            n_points: r.n_points,
+            n_rejected: r.n_rejected,
+            rejected_ids,
+            pose_xyzabc: e.to_kuka_pose(),
+            quaternion_wxyz: q,
+            iterations: r.iterations,
+            hypotheses: r.hypotheses,
+        }
+    }
+}
+
+/// Builds the resection observations of an observation file, checking ids
+/// against the field.
+pub fn observations_for(
+    camera: &Camera,
+    field: &Field,
+    path: &std::path::Path,
+    out: &mut Vec<Observation>,
+) -> Result<(), String> {
+    let obs = photopose_formats::load_observations(path).map_err(|e| e.to_string())?;
+    out.clear();
+    for o in obs {
+        let Some(t) = field.get(o.id) else {
+            return Err(format!(
+                "{}:{}: id {} is not in the test field",
+                path.display(),
+                o.line,
+                o.id
+            ));
+        };
+        out.push(Observation::from_pixel(
+            camera, o.id, t.position, o.col, o.row,
+        ));
+    }
+    Ok(())
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<ExitCode> {
+    let camera = defaults::camera(args.camera.as_deref())?;
+    let field = defaults::field(args.field.as_deref())?;
+    if args.observations.is_empty() {
+        anyhow::bail!("no input: give --observations FILE... (images come with target detection)");
+    }
+    let options = ResectionOptions {
+        ransac_threshold_px: args.gate_px,
+        snooping_critical: args.critical,
+        ..ResectionOptions::default()
+    };
+    let mut resection = Resection::new(&camera, options);
+    let mut obs = Vec::new();
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut failed = 0;
+    for path in &args.observations {
+        let name = path.display().to_string();
+        let result = observations_for(&camera, &field, path, &mut obs)
+            .and_then(|()| resection.solve(&obs).map_err(|e| format!("{name}: {e}")));
+        let line = match result {
+            Ok(report) => {
+                serde_json::to_string(&PoseLine::new(&name, &report, resection.rejected_ids()))?
+            }
+            Err(error) => {
+                failed += 1;
+                serde_json::to_string(&ErrorLine {
+                    image: &name,
+                    ok: false,
+                    error,
+                })?
+            }
+        };
+        writeln!(out, "{line}")?;
+    }
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
