@@ -18,12 +18,15 @@ struct Cli {
 enum Command {
     /// Exterior orientation from observations (or images): one JSON line per input.
     Resect(cmd::resect::Args),
+    /// Predicted precision of a configuration without images (and a Monte Carlo check).
+    Simulate(cmd::simulate::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Resect(args) => cmd::resect::run(args),
+        Command::Simulate(args) => cmd::simulate::run(args),
     };
     match result {
         Ok(code) => code,

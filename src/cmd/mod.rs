@@ -1,4 +1,6 @@
 //! The subcommands of the `photopose` binary, one module each.
 
 pub mod defaults;
+pub mod pose_arg;
 pub mod resect;
+pub mod simulate;

@@ -13,6 +13,7 @@ pub mod camera;
 pub mod closed_form;
 pub mod error;
 pub mod exterior;
+pub mod linearised;
 pub mod precision;
 pub mod resection;
 pub mod rng;

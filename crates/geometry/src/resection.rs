@@ -16,8 +16,9 @@ use crate::camera::Camera;
 use crate::closed_form;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
+use crate::linearised::{Linearised, Normals};
 use crate::rng::SplitMix64;
-use crate::rotation::{cayley, cayley_derivatives};
+use crate::rotation::cayley;
 use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
 
 /// One control point seen in the image.
@@ -77,7 +78,7 @@ impl Default for ResectionOptions {
             sigma_floor_px: 0.005,
             max_snooped_ratio: 0.2,
             max_iterations: 50,
-            seed: 0x5eed_0f_90_5e,
+            seed: 0x5EED_0F90_5E00,
         }
     }
 }
@@ -144,107 +145,9 @@ pub struct Resection {
     pixel_size: f64,
     options: ResectionOptions,
     status: Vec<Status>,
-    best: Vec<bool>,
     rejected: Vec<u64>,
-}
-
-/// Normal equations of the six exterior unknowns.
-#[derive(Debug, Clone, Copy)]
-struct Normals {
-    n: Matrix6<f64>,
-    g: Vector6<f64>,
-    cost: f64,
-    count: usize,
-}
-
-/// Linearisation of one point: residual and the two Jacobian rows.
-#[inline(always)]
-fn linearise(
-    c: f64,
-    r: &Matrix3<f64>,
-    d: &[Matrix3<f64>; 3],
-    center: &Vector3<f64>,
-    o: &Observation,
-) -> Option<(Vector2<f64>, Vector6<f64>, Vector6<f64>)> {
-    let u = o.object - center;
-    let z = r * u;
-    if z.z >= 0.0 {
-        return None;
-    }
-    let inv_n = 1.0 / z.z;
-    let gx = z.x * inv_n;
-    let gy = z.y * inv_n;
-    let f = -c * inv_n;
-    let v = o.image - Vector2::new(-c * gx, -c * gy);
-    let mut ax = Vector6::zeros();
-    let mut ay = Vector6::zeros();
-    // Centre: dZ/dC = -R.
-    for k in 0..3 {
-        let dz = -r.column(k);
-        ax[k] = f * (dz.x - gx * dz.z);
-        ay[k] = f * (dz.y - gy * dz.z);
-    }
-    // Rotation increments: dZ/da_k = d_k u.
-    for k in 0..3 {
-        let dz = d[k] * u;
-        ax[3 + k] = f * (dz.x - gx * dz.z);
-        ay[3 + k] = f * (dz.y - gy * dz.z);
-    }
-    Some((v, ax, ay))
-}
-
-/// `R0 · dcayley/d(a,b,c)` at zero increments.
-#[inline]
-fn rotation_derivatives(r0: &Matrix3<f64>) -> [Matrix3<f64>; 3] {
-    let d = cayley_derivatives(0.0, 0.0, 0.0);
-    [r0 * d[0], r0 * d[1], r0 * d[2]]
-}
-
-/// Sum of squared residuals, `None` if a used point is behind the camera.
-fn cost_of(c: f64, e: &Exterior, obs: &[Observation], status: &[Status]) -> Option<f64> {
-    let mut cost = 0.0;
-    for (o, s) in obs.iter().zip(status) {
-        if *s != Status::Used {
-            continue;
-        }
-        let v = o.image - e.project_ideal(c, &o.object)?;
-        cost += v.norm_squared();
-    }
-    Some(cost)
-}
-
-fn normals(
-    c: f64,
-    e: &Exterior,
-    obs: &[Observation],
-    status: &[Status],
-) -> Result<Normals, GeometryError> {
-    let d = rotation_derivatives(&e.rotation);
-    let mut n = Matrix6::zeros();
-    let mut g = Vector6::zeros();
-    let mut cost = 0.0;
-    let mut count = 0;
-    let mut behind = 0;
-    for (o, s) in obs.iter().zip(status) {
-        if *s != Status::Used {
-            continue;
-        }
-        match linearise(c, &e.rotation, &d, &e.center, o) {
-            Some((v, ax, ay)) => {
-                n.syger(1.0, &ax, &ax, 1.0);
-                n.syger(1.0, &ay, &ay, 1.0);
-                g += ax * v.x + ay * v.y;
-                cost += v.norm_squared();
-                count += 1;
-            }
-            None => behind += 1,
-        }
-    }
-    if behind > 0 {
-        return Err(GeometryError::BehindCamera { count: behind });
-    }
-    n.fill_upper_triangle_with_lower_triangle();
-    Ok(Normals { n, g, cost, count })
+    lin: Linearised,
+    trial: Linearised,
 }
 
 /// Unit-weight normal matrix of the six unknowns at `e` over `points` seen
@@ -254,21 +157,17 @@ pub fn normal_matrix(
     e: &Exterior,
     points: &[Vector3<f64>],
 ) -> Result<Matrix6<f64>, GeometryError> {
-    let d = rotation_derivatives(&e.rotation);
-    let mut n = Matrix6::zeros();
-    for p in points {
-        let o = Observation {
+    let obs: Vec<Observation> = points
+        .iter()
+        .map(|p| Observation {
             id: 0,
             object: *p,
             image: Vector2::zeros(),
-        };
-        let (_, ax, ay) = linearise(c, &e.rotation, &d, &e.center, &o)
-            .ok_or(GeometryError::BehindCamera { count: 1 })?;
-        n.syger(1.0, &ax, &ax, 1.0);
-        n.syger(1.0, &ay, &ay, 1.0);
-    }
-    n.fill_upper_triangle_with_lower_triangle();
-    Ok(n)
+        })
+        .collect();
+    let mut lin = Linearised::default();
+    lin.load(&obs, &vec![Status::Used; obs.len()]);
+    Ok(lin.evaluate(c, e)?.n)
 }
 
 /// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.
@@ -293,8 +192,9 @@ impl Resection {
             pixel_size: camera.sensor.pixel_size,
             options,
             status: Vec::new(),
-            best: Vec::new(),
             rejected: Vec::new(),
+            lin: Linearised::default(),
+            trial: Linearised::default(),
         }
     }
 
@@ -316,8 +216,6 @@ impl Resection {
     fn reset(&mut self, n: usize) {
         self.status.clear();
         self.status.resize(n, Status::Used);
-        self.best.clear();
-        self.best.resize(n, false);
         self.rejected.clear();
     }
 
@@ -463,18 +361,26 @@ impl Resection {
     }
 
     /// Levenberg–Marquardt over the used observations, updating `e`.
-    fn adjust(&mut self, obs: &[Observation], e: &mut Exterior) -> Result<usize, GeometryError> {
+    /// Returns the iterations and the normal equations at the solution; the
+    /// workspace `lin` then holds the Jacobian and residuals at `e`.
+    fn adjust(
+        &mut self,
+        obs: &[Observation],
+        e: &mut Exterior,
+    ) -> Result<(usize, Normals), GeometryError> {
         let c = self.c;
         let scale = e.center.norm().max(1.0);
         let mut lambda = 1e-6;
         let mut it = 0;
-        let mut current = normals(c, e, obs, &self.status)?;
-        if current.count < 4 {
+        self.lin.load(obs, &self.status);
+        if self.lin.len() < 4 {
             return Err(GeometryError::TooFewPoints {
-                got: current.count,
+                got: self.lin.len(),
                 need: 4,
             });
         }
+        self.trial.load_from(&self.lin);
+        let mut current = self.lin.evaluate(c, e)?;
         while it < self.options.max_iterations {
             it += 1;
             let mut a = current.n;
@@ -493,25 +399,38 @@ impl Resection {
                 rotation: e.rotation * cayley(delta[3], delta[4], delta[5]),
                 center: e.center + delta.fixed_rows::<3>(0),
             };
-            let new_cost = cost_of(c, &candidate, obs, &self.status);
-            match new_cost {
-                Some(cost) if cost <= current.cost => {
+            // Steps this small only move the pose by rounding noise: take
+            // the step and stop, moving the residuals by the linear
+            // prediction (exact to the second order of the step).
+            // Gauss–Newton converges quadratically here, so after a step of
+            // 1e-6 of the camera distance what remains is ~1e-12 of it.
+            let tiny = delta.fixed_rows::<3>(0).norm() <= 1e-6 * scale
+                && delta.fixed_rows::<3>(3).norm() <= 1e-6;
+            if tiny && lambda <= 1e-6 {
+                *e = candidate;
+                current.cost = self.lin.shift(&delta);
+                return Ok((it, current));
+            }
+            // The normal equations at the candidate carry its cost: one pass
+            // serves both the acceptance test and the next step.
+            match self.trial.evaluate(c, &candidate) {
+                Ok(next) if next.cost <= current.cost * (1.0 + 1e-12) => {
                     *e = candidate;
-                    let small_step = delta.fixed_rows::<3>(0).norm() <= 1e-10 * scale
-                        && delta.fixed_rows::<3>(3).norm() <= 1e-13;
-                    let small_gain = current.cost - cost <= 1e-14 * current.cost.max(1e-300);
+                    std::mem::swap(&mut self.lin, &mut self.trial);
+                    let small_gain = current.cost - next.cost <= 1e-10 * current.cost;
                     lambda = (lambda * 0.1).max(1e-12);
-                    current = normals(c, e, obs, &self.status)?;
-                    if small_step || small_gain {
-                        return Ok(it);
+                    current = next;
+                    if tiny || small_gain {
+                        return Ok((it, current));
                     }
                 }
+                _ if tiny => return Ok((it, current)),
                 _ => {
                     lambda *= 10.0;
                     if lambda > 1e10 {
                         // No step lowers the cost: we sit at the minimum to
                         // machine precision.
-                        return Ok(it);
+                        return Ok((it, current));
                     }
                 }
             }
@@ -526,13 +445,11 @@ impl Resection {
         obs: &[Observation],
         mut e: Exterior,
     ) -> Result<ResectionReport, GeometryError> {
-        let c = self.c;
         let n_total = obs.len();
         let max_snooped = (self.options.max_snooped_ratio * n_total as f64).floor() as usize;
         let mut snooped = 0;
         loop {
-            let iterations = self.adjust(obs, &mut e)?;
-            let nm = normals(c, &e, obs, &self.status)?;
+            let (iterations, nm) = self.adjust(obs, &mut e)?;
             let redundancy = 2 * nm.count - 6;
             if redundancy == 0 {
                 return Err(GeometryError::TooFewPoints {
@@ -544,22 +461,11 @@ impl Resection {
             let sigma0 = (nm.cost / redundancy as f64).sqrt();
             let sigma_test = sigma0.max(self.options.sigma_floor_px * self.pixel_size);
             // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)).
-            let d = rotation_derivatives(&e.rotation);
-            let mut worst: Option<(usize, f64)> = None;
-            for (k, o) in obs.iter().enumerate() {
-                if self.status[k] != Status::Used {
-                    continue;
-                }
-                let Some((v, ax, ay)) = linearise(c, &e.rotation, &d, &e.center, o) else {
-                    return Err(GeometryError::BehindCamera { count: 1 });
-                };
-                let qx = (1.0 - ax.dot(&(q * ax))).max(1e-12);
-                let qy = (1.0 - ay.dot(&(q * ay))).max(1e-12);
-                let w = (v.x.abs() / qx.sqrt()).max(v.y.abs() / qy.sqrt()) / sigma_test;
-                if w > self.options.snooping_critical && worst.is_none_or(|(_, ww)| w > ww) {
-                    worst = Some((k, w));
-                }
-            }
+            let worst = self
+                .lin
+                .worst_standardised(&q, sigma_test)
+                .filter(|(_, w)| *w > self.options.snooping_critical)
+                .map(|(i, w)| (self.lin.idx[i], w));
             match worst {
                 Some((k, _)) if snooped < max_snooped && nm.count > 4 => {
                     self.status[k] = Status::Snooped;

@@ -1,0 +1,277 @@
+//! Acceptance tests of the resection on the default plate and camera:
+//! exactness on noise-free data at any attitude, agreement of the predicted
+//! precision with Monte Carlo, and rejection of gross errors.
+
+use photopose_field::design::default_plate;
+use photopose_geometry::precision::{predict, visible_points};
+use photopose_geometry::rng::SplitMix64;
+use photopose_geometry::rotation::angle_between;
+use photopose_geometry::{
+    Camera, Distortion, Exterior, GeometryError, Interior, Observation, Resection,
+    ResectionOptions, Sensor, Vector3,
+};
+
+fn plate() -> &'static photopose_field::Field {
+    static PLATE: std::sync::OnceLock<photopose_field::Field> = std::sync::OnceLock::new();
+    PLATE.get_or_init(default_plate)
+}
+
+fn camera() -> Camera {
+    Camera::new(
+        Sensor {
+            width: 1300,
+            height: 1030,
+            pixel_size: 0.0067,
+        },
+        Interior {
+            c: 12.0,
+            x0: 0.021,
+            y0: -0.014,
+        },
+        Distortion {
+            k1: -1.2e-4,
+            k2: 3.0e-7,
+            p1: 5.0e-6,
+            p2: -3.0e-6,
+            ..Distortion::default()
+        },
+    )
+    .unwrap()
+}
+
+/// Observations of the default plate from `e`, with Gaussian noise `sigma_px`.
+fn observe(cam: &Camera, e: &Exterior, sigma_px: f64, rng: &mut SplitMix64) -> Vec<Observation> {
+    let mut out = Vec::new();
+    for t in plate().targets() {
+        let Some(px) = e.project_pixel(cam, &t.position) else {
+            continue;
+        };
+        if !cam.contains_pixel(px, 5.0) {
+            continue;
+        }
+        let col = px.x + sigma_px * rng.normal();
+        let row = px.y + sigma_px * rng.normal();
+        out.push(Observation::from_pixel(cam, t.id, t.position, col, row));
+    }
+    out
+}
+
+fn poses() -> Vec<(&'static str, Exterior)> {
+    let up = Vector3::y();
+    vec![
+        (
+            "frontal",
+            Exterior::from_kuka_pose([0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]),
+        ),
+        (
+            "upside down",
+            Exterior::from_kuka_pose([20.0, -10.0, 1000.0, 180.0, 0.0, 0.0]),
+        ),
+        (
+            "yawed 90",
+            Exterior::from_kuka_pose([0.0, 0.0, 900.0, 90.0, 0.0, 0.0]),
+        ),
+        (
+            "oblique 60",
+            Exterior::look_at(Vector3::new(0.0, -1039.2, 600.0), Vector3::zeros(), up).unwrap(),
+        ),
+        (
+            "oblique 60 side",
+            Exterior::look_at(
+                Vector3::new(866.0, 0.0, 500.0),
+                Vector3::new(30.0, 0.0, 0.0),
+                Vector3::z(),
+            )
+            .unwrap(),
+        ),
+        (
+            "close",
+            Exterior::from_kuka_pose([50.0, 20.0, 600.0, 10.0, 5.0, -8.0]),
+        ),
+        (
+            "far tilted",
+            Exterior::from_kuka_pose([-100.0, 80.0, 1500.0, -135.0, 12.0, 20.0]),
+        ),
+    ]
+}
+
+#[test]
+fn noise_free_any_attitude_is_exact() {
+    let cam = camera();
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    let mut rng = SplitMix64::new(1);
+    for (name, truth) in poses() {
+        let obs = observe(&cam, &truth, 0.0, &mut rng);
+        assert!(obs.len() >= 50, "{name}: only {} points visible", obs.len());
+        let r = rs.solve(&obs).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let dc = (r.exterior.center - truth.center).norm();
+        let dr = angle_between(&r.exterior.rotation, &truth.rotation);
+        assert!(dc < 1e-6, "{name}: centre off by {dc} mm");
+        assert!(dr < 1e-9, "{name}: rotation off by {dr} rad");
+        assert_eq!(r.n_rejected, 0, "{name}: rejected {:?}", rs.rejected_ids());
+    }
+}
+
+#[test]
+fn monte_carlo_agrees_with_predicted_precision() {
+    let cam = camera();
+    let truth = Exterior::from_kuka_pose([30.0, -20.0, 1000.0, 15.0, 8.0, -5.0]);
+    let sigma = 0.1;
+    let mut pts = Vec::new();
+    visible_points(
+        &cam,
+        &truth,
+        plate().targets().iter().map(|t| t.position),
+        5.0,
+        &mut pts,
+    );
+    let pred = predict(&cam, &truth, &pts, sigma).unwrap();
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    let mut rng = SplitMix64::new(2024);
+    let trials = 1000;
+    let mut sum = [0.0f64; 6];
+    let mut sum2 = [0.0f64; 6];
+    for _ in 0..trials {
+        let obs = observe(&cam, &truth, sigma, &mut rng);
+        let r = rs.solve(&obs).unwrap();
+        let d = r.exterior.center - truth.center;
+        // Small rotation of the camera about the field axes: R = R_true (I + [ω]x).
+        let dr = truth.rotation.transpose() * r.exterior.rotation;
+        let w = [
+            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
+            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
+            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
+        ];
+        let e = [d.x, d.y, d.z, w[0], w[1], w[2]];
+        for k in 0..6 {
+            sum[k] += e[k];
+            sum2[k] += e[k] * e[k];
+        }
+    }
+    let n = trials as f64;
+    for k in 0..6 {
+        let mean = sum[k] / n;
+        let std = ((sum2[k] - n * mean * mean) / (n - 1.0)).sqrt();
+        let predicted = pred.covariance[(k, k)].sqrt();
+        let ratio = std / predicted;
+        assert!(
+            (ratio - 1.0).abs() < 0.10,
+            "unknown {k}: empirical {std:e} vs predicted {predicted:e} (ratio {ratio:.3})"
+        );
+        let se = predicted / n.sqrt();
+        assert!(
+            mean.abs() < 3.0 * se,
+            "unknown {k}: mean error {mean:e} exceeds 3 standard errors {se:e}"
+        );
+    }
+}
+
+#[test]
+fn gross_errors_are_rejected_and_do_not_move_the_pose() {
+    let cam = camera();
+    let truth = Exterior::from_kuka_pose([-40.0, 25.0, 950.0, -30.0, 10.0, 6.0]);
+    let mut rng = SplitMix64::new(77);
+    let mut pts = Vec::new();
+    visible_points(
+        &cam,
+        &truth,
+        plate().targets().iter().map(|t| t.position),
+        5.0,
+        &mut pts,
+    );
+    let pred = predict(&cam, &truth, &pts, 0.1).unwrap();
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    for trial in 0..20 {
+        let mut obs = observe(&cam, &truth, 0.1, &mut rng);
+        // Wrong ids: swap the object points of 10 % of the observations
+        // with other targets' (a misidentification).
+        let n = obs.len();
+        let k = n / 10;
+        let mut wrong = Vec::new();
+        while wrong.len() < k {
+            let i = rng.below(n);
+            if !wrong.contains(&i) {
+                wrong.push(i);
+            }
+        }
+        let plate = plate();
+        for &i in &wrong {
+            let other = plate.targets()[rng.below(plate.len())];
+            if (other.position - obs[i].object).norm() < 1.0 {
+                continue;
+            }
+            obs[i].object = other.position;
+        }
+        let bad_ids: Vec<u64> = wrong
+            .iter()
+            .map(|&i| obs[i].id)
+            .filter(|id| {
+                let t = plate.get(*id).unwrap();
+                (t.position - obs.iter().find(|o| o.id == *id).unwrap().object).norm() > 1.0
+            })
+            .collect();
+        let r = rs.solve(&obs).unwrap();
+        let mut rejected = rs.rejected_ids().to_vec();
+        rejected.sort();
+        let mut want = bad_ids.clone();
+        want.sort();
+        assert_eq!(rejected, want, "trial {trial}");
+        let std = pred.std_center();
+        let d = r.exterior.center - truth.center;
+        for a in 0..3 {
+            assert!(
+                d[a].abs() < 4.5 * std[a],
+                "trial {trial}: axis {a} off by {} mm, σ {}",
+                d[a],
+                std[a]
+            );
+        }
+    }
+}
+
+#[test]
+fn unusable_inputs_are_errors_not_answers() {
+    let cam = camera();
+    let truth = Exterior::from_kuka_pose([0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]);
+    let mut rng = SplitMix64::new(3);
+    let obs = observe(&cam, &truth, 0.0, &mut rng);
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    assert!(matches!(
+        rs.solve(&obs[..3]),
+        Err(GeometryError::TooFewPoints { got: 3, need: 4 })
+    ));
+    // All on one line of the plate.
+    let y = obs[0].object.y;
+    let line: Vec<Observation> = obs
+        .iter()
+        .copied()
+        .filter(|o| (o.object.y - y).abs() < 1e-9)
+        .collect();
+    assert!(line.len() >= 4);
+    assert!(matches!(rs.solve(&line), Err(GeometryError::Degenerate(_))));
+    let mut nan = obs.clone();
+    nan[5].image.x = f64::NAN;
+    assert!(matches!(
+        rs.solve(&nan),
+        Err(GeometryError::NonFinite { index: 5 })
+    ));
+    // Random image positions: no pose explains them.
+    let mut noise = obs.clone();
+    for o in &mut noise {
+        o.image.x = (rng.unit() - 0.5) * 8.0;
+        o.image.y = (rng.unit() - 0.5) * 6.0;
+    }
+    assert!(rs.solve(&noise).is_err());
+}
+
+#[test]
+fn a_workspace_solves_the_same_way_twice() {
+    let cam = camera();
+    let truth = Exterior::from_kuka_pose([10.0, 10.0, 1000.0, 5.0, 3.0, 2.0]);
+    let mut rng = SplitMix64::new(5);
+    let obs = observe(&cam, &truth, 0.2, &mut rng);
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    let a = rs.solve(&obs).unwrap();
+    let b = rs.solve(&obs).unwrap();
+    assert_eq!(a, b);
+}

@@ -1,0 +1,296 @@
+//! End-to-end tests of `photopose resect` and `photopose simulate`: the real
+//! binary on real files, the output contract (keys), and bad inputs that
+//! must give `ok: false` with a reason naming the file, line or key while the
+//! batch goes on.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_photopose"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("photopose-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
+}
+
+fn lines(out: &std::process::Output) -> Vec<Value> {
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON: {l}: {e}")))
+        .collect()
+}
+
+#[test]
+fn resect_recovers_the_simulated_pose_with_the_fixed_keys() {
+    let obs = fixture("observations/oblique-0.1px.csv");
+    let out = bin()
+        .args(["resect", "--observations"])
+        .arg(&obs)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = &lines(&out)[0];
+    for key in [
+        "image",
+        "ok",
+        "center",
+        "rotation",
+        "std_center",
+        "std_rotation_deg",
+        "sigma0_px",
+        "rms_px",
+        "n_points",
+        "n_rejected",
+        "rejected_ids",
+    ] {
+        assert!(v.get(key).is_some(), "missing key {key} in {v}");
+    }
+    assert_eq!(v["ok"], true);
+    assert_eq!(v["image"], obs.display().to_string());
+    // The fixture was simulated at X,Y,Z = 150,-300,900 (see fixtures/README.md).
+    let c: Vec<f64> = v["center"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let s: Vec<f64> = v["std_center"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    for (k, want) in [150.0, -300.0, 900.0].iter().enumerate() {
+        assert!(
+            (c[k] - want).abs() < 4.0 * s[k],
+            "axis {k}: {} vs {want} (σ {})",
+            c[k],
+            s[k]
+        );
+    }
+    let sigma0 = v["sigma0_px"].as_f64().unwrap();
+    assert!(
+        (0.08..0.12).contains(&sigma0),
+        "σ0 {sigma0} px for 0.1 px noise"
+    );
+    let r = v["rotation"].as_array().unwrap();
+    assert_eq!(r.len(), 3);
+}
+
+/// The ids of the good fixture at pseudo-random image positions.
+fn garbage(good: &str) -> String {
+    let mut out = String::from("id,col,row\n");
+    let mut state = 12345u64;
+    for line in good.lines().skip(1).step_by(5) {
+        let id = line.split(',').next().unwrap();
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let col = (state >> 33) % 1300;
+        let row = (state >> 13) % 1030;
+        out.push_str(&format!("{id},{col}.5,{row}.25\n"));
+    }
+    out
+}
+
+#[test]
+fn bad_inputs_give_reasons_and_the_batch_goes_on() {
+    let dir = scratch("bad");
+    let good = fixture("observations/oblique-0.1px.csv");
+    let good_text = std::fs::read_to_string(&good).unwrap();
+    let mut first_rows = good_text.lines().skip(1);
+    let row = |line: Option<&str>| line.unwrap().to_string();
+    let (r1, r2, r3) = (
+        row(first_rows.next()),
+        row(first_rows.next()),
+        row(first_rows.next()),
+    );
+    let cases: Vec<(&str, String, &str)> = vec![
+        ("empty.csv", String::new(), "empty"),
+        (
+            "three.csv",
+            format!("id,col,row\n{r1}\n{r2}\n{r3}\n"),
+            "too few usable points: 3",
+        ),
+        (
+            "nan.csv",
+            format!("id,col,row\n{r1}\n1001,NaN,5\n"),
+            "nan.csv:3: col `NaN` is not finite",
+        ),
+        (
+            "text.csv",
+            format!("id,col,row\n{r1}\n1001,12.5,abc\n"),
+            "text.csv:3: row `abc` is not a number",
+        ),
+        (
+            "dup.csv",
+            format!("id,col,row\n{r1}\n{r1}\n"),
+            "dup.csv:3: duplicate id",
+        ),
+        (
+            "unknown.csv",
+            format!("id,col,row\n{r1}\n999999,1,2\n"),
+            "unknown.csv:3: id 999999 is not in the test field",
+        ),
+        // Four targets along one row of the plate.
+        (
+            "collinear.csv",
+            "id,col,row\n1001,100,100\n1002,200,100\n1003,300,100\n1004,400,100\n".into(),
+            "collinear",
+        ),
+        // Random positions: no pose explains them.
+        ("garbage.csv", garbage(&good_text), "no consistent pose"),
+    ];
+    let mut args = vec!["resect".to_string(), "--observations".to_string()];
+    let mut want = Vec::new();
+    for (name, text, reason) in &cases {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        args.push(p.display().to_string());
+        want.push((p.display().to_string(), *reason));
+        // A good input after every bad one: the batch must go on.
+        args.push(good.display().to_string());
+    }
+    args.push(dir.join("missing.csv").display().to_string());
+    let out = bin().args(&args).output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "a failed input makes the exit status non-zero"
+    );
+    let v = lines(&out);
+    assert_eq!(v.len(), 2 * cases.len() + 1, "one line per input");
+    for (k, (path, reason)) in want.iter().enumerate() {
+        let bad = &v[2 * k];
+        assert_eq!(bad["image"], *path);
+        assert_eq!(bad["ok"], false, "{bad}");
+        let err = bad["error"].as_str().unwrap();
+        assert!(
+            err.contains(reason),
+            "{path}: error {err:?} lacks {reason:?}"
+        );
+        assert!(
+            err.contains(Path::new(path).file_name().unwrap().to_str().unwrap()),
+            "error names the file: {err}"
+        );
+        assert_eq!(
+            v[2 * k + 1]["ok"],
+            true,
+            "the good input after {path} failed: {}",
+            v[2 * k + 1]
+        );
+    }
+    let last = v.last().unwrap();
+    assert_eq!(last["ok"], false);
+    assert!(last["error"]
+        .as_str()
+        .unwrap()
+        .contains("missing.csv: cannot read"));
+}
+
+#[test]
+fn a_bad_camera_file_is_named_with_its_key() {
+    let dir = scratch("badcam");
+    let cam = dir.join("cam.toml");
+    std::fs::write(
+        &cam,
+        "[sensor]\nwidth = 1300\nheight = 1030\npixel_size = -0.0067\n[interior]\nc = 12.0\nx0 = 0.0\ny0 = 0.0\n",
+    )
+    .unwrap();
+    let out = bin()
+        .args(["resect", "--camera"])
+        .arg(&cam)
+        .arg("--observations")
+        .arg(fixture("observations/oblique-0.1px.csv"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("cam.toml") && err.contains("sensor.pixel_size"),
+        "{err}"
+    );
+}
+
+#[test]
+fn simulate_prints_the_table_and_refuses_a_plate_behind_the_camera() {
+    let out = bin()
+        .args(["simulate", "--json", "--sigma-px", "0.1"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v = &lines(&out)[0];
+    assert_eq!(v["n_points"], 230);
+    let s = v["predicted_std_center"].as_array().unwrap();
+    assert!(s
+        .iter()
+        .all(|x| x.as_f64().unwrap() > 0.0 && x.as_f64().unwrap() < 1.0));
+    // Camera below the plate, looking down: every target is behind it.
+    let out = bin()
+        .args(["simulate", "--pose", "0,0,-1000,0,0,0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("behind the camera"), "{err}");
+}
+
+#[test]
+fn simulated_observations_round_trip_through_resect() {
+    let dir = scratch("sim");
+    let obs = dir.join("obs.csv");
+    let out = bin()
+        .args([
+            "simulate",
+            "--pose",
+            "-50,40,800,30,5,-10",
+            "--sigma-px",
+            "0.05",
+            "--seed",
+            "3",
+            "--observations-out",
+        ])
+        .arg(&obs)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = bin()
+        .args(["resect", "--observations"])
+        .arg(&obs)
+        .output()
+        .unwrap();
+    let v = &lines(&out)[0];
+    assert_eq!(v["ok"], true, "{v}");
+    let p: Vec<f64> = v["pose_xyzabc"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let want = [-50.0, 40.0, 800.0, 30.0, 5.0, -10.0];
+    for k in 0..3 {
+        assert!((p[k] - want[k]).abs() < 0.5, "{p:?}");
+    }
+    for k in 3..6 {
+        assert!((p[k] - want[k]).abs() < 0.05, "{p:?}");
+    }
+}
