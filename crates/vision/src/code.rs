@@ -1,0 +1,466 @@
+//! Reading the 12-sector code ring of a coded target (`coded-targets.md`).
+//!
+//! The centre dot's second moments give the ellipse `E` onto which the
+//! plate's circle of radius `r` projects (a uniform disc of radius `r` has
+//! second moment `r²/4` along each axis, so `E = 2·C^{1/2}`). Under the
+//! affine approximation of the projection, the plate's circle of radius
+//! `k·r` at plate angle `t` (counter-clockwise seen from +Z, i.e. in image
+//! coordinates with `y'` up) lies at pixel offset `k·E·(cos t, −sin t)` up to
+//! a constant angle, the ring's unknown phase. The minus sign is the row
+//! axis pointing down: reading counter-clockwise in the image (`y'` up) is
+//! reading clockwise in pixel coordinates.
+//!
+//! The reader
+//! 1. takes the dark level from the gap (1.5 r) and the bright level from
+//!    the dot, and puts the threshold half-way;
+//! 2. samples the ring's middle (2.5 r) every 5° (six samples per sector) and
+//!    finds the sector phase as the 12th harmonic of the grey-value
+//!    transitions (the sector boundaries are 30° apart);
+//! 3. classifies each sector from six samples over its central 20° at 2.5 r:
+//!    every sample must lie on the same side of the threshold as its
+//!    sector's mean, the mean must be clear of the threshold; the same at
+//!    2.35 r and 2.65 r with smaller margins must give the same bits,
+//!    otherwise the reading is uncertain and the target unidentified;
+//! 4. checks that the gap and the quiet zone (3.5 r) are dark all round;
+//! 5. reads bits in that order, first bit most significant, and takes the id
+//!    of the canonical value; ids that the field does not carry as coded
+//!    targets are not accepted.
+
+use crate::pixel::{Pixel, Plane};
+use photopose_field::{codes, Field, TargetKind};
+
+/// The set of code ids a detector accepts (those of the field's coded targets).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CodeSet {
+    bits: [u64; 6],
+}
+
+impl CodeSet {
+    /// No ids: every ring reads as unidentified.
+    pub const fn empty() -> Self {
+        CodeSet { bits: [0; 6] }
+    }
+
+    /// All 350 ids (for tests and tools; a real field should be used on plates).
+    pub fn all() -> Self {
+        let mut s = Self::empty();
+        for id in 1..=codes::COUNT as u64 {
+            s.insert(id);
+        }
+        s
+    }
+
+    /// The ids of the coded targets of `field`.
+    pub fn from_field(field: &Field) -> Self {
+        Self::from_ids(
+            field
+                .targets()
+                .iter()
+                .filter(|t| t.kind == TargetKind::Coded)
+                .map(|t| t.id),
+        )
+    }
+
+    /// From a list of ids (ids outside 1..=350 are ignored).
+    pub fn from_ids(ids: impl IntoIterator<Item = u64>) -> Self {
+        let mut s = Self::empty();
+        for id in ids {
+            s.insert(id);
+        }
+        s
+    }
+
+    /// Adds an id (ignored outside 1..=350).
+    pub fn insert(&mut self, id: u64) {
+        if (1..=codes::COUNT as u64).contains(&id) {
+            self.bits[(id / 64) as usize] |= 1 << (id % 64);
+        }
+    }
+
+    /// Whether the set holds `id`.
+    pub fn contains(&self, id: u64) -> bool {
+        (1..=codes::COUNT as u64).contains(&id)
+            && self.bits[(id / 64) as usize] >> (id % 64) & 1 == 1
+    }
+
+    /// Number of ids.
+    pub fn len(&self) -> usize {
+        self.bits.iter().map(|b| b.count_ones() as usize).sum()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Why a ring could not be read with certainty.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Uncertainty {
+    /// Part of the ring or its surroundings lies outside the image.
+    OutsideImage,
+    /// Too little contrast between the dot and the gap.
+    LowContrast,
+    /// Something bright in the gap between dot and ring.
+    GapNotDark,
+    /// Something bright in the quiet zone outside the ring.
+    QuietZoneNotDark,
+    /// No sector boundaries found (no transitions around the ring).
+    NoPhase,
+    /// A sector's mean lies too close to the threshold.
+    MarginalSector,
+    /// The samples within a sector disagree.
+    SectorDisagrees,
+    /// Inner, middle and outer readings of the ring differ.
+    RadiiDisagree,
+}
+
+/// The outcome of reading a target's ring.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CodeStatus {
+    /// Nothing bright in the ring zone: an uncoded target.
+    NoRing,
+    /// A certain reading of a code that the field carries.
+    Read {
+        /// The code id.
+        id: u64,
+        /// Its canonical value.
+        value: u16,
+    },
+    /// A certain reading whose code is not in the field (or is no code at
+    /// all: `value` 4095, a full ring); the target is unidentified.
+    NotInField {
+        /// The canonical value read.
+        value: u16,
+    },
+    /// The bits could not be read with certainty; the target is unidentified.
+    Uncertain(Uncertainty),
+}
+
+impl CodeStatus {
+    /// The id, if one was read.
+    pub fn id(&self) -> Option<u64> {
+        match self {
+            CodeStatus::Read { id, .. } => Some(*id),
+            _ => None,
+        }
+    }
+}
+
+/// Parameters of the reader.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CodeParams {
+    /// Least dot-to-gap contrast, grey values.
+    pub min_contrast: f64,
+    /// A sector's mean must be this fraction of the contrast away from the threshold.
+    pub sector_margin: f64,
+    /// Each sample must lie on its sector's side, at least this fraction of
+    /// the contrast away from the threshold.
+    pub sample_margin: f64,
+    /// Gap and quiet-zone samples must stay below dark + this fraction of the contrast.
+    pub dark_tolerance: f64,
+}
+
+/// Result of reading a ring.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Outcome.
+    pub status: CodeStatus,
+    /// Whether bright marks were found in the ring zone (a coded target).
+    pub ring_present: bool,
+    /// Raw bits in reading order (first read most significant) when read.
+    pub raw: u16,
+    /// Bright (dot) level.
+    pub bright: f64,
+    /// Dark (gap) level.
+    pub dark: f64,
+}
+
+/// Sampling geometry: centre and the matrix `E` that maps the plate's unit
+/// circle (in units of the dot radius) into pixel offsets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RingFrame {
+    /// Centre column.
+    pub col: f64,
+    /// Centre row.
+    pub row: f64,
+    /// `E` (symmetric): `[exx, exy, eyy]`.
+    pub e: [f64; 3],
+}
+
+impl RingFrame {
+    /// The frame of a dot whose central second moments are `(cxx, cyy, cxy)`.
+    pub fn from_moments(col: f64, row: f64, cxx: f64, cyy: f64, cxy: f64) -> Option<Self> {
+        // Symmetric square root of 4C: sqrt(M) = (M + sqrt(det) I) / sqrt(tr + 2 sqrt(det)).
+        let (a, b, c) = (4.0 * cxx, 4.0 * cxy, 4.0 * cyy);
+        let det = a * c - b * b;
+        if !(det > 0.0 && a > 0.0 && c > 0.0) {
+            return None;
+        }
+        let sd = det.sqrt();
+        let t = (a + c + 2.0 * sd).sqrt();
+        Some(RingFrame {
+            col,
+            row,
+            e: [(a + sd) / t, b / t, (c + sd) / t],
+        })
+    }
+
+    /// Pixel position at radius `k` (units of the dot radius) and plate angle
+    /// `t` (counter-clockwise in the image, `y'` up).
+    #[inline]
+    pub fn point(&self, k: f64, t: f64) -> (f64, f64) {
+        let (s, c) = t.sin_cos();
+        let (x, y) = (k * c, -k * s);
+        (
+            self.col + self.e[0] * x + self.e[1] * y,
+            self.row + self.e[1] * x + self.e[2] * y,
+        )
+    }
+
+    /// Radius (units of the dot radius) of a pixel position in this frame.
+    pub fn radius_of(&self, col: f64, row: f64) -> f64 {
+        let (dx, dy) = (col - self.col, row - self.row);
+        let [a, b, c] = self.e;
+        let det = a * c - b * b;
+        let x = (c * dx - b * dy) / det;
+        let y = (-b * dx + a * dy) / det;
+        (x * x + y * y).sqrt()
+    }
+}
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+/// Phase samples around the ring (every 5°: six per sector).
+const PHASE_SAMPLES: usize = 72;
+/// Samples of the gap and the quiet zone.
+const ZONE_SAMPLES: usize = 24;
+/// Offsets of the classification samples from a sector's centre, degrees.
+const SECTOR_OFFSETS: [f64; 6] = [-10.0, -6.0, -2.0, 2.0, 6.0, 10.0];
+/// Phase samples closer than this to a sector boundary (degrees) are not
+/// checked against their sector.
+const EDGE_CLEARANCE: f64 = 3.0;
+/// Radii at which sectors are classified (middle first).
+const RING_RADII: [f64; 3] = [2.5, 2.35, 2.65];
+/// At the inner and outer radii (cross-checks), margins are this fraction
+/// of those at the middle.
+const CROSS_MARGIN: f64 = 0.4;
+
+fn zone<P: Pixel>(plane: &Plane<P>, f: &RingFrame, k: f64) -> Option<(f64, f64)> {
+    let mut sum = 0.0;
+    let mut max = f64::MIN;
+    for j in 0..ZONE_SAMPLES {
+        let t = (j as f64 + 0.5) * (360.0 / ZONE_SAMPLES as f64) * DEG;
+        let (x, y) = f.point(k, t);
+        let v = plane.bilinear(x, y)?;
+        sum += v;
+        max = max.max(v);
+    }
+    Some((sum / ZONE_SAMPLES as f64, max))
+}
+
+/// Reads the ring around a dot.
+pub fn read<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    params: &CodeParams,
+    accepted: &CodeSet,
+) -> Reading {
+    let mut out = Reading {
+        status: CodeStatus::Uncertain(Uncertainty::OutsideImage),
+        ring_present: false,
+        raw: 0,
+        bright: 0.0,
+        dark: 0.0,
+    };
+    // Bright level: the dot's centre and eight points at 0.3 r.
+    let mut bright = match plane.bilinear(f.col, f.row) {
+        Some(v) => v,
+        None => return out,
+    };
+    for j in 0..8 {
+        let (x, y) = f.point(0.3, j as f64 * 45.0 * DEG);
+        match plane.bilinear(x, y) {
+            Some(v) => bright += v,
+            None => return out,
+        }
+    }
+    bright /= 9.0;
+    let Some((dark, gap_max)) = zone(plane, f, 1.5) else {
+        return out;
+    };
+    out.bright = bright;
+    out.dark = dark;
+    let contrast = bright - dark;
+    if contrast < params.min_contrast {
+        out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
+        return out;
+    }
+    let thr = dark + 0.5 * contrast;
+    // Presence and phase: the ring's middle every 5°.
+    let mut ring = [0.0f64; PHASE_SAMPLES];
+    let mut n_bright = 0;
+    let mut outside = false;
+    for (j, s) in ring.iter_mut().enumerate() {
+        let (x, y) = f.point(2.5, j as f64 * (360.0 / PHASE_SAMPLES as f64) * DEG);
+        match plane.bilinear(x, y) {
+            Some(v) => {
+                *s = v;
+                n_bright += (v > thr) as usize;
+            }
+            None => outside = true,
+        }
+    }
+    out.ring_present = n_bright >= 2;
+    let dark_limit = dark + params.dark_tolerance * contrast;
+    if !out.ring_present {
+        out.status = if outside {
+            CodeStatus::Uncertain(Uncertainty::OutsideImage)
+        } else if gap_max > dark_limit {
+            CodeStatus::Uncertain(Uncertainty::GapNotDark)
+        } else {
+            CodeStatus::NoRing
+        };
+        return out;
+    }
+    if outside {
+        return out;
+    }
+    if gap_max > dark_limit {
+        out.status = CodeStatus::Uncertain(Uncertainty::GapNotDark);
+        return out;
+    }
+    match zone(plane, f, 3.5) {
+        None => return out,
+        Some((_, quiet_max)) if quiet_max > dark_limit => {
+            out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);
+            return out;
+        }
+        Some(_) => {}
+    }
+    // Sector boundaries: 12th harmonic of the transitions' strength.
+    let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
+    for j in 0..PHASE_SAMPLES {
+        let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
+        let t = (j as f64 + 0.5) * (360.0 / PHASE_SAMPLES as f64) * DEG;
+        re += g * (12.0 * t).cos();
+        im += g * (12.0 * t).sin();
+        total += g;
+    }
+    if total < params.min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
+        // A full ring (4095) has no transitions; anything else without a
+        // 30° pattern is not a code.
+        out.status = if n_bright == PHASE_SAMPLES {
+            CodeStatus::NotInField { value: codes::MASK }
+        } else {
+            CodeStatus::Uncertain(Uncertainty::NoPhase)
+        };
+        return out;
+    }
+    let boundary = im.atan2(re) / 12.0;
+    // Classify: sector k is centred at boundary + 15° + 30°k.
+    let base_margin = params.sector_margin * contrast;
+    let base_sample_margin = params.sample_margin * contrast;
+    let mut raw = 0u16;
+    for (ri, &k) in RING_RADII.iter().enumerate() {
+        let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
+        let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
+        let mut word = 0u16;
+        for sector in 0..12 {
+            let centre = boundary + (15.0 + 30.0 * sector as f64) * DEG;
+            let mut s = [0.0f64; SECTOR_OFFSETS.len()];
+            for (v, d) in s.iter_mut().zip(SECTOR_OFFSETS) {
+                let (x, y) = f.point(k, centre + d * DEG);
+                match plane.bilinear(x, y) {
+                    Some(g) => *v = g,
+                    None => return out,
+                }
+            }
+            let mean = s.iter().sum::<f64>() / s.len() as f64;
+            if (mean - thr).abs() < margin {
+                out.status = CodeStatus::Uncertain(Uncertainty::MarginalSector);
+                return out;
+            }
+            let bit = mean > thr;
+            if s.iter().any(|&v| {
+                if bit {
+                    v < thr + sample_margin
+                } else {
+                    v > thr - sample_margin
+                }
+            }) {
+                out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
+                return out;
+            }
+            word = (word << 1) | bit as u16;
+        }
+        if ri == 0 {
+            raw = word;
+        } else if word != raw {
+            out.status = CodeStatus::Uncertain(Uncertainty::RadiiDisagree);
+            return out;
+        }
+    }
+    // Every phase sample clear of a sector boundary must agree with its
+    // sector: catches marks (a bar's shadow) that hide a sector's middle
+    // but not its edges.
+    for (j, &v) in ring.iter().enumerate() {
+        let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
+        let rel = (t - boundary / DEG).rem_euclid(360.0);
+        let within = rel % 30.0;
+        if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
+            continue;
+        }
+        let sector = (rel / 30.0) as u32 % 12;
+        let bit = (raw >> (11 - sector)) & 1 == 1;
+        if bit != (v > thr) {
+            out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
+            return out;
+        }
+    }
+    out.raw = raw;
+    let value = codes::canonical(raw);
+    out.status = match codes::id_of(raw) {
+        Some(id) if accepted.contains(id) => CodeStatus::Read { id, value },
+        _ => CodeStatus::NotInField { value },
+    };
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn code_set_membership() {
+        let s = CodeSet::from_ids([2, 17, 350, 0, 351]);
+        assert!(s.contains(2) && s.contains(17) && s.contains(350));
+        assert!(!s.contains(3) && !s.contains(0) && !s.contains(351));
+        assert_eq!(s.len(), 3);
+        assert_eq!(CodeSet::all().len(), 350);
+        let f = photopose_field::design::default_plate();
+        let s = CodeSet::from_field(&f);
+        assert_eq!(s.len(), 30);
+        assert!(f.coded().all(|t| s.contains(t.id)));
+    }
+
+    #[test]
+    fn ring_frame_maps_the_unit_circle_onto_the_moment_ellipse() {
+        // A circle of radius 4 px: second moments 4.
+        let f = RingFrame::from_moments(10.0, 20.0, 4.0, 4.0, 0.0).unwrap();
+        let (x, y) = f.point(1.0, 0.0);
+        assert!((x - 14.0).abs() < 1e-12 && (y - 20.0).abs() < 1e-12);
+        // Counter-clockwise in the image is up in the picture: row decreases.
+        let (x, y) = f.point(1.0, 90.0 * DEG);
+        assert!(
+            (x - 10.0).abs() < 1e-12 && (y - 16.0).abs() < 1e-12,
+            "{x} {y}"
+        );
+        assert!((f.radius_of(10.0, 28.0) - 2.0).abs() < 1e-12);
+        // An ellipse with axes 6 (along col) and 3 (along row).
+        let f = RingFrame::from_moments(0.0, 0.0, 9.0, 2.25, 0.0).unwrap();
+        let (x, _) = f.point(1.0, 0.0);
+        assert!((x - 6.0).abs() < 1e-12);
+        assert!((f.radius_of(0.0, 3.0) - 1.0).abs() < 1e-12);
+        assert!(RingFrame::from_moments(0.0, 0.0, 1.0, 1.0, 1.0).is_none());
+    }
+}

@@ -1,0 +1,370 @@
+//! Connected components by run-length labelling with union-find
+//! (8-connectivity), collecting each blob's statistics in the same pass:
+//! area, bounding box, grey-value sum and peak, saturated pixels, and the
+//! binary first and second moments (computed in closed form per run).
+//!
+//! All buffers belong to [`Labeller`] and are sized once; a frame that needs
+//! more runs or blobs than the capacity is reported as overflowing instead of
+//! growing them.
+
+use crate::pixel::Pixel;
+
+/// A horizontal run of foreground pixels.
+#[derive(Debug, Clone, Copy, Default)]
+struct Run {
+    row: u32,
+    start: u32,
+    /// One past the last column.
+    end: u32,
+    sum: u32,
+    max: u16,
+    saturated: u16,
+}
+
+/// Statistics of one connected component.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Blob {
+    /// Pixels in the blob.
+    pub area: u32,
+    /// Bounding box, inclusive: first column.
+    pub col0: u32,
+    /// First row.
+    pub row0: u32,
+    /// Last column.
+    pub col1: u32,
+    /// Last row.
+    pub row1: u32,
+    /// Sum of grey values.
+    pub sum: u64,
+    /// Largest grey value.
+    pub max: u32,
+    /// Pixels at or above the saturation level.
+    pub saturated: u32,
+    /// Binary moments Σx, Σy, Σx², Σy², Σxy relative to `(origin_col, row0)`.
+    pub m: [f64; 5],
+    /// Column of the moments' origin (the start of the blob's first run).
+    pub origin_col: u32,
+}
+
+impl Blob {
+    fn empty() -> Self {
+        Blob {
+            area: 0,
+            col0: u32::MAX,
+            row0: u32::MAX,
+            col1: 0,
+            row1: 0,
+            sum: 0,
+            max: 0,
+            saturated: 0,
+            m: [0.0; 5],
+            origin_col: 0,
+        }
+    }
+
+    /// Binary centroid `(col, row)`.
+    pub fn centre(&self) -> (f64, f64) {
+        let n = self.area as f64;
+        (
+            self.origin_col as f64 + self.m[0] / n,
+            self.row0 as f64 + self.m[1] / n,
+        )
+    }
+
+    /// Binary central second moments `(cxx, cyy, cxy)`, px², including the
+    /// pixel's own `1/12` so that a disc of radius `r` gives about `r²/4`.
+    pub fn covariance(&self) -> (f64, f64, f64) {
+        let n = self.area as f64;
+        let (mx, my) = (self.m[0] / n, self.m[1] / n);
+        (
+            self.m[2] / n - mx * mx + 1.0 / 12.0,
+            self.m[3] / n - my * my + 1.0 / 12.0,
+            self.m[4] / n - mx * my,
+        )
+    }
+}
+
+/// Outcome of labelling a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LabelOutcome {
+    /// All runs and blobs fitted.
+    Complete,
+    /// More runs than the capacity.
+    TooManyRuns,
+    /// More blobs than the capacity.
+    TooManyBlobs,
+}
+
+/// Run-length labeller with its buffers.
+#[derive(Debug)]
+pub struct Labeller {
+    runs: Vec<Run>,
+    parent: Vec<u32>,
+    blob_of: Vec<u32>,
+    blobs: Vec<Blob>,
+    max_runs: usize,
+    max_blobs: usize,
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        let p = parent[i as usize];
+        parent[i as usize] = parent[p as usize];
+        i = p;
+    }
+    i
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let ra = find(parent, a);
+    let rb = find(parent, b);
+    if ra != rb {
+        // Keep the older run as root (stable, and roots come first).
+        if ra < rb {
+            parent[rb as usize] = ra;
+        } else {
+            parent[ra as usize] = rb;
+        }
+    }
+}
+
+/// `Σ_{x=0}^{k-1} x²`.
+#[inline]
+fn sum_sq_below(k: f64) -> f64 {
+    (k - 1.0) * k * (2.0 * k - 1.0) / 6.0
+}
+
+/// Chunk length for skipping dark stretches of a row.
+const CHUNK: usize = 32;
+
+impl Labeller {
+    /// A labeller for at most `max_runs` runs and `max_blobs` blobs per frame.
+    pub fn new(max_runs: usize, max_blobs: usize) -> Self {
+        Labeller {
+            runs: Vec::with_capacity(max_runs),
+            parent: Vec::with_capacity(max_runs),
+            blob_of: Vec::with_capacity(max_runs),
+            blobs: Vec::with_capacity(max_blobs),
+            max_runs,
+            max_blobs,
+        }
+    }
+
+    /// The blobs of the last frame.
+    pub fn blobs(&self) -> &[Blob] {
+        &self.blobs
+    }
+
+    /// Labels the pixels strictly above `threshold`; pixels at or above
+    /// `saturation` count as saturated.
+    pub fn label<P: Pixel>(
+        &mut self,
+        data: &[P],
+        width: usize,
+        height: usize,
+        threshold: u32,
+        saturation: u32,
+    ) -> LabelOutcome {
+        self.runs.clear();
+        self.parent.clear();
+        self.blob_of.clear();
+        self.blobs.clear();
+        let mut prev_start = 0usize; // runs of the previous row: prev_start..row_start
+        let mut prev_end = 0usize;
+        for row in 0..height {
+            let line = &data[row * width..(row + 1) * width];
+            let row_start = self.runs.len();
+            if !self.extract_runs(line, row as u32, threshold, saturation) {
+                return LabelOutcome::TooManyRuns;
+            }
+            let row_end = self.runs.len();
+            for k in row_start..row_end {
+                self.parent.push(k as u32);
+            }
+            // Connect with the previous row (8-connectivity: overlap or touch diagonally).
+            if prev_end > prev_start && row_end > row_start {
+                let (mut i, mut j) = (prev_start, row_start);
+                while i < prev_end && j < row_end {
+                    let a = self.runs[i];
+                    let b = self.runs[j];
+                    if a.start <= b.end && b.start <= a.end {
+                        union(&mut self.parent, i as u32, j as u32);
+                    }
+                    // Advance the run that ends first.
+                    if a.end < b.end {
+                        i += 1;
+                    } else {
+                        j += 1;
+                    }
+                }
+            }
+            prev_start = row_start;
+            prev_end = row_end;
+        }
+        // Resolve labels and accumulate statistics.
+        for k in 0..self.runs.len() {
+            let root = find(&mut self.parent, k as u32) as usize;
+            let b = if root == k {
+                if self.blobs.len() >= self.max_blobs {
+                    return LabelOutcome::TooManyBlobs;
+                }
+                self.blobs.push(Blob::empty());
+                let b = self.blobs.len() as u32 - 1;
+                self.blob_of.push(b);
+                b
+            } else {
+                // Roots have smaller indices, so theirs is already set.
+                let b = self.blob_of[root];
+                self.blob_of.push(b);
+                b
+            };
+            let run = self.runs[k];
+            let blob = &mut self.blobs[b as usize];
+            if blob.area == 0 {
+                blob.origin_col = run.start;
+                blob.row0 = run.row;
+            }
+            // The moments' origin is fixed by the blob's first run (the
+            // bounding box may later extend to its left).
+            let ox = blob.origin_col as f64;
+            let oy = blob.row0 as f64;
+            let n = (run.end - run.start) as f64;
+            let a = run.start as f64 - ox;
+            let e = run.end as f64 - ox;
+            let sx = (a + e - 1.0) * n / 2.0;
+            let sxx = sum_sq_below(e) - sum_sq_below(a);
+            let y = run.row as f64 - oy;
+            blob.m[0] += sx;
+            blob.m[1] += n * y;
+            blob.m[2] += sxx;
+            blob.m[3] += n * y * y;
+            blob.m[4] += sx * y;
+            blob.area += run.end - run.start;
+            blob.sum += run.sum as u64;
+            blob.max = blob.max.max(run.max as u32);
+            blob.saturated += run.saturated as u32;
+            blob.col0 = blob.col0.min(run.start);
+            blob.col1 = blob.col1.max(run.end - 1);
+            blob.row1 = blob.row1.max(run.row);
+        }
+        LabelOutcome::Complete
+    }
+
+    /// Appends the runs of one row; false if the capacity is exceeded.
+    #[inline]
+    fn extract_runs<P: Pixel>(
+        &mut self,
+        line: &[P],
+        row: u32,
+        threshold: u32,
+        saturation: u32,
+    ) -> bool {
+        let width = line.len();
+        let mut col = 0usize;
+        while col < width {
+            // Skip dark chunks quickly.
+            if col % CHUNK == 0
+                && col + CHUNK <= width
+                && P::max_of(&line[col..col + CHUNK]) <= threshold
+            {
+                col += CHUNK;
+                continue;
+            }
+            let v = line[col].value();
+            if v <= threshold {
+                col += 1;
+                continue;
+            }
+            let start = col;
+            let mut sum = 0u32;
+            let mut max = 0u32;
+            let mut sat = 0u32;
+            while col < width {
+                let v = line[col].value();
+                if v <= threshold {
+                    break;
+                }
+                sum += v;
+                max = max.max(v);
+                sat += (v >= saturation) as u32;
+                col += 1;
+            }
+            if self.runs.len() >= self.max_runs {
+                return false;
+            }
+            self.runs.push(Run {
+                row,
+                start: start as u32,
+                end: col as u32,
+                sum,
+                max: max.min(u16::MAX as u32) as u16,
+                saturated: sat.min(u16::MAX as u32) as u16,
+            });
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn label(img: &[&str]) -> Vec<Blob> {
+        let h = img.len();
+        let w = img[0].len();
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 0 }))
+            .collect();
+        let mut l = Labeller::new(1000, 100);
+        assert_eq!(l.label(&data, w, h, 100, 255), LabelOutcome::Complete);
+        l.blobs().to_vec()
+    }
+
+    #[test]
+    fn components_with_8_connectivity() {
+        let b = label(&[
+            "##....#.", //
+            ".#...#..", //
+            "........", //
+            "#......#", //
+            "##....##", //
+            "#.#..#..", //
+        ]);
+        assert_eq!(b.len(), 4, "{b:?}");
+        assert_eq!(b[0].area, 3);
+        assert_eq!(b[1].area, 2); // diagonal pair top right
+        assert_eq!(b[2].area, 5);
+        assert_eq!((b[2].col0, b[2].row0, b[2].col1, b[2].row1), (0, 3, 2, 5));
+        assert_eq!(b[3].area, 4);
+    }
+
+    #[test]
+    fn u_shape_merges_and_moments_are_exact() {
+        let b = label(&[
+            "#...#", //
+            "#...#", //
+            "#####", //
+        ]);
+        assert_eq!(b.len(), 1);
+        let (cx, cy) = b[0].centre();
+        // Pixels: (0,0),(4,0),(0,1),(4,1),(0..=4,2): Σx = 0+4+0+4+10 = 18, n = 9.
+        assert!((cx - 2.0).abs() < 1e-12, "{cx}");
+        assert!(
+            (cy - (0.0 + 0.0 + 1.0 + 1.0 + 10.0) / 9.0).abs() < 1e-12,
+            "{cy}"
+        );
+        let (cxx, _, _) = b[0].covariance();
+        let want = (0.0 + 16.0 + 0.0 + 16.0 + 30.0) / 9.0 - 4.0 + 1.0 / 12.0;
+        assert!((cxx - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn capacity_is_reported() {
+        let data = [200u8, 0, 200, 0, 200, 0];
+        let mut l = Labeller::new(2, 10);
+        assert_eq!(l.label(&data, 6, 1, 100, 255), LabelOutcome::TooManyRuns);
+        let mut l = Labeller::new(10, 2);
+        assert_eq!(l.label(&data, 6, 1, 100, 255), LabelOutcome::TooManyBlobs);
+    }
+}

@@ -1,0 +1,399 @@
+//! Detector tests on synthetic frames drawn by `testutil`.
+
+use crate::testutil::{Drawn, Rng, Scene, View};
+use crate::*;
+use photopose_field::codes;
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+fn dot(col: f64, row: f64, radius_px: f64) -> Drawn {
+    Drawn {
+        col,
+        row,
+        radius: radius_px,
+        view: View::frontal(1.0),
+        code: None,
+        phase: 0.0,
+    }
+}
+
+fn coded(col: f64, row: f64, radius_px: f64, view: View, id: u64, phase: f64) -> Drawn {
+    Drawn {
+        col,
+        row,
+        radius: radius_px,
+        view,
+        code: codes::value_of(id),
+        phase,
+    }
+}
+
+fn detect(img: &photopose_frame::Image, codes: CodeSet) -> Detections {
+    let mut d = Detector::new(
+        img.width(),
+        img.height(),
+        DetectorOptions {
+            codes,
+            ..DetectorOptions::default()
+        },
+    )
+    .unwrap();
+    d.detect(img.view()).unwrap().clone()
+}
+
+/// The detection nearest to `(col, row)` within `tol` px.
+fn near(d: &Detections, col: f64, row: f64, tol: f64) -> Option<&Detection> {
+    d.targets
+        .iter()
+        .filter(|t| (t.col - col).hypot(t.row - row) < tol)
+        .min_by(|a, b| {
+            let da = (a.col - col).hypot(a.row - row);
+            let db = (b.col - col).hypot(b.row - row);
+            da.total_cmp(&db)
+        })
+}
+
+#[test]
+fn centroids_of_blurred_noisy_dots_are_within_two_hundredths() {
+    let mut rng = Rng::new(7);
+    let mut sq = 0.0;
+    let mut n = 0;
+    for frame in 0..4 {
+        let mut s = Scene::new(240, 200, 20.0);
+        let mut truth = Vec::new();
+        for gy in 0..4 {
+            for gx in 0..5 {
+                let r = 4.0 + 0.5 * ((gx + gy + frame) % 6) as f64; // 8..13 px across
+                let c = 30.0 + 45.0 * gx as f64 + rng.range(-0.5, 0.5);
+                let rw = 30.0 + 45.0 * gy as f64 + rng.range(-0.5, 0.5);
+                s.draw(&dot(c, rw, r), 180.0);
+                truth.push((c, rw));
+            }
+        }
+        s.blur(0.6);
+        s.noise(2.0, &mut rng);
+        let d = detect(&s.to_mono8(), CodeSet::all());
+        assert_eq!(d.targets.len(), truth.len(), "{:?}", d.rejected);
+        for &(c, r) in &truth {
+            let t = near(&d, c, r, 1.0).expect("dot found");
+            assert_eq!(t.kind, TargetKind::Uncoded);
+            assert_eq!(t.id, None);
+            sq += (t.col - c).powi(2) + (t.row - r).powi(2);
+            n += 1;
+        }
+    }
+    let rms = (sq / n as f64).sqrt();
+    assert!(rms <= 0.02, "centroid RMS {rms:.4} px over {n} dots");
+}
+
+#[test]
+fn ellipse_axes_and_angle_follow_the_dot() {
+    let mut s = Scene::new(80, 80, 10.0);
+    let view = View::tilted(1.0, 60.0 * DEG, 30.0 * DEG, 0.0);
+    let mut t = dot(40.3, 39.6, 8.0);
+    t.view = view;
+    s.draw(&t, 200.0);
+    let d = detect(&s.to_mono8(), CodeSet::all());
+    assert_eq!(d.targets.len(), 1);
+    let t = d.targets[0];
+    assert!(
+        (t.col - 40.3).abs() < 0.01 && (t.row - 39.6).abs() < 0.01,
+        "{t:?}"
+    );
+    assert!((t.semi_major - 8.0).abs() < 0.15, "{t:?}");
+    assert!((t.semi_minor - 4.0).abs() < 0.15, "{t:?}");
+    // Foreshortened along 30° in the image (y' up) → the major axis is at
+    // 120° there, i.e. at −120° ≡ 60° from +col towards +row.
+    let ang = t.angle.rem_euclid(std::f64::consts::PI);
+    assert!((ang - 60.0 * DEG).abs() < 2.0 * DEG, "angle {}", ang / DEG);
+}
+
+fn coded_scene(targets: &[Drawn], seed: u64) -> photopose_frame::Image {
+    let mut s = Scene::new(260, 260, 15.0);
+    for t in targets {
+        s.draw(t, 190.0);
+    }
+    s.blur(0.6);
+    s.noise(2.0, &mut Rng::new(seed));
+    s.to_mono8()
+}
+
+#[test]
+fn coded_targets_read_their_ids_at_any_rotation_and_tilt() {
+    let mut rng = Rng::new(11);
+    let ids: Vec<u64> = codes::even_ids().step_by(7).collect();
+    let mut read = 0;
+    let mut total = 0;
+    for (f, chunk) in ids.chunks(9).enumerate() {
+        let mut targets = Vec::new();
+        for (k, &id) in chunk.iter().enumerate() {
+            let tilt = [0.0, 30.0, 45.0][k % 3] * DEG;
+            let view = View::tilted(
+                1.0,
+                tilt,
+                rng.range(0.0, 360.0) * DEG,
+                rng.range(0.0, 360.0) * DEG,
+            );
+            let c = 45.0 + 85.0 * (k % 3) as f64 + rng.range(-0.5, 0.5);
+            let r = 45.0 + 85.0 * (k / 3) as f64 + rng.range(-0.5, 0.5);
+            let radius = rng.range(4.0, 6.0);
+            targets.push(coded(c, r, radius, view, id, rng.range(0.0, 360.0) * DEG));
+        }
+        let d = detect(&coded_scene(&targets, f as u64), CodeSet::all());
+        for t in &targets {
+            if near(&d, t.col, t.row, 1.0).is_none() {
+                let r: Vec<_> = d
+                    .rejected
+                    .iter()
+                    .filter(|x| (x.col - t.col).hypot(x.row - t.row) < 3.0)
+                    .collect();
+                panic!("target {t:?} not found; rejected nearby: {r:?}");
+            }
+        }
+        assert_eq!(
+            d.targets.len(),
+            targets.len(),
+            "ring parts must not become targets: {:?}",
+            d.targets,
+        );
+        for t in &targets {
+            let id = codes::id_of(t.code.unwrap()).unwrap();
+            let got = near(&d, t.col, t.row, 1.0).expect("coded target found");
+            assert_eq!(got.kind, TargetKind::Coded);
+            assert!((got.col - t.col).abs() < 0.1 && (got.row - t.row).abs() < 0.1);
+            total += 1;
+            match got.id {
+                Some(g) => {
+                    assert_eq!(g, id, "wrong id");
+                    read += 1;
+                }
+                None => eprintln!("id {id} unread: {got:?} drawn {t:?}"),
+            }
+        }
+    }
+    assert!(read == total, "read {read} of {total}");
+}
+
+#[test]
+fn reading_direction_is_counter_clockwise_seen_from_the_front() {
+    // Codes whose mirror image is another code.
+    let mut checked = 0;
+    for id in codes::even_ids() {
+        let v = codes::value_of(id).unwrap();
+        let reversed = (0..12).fold(0u16, |acc, k| acc | (((v >> k) & 1) << (11 - k)));
+        let mirror_id = codes::id_of(reversed).unwrap();
+        if mirror_id == id {
+            continue;
+        }
+        let view = View::frontal(1.0);
+        let targets = [
+            coded(70.0, 70.0, 5.0, view, id, 10.0 * DEG),
+            coded(190.0, 70.0, 5.0, view.mirrored(), id, 10.0 * DEG),
+        ];
+        let d = detect(&coded_scene(&targets, id), CodeSet::all());
+        assert_eq!(near(&d, 70.0, 70.0, 1.0).unwrap().id, Some(id));
+        assert_eq!(near(&d, 190.0, 70.0, 1.0).unwrap().id, Some(mirror_id));
+        // With only the true ids accepted, the mirror image is unidentified.
+        let d = detect(&coded_scene(&targets, id), CodeSet::from_ids([id]));
+        assert_eq!(near(&d, 70.0, 70.0, 1.0).unwrap().id, Some(id));
+        let m = near(&d, 190.0, 70.0, 1.0).unwrap();
+        assert_eq!(m.id, None);
+        assert_eq!(m.kind, TargetKind::Coded);
+        assert!(
+            matches!(m.code, CodeStatus::NotInField { .. }),
+            "{:?}",
+            m.code
+        );
+        checked += 1;
+        if checked == 4 {
+            break;
+        }
+    }
+    assert_eq!(checked, 4);
+}
+
+#[test]
+fn degenerate_frames_give_no_targets() {
+    for (value, status) in [
+        (0.0, FrameStatus::Empty),
+        (255.0, FrameStatus::Saturated),
+        (128.0, FrameStatus::Empty),
+    ] {
+        let s = Scene::new(64, 48, value);
+        let d = detect(&s.to_mono8(), CodeSet::all());
+        assert!(d.targets.is_empty());
+        assert_eq!(d.status, status, "grey {value}");
+    }
+    // Noise only, at several levels.
+    for sigma in [1.0, 3.0, 8.0] {
+        let mut s = Scene::new(200, 150, 40.0);
+        s.noise(sigma, &mut Rng::new(3));
+        let d = detect(&s.to_mono8(), CodeSet::all());
+        assert!(d.targets.is_empty(), "σ {sigma}: {:?}", d.targets.first());
+    }
+    // A frame that is mostly saturated with a dark corner.
+    let mut s = Scene::new(64, 48, 255.0);
+    s.fill_rect(0, 0, 10, 10, 0.0);
+    assert!(detect(&s.to_mono8(), CodeSet::all()).targets.is_empty());
+}
+
+#[test]
+fn odd_shaped_reflections_are_rejected_with_reasons() {
+    let mut s = Scene::new(300, 200, 12.0);
+    s.draw(&dot(40.0, 40.0, 5.0), 180.0); // a real target
+    s.bar(150.0, 20.0, 0.0, 1.5, 170.0); // a horizontal line across the frame
+    s.fill_rect(200, 60, 280, 180, 160.0); // a large bright patch
+    s.fill_rect(60, 100, 72, 112, 160.0); // a square
+    s.draw(&dot(120.0, 120.0, 5.0), 110.0); // two merged dots
+    s.draw(&dot(129.0, 120.0, 5.0), 110.0);
+    s.draw(&dot(40.0, 160.0, 5.0), 180.0); // a dot with a tail
+    s.fill_rect(44, 159, 64, 161, 170.0);
+    s.draw(&dot(160.0, 160.0, 4.0), 300.0); // saturated
+    s.blur(0.6);
+    s.noise(2.0, &mut Rng::new(5));
+    let d = detect(&s.to_mono8(), CodeSet::all());
+    assert_eq!(d.targets.len(), 1, "{:#?}", d.targets);
+    assert!(near(&d, 40.0, 40.0, 0.1).is_some());
+    let reason_at = |c: f64, r: f64| {
+        d.rejected
+            .iter()
+            .find(|x| {
+                x.bbox[0] as f64 <= c
+                    && c <= x.bbox[2] as f64
+                    && x.bbox[1] as f64 <= r
+                    && r <= x.bbox[3] as f64
+            })
+            .map(|x| x.reason)
+    };
+    assert_eq!(reason_at(150.0, 20.0), Some(RejectReason::Border));
+    assert_eq!(reason_at(240.0, 120.0), Some(RejectReason::TooLarge));
+    assert_eq!(reason_at(66.0, 106.0), Some(RejectReason::Shape));
+    assert!(
+        matches!(
+            reason_at(124.5, 120.0),
+            Some(RejectReason::Shape | RejectReason::Elongated)
+        ),
+        "{:?}",
+        d.rejected
+    );
+    assert!(matches!(
+        reason_at(40.0, 160.0),
+        Some(RejectReason::Shape | RejectReason::Elongated)
+    ));
+    assert_eq!(reason_at(160.0, 160.0), Some(RejectReason::Saturated));
+}
+
+#[test]
+fn targets_cut_by_the_frame_are_rejected() {
+    let mut s = Scene::new(120, 100, 10.0);
+    s.draw(&dot(2.0, 50.0, 5.0), 180.0);
+    s.draw(&dot(60.0, 98.5, 5.0), 180.0);
+    s.draw(&dot(60.0, 40.0, 5.0), 180.0);
+    // A coded target whose ring leaves the frame: never a wrong id.
+    let ring = coded(110.0, 15.0, 4.0, View::frontal(1.0), 17, 0.0);
+    s.draw(&ring, 180.0);
+    s.blur(0.6);
+    let d = detect(&s.to_mono8(), CodeSet::all());
+    assert!(near(&d, 60.0, 40.0, 0.1).is_some());
+    assert!(near(&d, 2.0, 50.0, 3.0).is_none());
+    assert!(near(&d, 60.0, 98.5, 3.0).is_none());
+    if let Some(t) = near(&d, 110.0, 15.0, 1.0) {
+        assert_eq!(t.id, None);
+        assert_eq!(t.code, CodeStatus::Uncertain(Uncertainty::OutsideImage));
+    }
+    for (c, r) in [(2.0, 50.0), (60.0, 98.5)] {
+        assert!(
+            d.rejected
+                .iter()
+                .any(|x| x.reason == RejectReason::Border && (x.col - c).hypot(x.row - r) < 3.0),
+            "{:?}",
+            d.rejected
+        );
+    }
+}
+
+#[test]
+fn dark_bars_across_rings_never_give_a_wrong_id() {
+    let mut rng = Rng::new(21);
+    let even: Vec<u64> = codes::even_ids().collect();
+    let mut unidentified = 0;
+    let mut n = 0;
+    for trial in 0..60 {
+        let id = even[(trial * 13) % even.len()];
+        let view = View::tilted(
+            1.0,
+            rng.range(0.0, 40.0) * DEG,
+            rng.range(0.0, 360.0) * DEG,
+            0.0,
+        );
+        let t = coded(60.0, 60.0, 5.0, view, id, rng.range(0.0, 360.0) * DEG);
+        let mut s = Scene::new(120, 120, 15.0);
+        s.draw(&t, 190.0);
+        // A bar crossing the ring, not the dot.
+        let off = rng.range(7.0, 13.0) * if trial % 2 == 0 { 1.0 } else { -1.0 };
+        let ang = rng.range(0.0, 180.0) * DEG;
+        let (c, r) = (60.0 - off * ang.sin(), 60.0 + off * ang.cos());
+        // Narrower than a sector's arc, so it cannot hide whole sectors.
+        s.bar(c, r, ang, rng.range(0.8, 2.0), 15.0);
+        s.blur(0.6);
+        s.noise(2.0, &mut rng);
+        // A designed plate's codes (the even ones) except the true one: any
+        // id read would be wrong.
+        let others = CodeSet::from_ids(codes::even_ids().filter(|&x| x != id));
+        let d = detect(&s.to_mono8(), others);
+        for x in &d.targets {
+            assert_eq!(x.id, None, "bar made id {id} read as {:?}", x.id);
+        }
+        let d = detect(&s.to_mono8(), CodeSet::from_ids(codes::even_ids()));
+        if let Some(x) = near(&d, 60.0, 60.0, 1.0) {
+            n += 1;
+            if x.id.is_none() {
+                unidentified += 1;
+            } else {
+                assert_eq!(x.id, Some(id), "wrong id under a bar");
+            }
+        }
+    }
+    assert!(
+        n >= 50,
+        "the dot stays a target under a ring-crossing bar: {n}"
+    );
+    assert!(
+        unidentified >= n / 2,
+        "bars hide bits: {unidentified} of {n} unidentified"
+    );
+}
+
+#[test]
+fn sixteen_bit_frames_match_eight_bit_ones() {
+    let mut s = Scene::new(200, 160, 15.0);
+    let mut rng = Rng::new(4);
+    let t1 = coded(60.0, 70.0, 5.0, View::tilted(1.0, 0.5, 1.0, 0.3), 17, 0.4);
+    s.draw(&t1, 190.0);
+    s.draw(&dot(150.3, 60.7, 4.5), 190.0);
+    s.blur(0.6);
+    s.noise(2.0, &mut rng);
+    let d8 = detect(&s.to_mono8(), CodeSet::all());
+    for (max, gain) in [(4095u16, 16.0), (65535, 256.0)] {
+        let d16 = detect(&s.to_mono16(max, gain), CodeSet::all());
+        assert_eq!(d16.targets.len(), 2);
+        for (a, b) in d8.targets.iter().zip(&d16.targets) {
+            assert_eq!(a.id, b.id);
+            assert_eq!(a.kind, b.kind);
+            assert!((a.col - b.col).abs() < 0.01 && (a.row - b.row).abs() < 0.01);
+        }
+    }
+    assert_eq!(near(&d8, 60.0, 70.0, 0.5).unwrap().id, Some(17));
+}
+
+#[test]
+fn wrong_size_is_an_error() {
+    let mut d = Detector::new(100, 80, DetectorOptions::default()).unwrap();
+    let img = photopose_frame::Image::new_mono8(80, 100);
+    let e = d.detect(img.view()).unwrap_err();
+    assert!(
+        e.to_string().contains("80×100") && e.to_string().contains("100×80"),
+        "{e}"
+    );
+    assert!(Detector::new(4, 4, DetectorOptions::default()).is_err());
+}

@@ -1,0 +1,261 @@
+//! Grey-value histogram and the global threshold: Otsu's method, bounded
+//! below by a noise floor estimated from the same histogram, with explicit
+//! outcomes for degenerate frames (all dark, saturated, nearly uniform).
+//!
+//! The histogram is taken on a sub-sampled grid (every `step`-th row and
+//! column): the threshold is a property of the grey-value distribution, and a
+//! quarter of the pixels estimate it as well as all of them. 16-bit values
+//! are binned down to at most [`MAX_BINS`] bins.
+
+use crate::pixel::Pixel;
+
+/// Most bins of the histogram (12 bits).
+pub const MAX_BINS: usize = 4096;
+
+/// What the threshold stage concluded about a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameStatus {
+    /// A usable threshold was found; targets (if any) were searched.
+    Normal,
+    /// Nothing rises above the noise floor: no targets (all dark or nearly uniform).
+    Empty,
+    /// Most of the frame is saturated: no targets are searched.
+    Saturated,
+    /// More runs or blobs than the detector's capacity (a cluttered or
+    /// noisy frame): no targets are reported.
+    Cluttered,
+}
+
+/// Result of the threshold stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThresholdResult {
+    /// Pixels strictly above this value are foreground.
+    pub threshold: u32,
+    /// Otsu's threshold before the floor was applied (grey value).
+    pub otsu: u32,
+    /// The noise floor (grey value).
+    pub floor: u32,
+    /// Background level (median of the sampled pixels), grey value.
+    pub background: f64,
+    /// Noise estimate (robust σ of the dark half), grey values.
+    pub noise: f64,
+    /// Largest sampled grey value.
+    pub max_sampled: u32,
+    /// Outcome.
+    pub status: FrameStatus,
+}
+
+/// Parameters of the threshold stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThresholdParams {
+    /// Sub-sampling step of the histogram (rows and columns).
+    pub step: usize,
+    /// The floor lies at least this many noise σ above the background.
+    pub noise_factor: f64,
+    /// ... and at least this fraction of the saturation level above it.
+    pub min_contrast: f64,
+    /// A frame whose median is at or above this fraction of the saturation
+    /// level counts as saturated.
+    pub saturated_median: f64,
+}
+
+/// Bin shift for a saturation level: values are binned by `v >> shift`.
+pub fn bin_shift(max_value: u32) -> u32 {
+    let bits = 32 - max_value.max(1).leading_zeros();
+    bits.saturating_sub(12)
+}
+
+/// Fills `hist` (length ≥ `(max_value >> shift) + 1`) with the sub-sampled
+/// histogram of `data` and returns the number of samples.
+pub fn histogram<P: Pixel>(
+    data: &[P],
+    width: usize,
+    height: usize,
+    step: usize,
+    shift: u32,
+    max_value: u32,
+    hist: &mut [u32],
+) -> u32 {
+    let step = step.max(1);
+    let top = (max_value >> shift) as usize;
+    hist.iter_mut().for_each(|h| *h = 0);
+    let mut n = 0u32;
+    let mut row = step / 2;
+    while row < height {
+        let line = &data[row * width..(row + 1) * width];
+        let mut col = step / 2;
+        while col < width {
+            let b = ((line[col].value().min(max_value)) >> shift) as usize;
+            hist[b.min(top)] += 1;
+            n += 1;
+            col += step;
+        }
+        row += step;
+    }
+    n
+}
+
+/// The value below which a fraction `q` of the histogram lies (bin index).
+fn quantile(hist: &[u32], total: u32, q: f64) -> usize {
+    let target = (q * total as f64).ceil().max(1.0) as u64;
+    let mut acc = 0u64;
+    for (i, &h) in hist.iter().enumerate() {
+        acc += h as u64;
+        if acc >= target {
+            return i;
+        }
+    }
+    hist.len().saturating_sub(1)
+}
+
+/// Otsu's threshold (bin index: foreground is `bin > t`) over `hist`; `None`
+/// if the histogram has a single occupied bin.
+pub fn otsu(hist: &[u32]) -> Option<usize> {
+    let total: f64 = hist.iter().map(|&h| h as f64).sum();
+    if total == 0.0 {
+        return None;
+    }
+    let sum_all: f64 = hist
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| i as f64 * h as f64)
+        .sum();
+    let mut w0 = 0.0;
+    let mut sum0 = 0.0;
+    let mut best = None;
+    let mut best_var = 0.0;
+    for (t, &h) in hist.iter().enumerate() {
+        w0 += h as f64;
+        sum0 += t as f64 * h as f64;
+        let w1 = total - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let m0 = sum0 / w0;
+        let m1 = (sum_all - sum0) / w1;
+        let var = w0 * w1 * (m1 - m0) * (m1 - m0);
+        if var > best_var {
+            best_var = var;
+            best = Some(t);
+        }
+    }
+    best
+}
+
+/// The threshold of a frame from its histogram (binned with `shift`).
+pub fn threshold(
+    hist: &[u32],
+    total: u32,
+    shift: u32,
+    max_value: u32,
+    p: &ThresholdParams,
+) -> ThresholdResult {
+    let top = (max_value >> shift) as usize;
+    let hist = &hist[..=top];
+    let scale = (1u32 << shift) as f64;
+    let centre = |bin: usize| (bin as f64 + 0.5) * scale - 0.5;
+    let mut r = ThresholdResult {
+        threshold: max_value,
+        otsu: max_value,
+        floor: max_value,
+        background: 0.0,
+        noise: 0.0,
+        max_sampled: 0,
+        status: FrameStatus::Empty,
+    };
+    if total == 0 {
+        return r;
+    }
+    let median = quantile(hist, total, 0.5);
+    let q25 = quantile(hist, total, 0.25);
+    let max_bin = hist.iter().rposition(|&h| h > 0).unwrap_or(0);
+    r.background = if shift == 0 {
+        median as f64
+    } else {
+        centre(median)
+    };
+    // Robust σ from the dark half (the targets are in the bright tail);
+    // at least the quantisation step.
+    r.noise = ((median - q25) as f64 * scale / 0.6745).max(scale * 0.5);
+    r.max_sampled = ((max_bin as u32) << shift).min(max_value);
+    if median as f64 >= p.saturated_median * top as f64 {
+        r.status = FrameStatus::Saturated;
+        return r;
+    }
+    let floor_above = (p.noise_factor * r.noise).max(p.min_contrast * max_value as f64);
+    let floor = (r.background + floor_above).ceil().min(max_value as f64) as u32;
+    r.floor = floor;
+    let otsu_value = otsu(hist)
+        .map(|t| (((t as u32 + 1) << shift) - 1).min(max_value))
+        .unwrap_or(max_value);
+    r.otsu = otsu_value;
+    r.threshold = otsu_value.max(floor);
+    // A saturated target pixel is foreground even if the floor is at the top.
+    r.threshold = r.threshold.min(max_value.saturating_sub(1));
+    r.status = FrameStatus::Normal;
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: ThresholdParams = ThresholdParams {
+        step: 1,
+        noise_factor: 8.0,
+        min_contrast: 0.04,
+        saturated_median: 0.9,
+    };
+
+    fn hist_of(values: &[u8]) -> (Vec<u32>, u32) {
+        let mut h = vec![0u32; 256];
+        let n = histogram(values, values.len(), 1, 1, 0, 255, &mut h);
+        (h, n)
+    }
+
+    #[test]
+    fn otsu_splits_two_modes() {
+        let mut v = vec![20u8; 900];
+        v.extend(std::iter::repeat_n(200u8, 100));
+        let (h, n) = hist_of(&v);
+        let t = threshold(&h, n, 0, 255, &P);
+        assert_eq!(t.status, FrameStatus::Normal);
+        assert!(t.threshold >= 20 && t.threshold < 200, "{t:?}");
+        assert_eq!(t.background, 20.0);
+    }
+
+    #[test]
+    fn floor_keeps_noise_out() {
+        // Background 30 ± a few DN, a handful of pixels 8 DN up.
+        let mut v: Vec<u8> = (0..1000).map(|i| 28 + (i % 5) as u8).collect();
+        v.extend([40u8; 5]);
+        let (h, n) = hist_of(&v);
+        let t = threshold(&h, n, 0, 255, &P);
+        assert!(t.threshold > 40, "{t:?}");
+    }
+
+    #[test]
+    fn degenerate_histograms() {
+        let (h, n) = hist_of(&[0u8; 500]);
+        let t = threshold(&h, n, 0, 255, &P);
+        assert!(t.threshold >= 10, "all dark: {t:?}");
+        let (h, n) = hist_of(&[255u8; 500]);
+        assert_eq!(threshold(&h, n, 0, 255, &P).status, FrameStatus::Saturated);
+        let (h, n) = hist_of(&[120u8; 500]);
+        let t = threshold(&h, n, 0, 255, &P);
+        assert!(t.threshold > 120, "uniform: {t:?}");
+    }
+
+    #[test]
+    fn sixteen_bit_is_binned() {
+        assert_eq!(bin_shift(255), 0);
+        assert_eq!(bin_shift(4095), 0);
+        assert_eq!(bin_shift(65535), 4);
+        let mut v = vec![1000u16; 900];
+        v.extend(std::iter::repeat_n(50_000u16, 100));
+        let mut h = vec![0u32; MAX_BINS];
+        let n = histogram(&v, v.len(), 1, 1, 4, 65535, &mut h);
+        let t = threshold(&h, n, 4, 65535, &P);
+        assert!(t.threshold > 1000 && t.threshold < 50_000, "{t:?}");
+    }
+}

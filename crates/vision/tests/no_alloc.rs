@@ -1,0 +1,158 @@
+//! Once warm, `Detector::detect` allocates nothing: a counting global
+//! allocator watches a run over frames with dots, coded targets, noise,
+//! rejections and degenerate content, in 8 and 16 bits.
+
+// A global allocator needs `unsafe impl`; it only forwards to `System`.
+#![allow(unsafe_code)]
+
+use photopose_field::codes;
+use photopose_frame::{Image, Pixels};
+use photopose_vision::{CodeSet, Detector, DetectorOptions, TargetKind};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const W: usize = 400;
+const H: usize = 300;
+
+/// A frame with uncoded dots, coded targets (frontal), a bright bar and a
+/// saturated blob, over a noisy background.
+fn frame(seed: u64) -> Vec<f64> {
+    let mut v = vec![15.0; W * H];
+    let mut state = seed;
+    let mut rnd = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut draw = |cx: f64, cy: f64, r: f64, code: Option<u16>, amp: f64| {
+        let reach = if code.is_some() { 3.2 * r } else { 1.2 * r };
+        let (c0, c1) = ((cx - reach) as usize, (cx + reach) as usize + 1);
+        let (r0, r1) = ((cy - reach) as usize, (cy + reach) as usize + 1);
+        for row in r0..=r1 {
+            for col in c0..=c1 {
+                let mut acc = 0.0;
+                for s in 0..16 {
+                    let x = (col as f64 - 0.5 + ((s % 4) as f64 + 0.5) / 4.0 - cx) / r;
+                    let y = -(row as f64 - 0.5 + ((s / 4) as f64 + 0.5) / 4.0 - cy) / r;
+                    let rho = x.hypot(y);
+                    let lit = if rho <= 1.0 {
+                        true
+                    } else if let (Some(c), true) = (code, (2.0..3.0).contains(&rho)) {
+                        let a = y.atan2(x).rem_euclid(std::f64::consts::TAU);
+                        let k = ((a / (std::f64::consts::PI / 6.0)) as u32).min(11);
+                        codes::sector_bit(c, k)
+                    } else {
+                        false
+                    };
+                    acc += lit as u8 as f64;
+                }
+                v[row * W + col] += amp * acc / 16.0;
+            }
+        }
+    };
+    for k in 0..12 {
+        let (cx, cy) = (40.0 + 30.0 * k as f64 + rnd(), 40.0 + rnd());
+        draw(cx, cy, 4.0 + rnd(), None, 180.0);
+    }
+    for (k, id) in [2u64, 17, 42, 200].into_iter().enumerate() {
+        draw(
+            60.0 + 90.0 * k as f64 + rnd(),
+            150.0 + rnd(),
+            5.0,
+            codes::value_of(id),
+            180.0,
+        );
+    }
+    draw(300.0, 250.0, 6.0, None, 400.0); // saturated
+    for col in 20..200 {
+        v[250 * W + col] = 200.0; // a line
+    }
+    for x in v.iter_mut() {
+        *x += 4.0 * (rnd() - 0.5);
+    }
+    v
+}
+
+fn mono8(v: &[f64]) -> Image {
+    let px = v
+        .iter()
+        .map(|&x| x.round().clamp(0.0, 255.0) as u8)
+        .collect();
+    Image::from_pixels(W as u32, H as u32, 255, Pixels::Mono8(px)).unwrap()
+}
+
+fn mono16(v: &[f64]) -> Image {
+    let px = v
+        .iter()
+        .map(|&x| (x * 16.0).round().clamp(0.0, 4095.0) as u16)
+        .collect();
+    Image::from_pixels(W as u32, H as u32, 4095, Pixels::Mono16(px)).unwrap()
+}
+
+#[test]
+fn detect_allocates_nothing_once_warm() {
+    let mut frames = Vec::new();
+    for seed in 0..3 {
+        let v = frame(seed);
+        frames.push(mono8(&v));
+        frames.push(mono16(&v));
+    }
+    frames.push(Image::new_mono8(W as u32, H as u32));
+    let mut sat = Image::new_mono8(W as u32, H as u32);
+    if let Pixels::Mono8(p) = sat.pixels_mut() {
+        p.iter_mut().for_each(|x| *x = 255);
+    }
+    frames.push(sat);
+
+    let options = DetectorOptions {
+        codes: CodeSet::from_ids([2, 17, 42, 200]),
+        ..DetectorOptions::default()
+    };
+    let mut detector = Detector::new(W as u32, H as u32, options).unwrap();
+    // Warm-up (nothing should allocate here either, but only the steady
+    // state is the contract).
+    let first = detector.detect(frames[0].view()).unwrap();
+    assert_eq!(first.targets.len(), 16, "{:?}", first.targets);
+    assert_eq!(
+        first
+            .targets
+            .iter()
+            .filter(|t| t.kind == TargetKind::Coded && t.id.is_some())
+            .count(),
+        4
+    );
+    assert!(!first.rejected.is_empty());
+
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut found = 0;
+    for _ in 0..3 {
+        for f in &frames {
+            found += detector.detect(f.view()).unwrap().targets.len();
+        }
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "allocations during detection");
+    assert_eq!(found, 3 * 6 * 16);
+}
