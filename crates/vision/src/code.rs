@@ -161,9 +161,24 @@ pub struct CodeParams {
     pub dark_tolerance: f64,
 }
 
+/// Whether the dark zone between the dot and its ring (1 r to 2 r, the
+/// quiet zone of an uncoded target) is dark all round.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Gap {
+    /// Dark all round: the dot is isolated, as every target's is.
+    Dark,
+    /// Something bright in it: not a target's dot (a ring part, a merged
+    /// reflection).
+    NotDark,
+    /// Part of it lies outside the image.
+    Outside,
+}
+
 /// Result of reading a ring.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
+    /// The gap around the dot.
+    pub gap: Gap,
     /// Outcome.
     pub status: CodeStatus,
     /// Whether bright marks were found in the ring zone (a coded target).
@@ -266,6 +281,7 @@ pub fn read<P: Pixel>(
     accepted: &CodeSet,
 ) -> Reading {
     let mut out = Reading {
+        gap: Gap::Outside,
         status: CodeStatus::Uncertain(Uncertainty::OutsideImage),
         ring_present: false,
         raw: 0,
@@ -292,6 +308,7 @@ pub fn read<P: Pixel>(
     out.dark = dark;
     let contrast = bright - dark;
     if contrast < params.min_contrast {
+        out.gap = Gap::NotDark;
         out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
@@ -312,21 +329,21 @@ pub fn read<P: Pixel>(
     }
     out.ring_present = n_bright >= 2;
     let dark_limit = dark + params.dark_tolerance * contrast;
+    if gap_max > dark_limit {
+        out.gap = Gap::NotDark;
+        out.status = CodeStatus::Uncertain(Uncertainty::GapNotDark);
+        return out;
+    }
+    out.gap = Gap::Dark;
     if !out.ring_present {
         out.status = if outside {
             CodeStatus::Uncertain(Uncertainty::OutsideImage)
-        } else if gap_max > dark_limit {
-            CodeStatus::Uncertain(Uncertainty::GapNotDark)
         } else {
             CodeStatus::NoRing
         };
         return out;
     }
     if outside {
-        return out;
-    }
-    if gap_max > dark_limit {
-        out.status = CodeStatus::Uncertain(Uncertainty::GapNotDark);
         return out;
     }
     match zone(plane, f, 3.5) {

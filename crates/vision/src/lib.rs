@@ -33,7 +33,7 @@ pub use code::{CodeSet, CodeStatus, Uncertainty};
 pub use photopose_field::TargetKind;
 pub use threshold::{FrameStatus, ThresholdResult};
 
-use code::{CodeParams, Reading, RingFrame};
+use code::{CodeParams, Gap, Reading, RingFrame};
 use label::{Blob, LabelOutcome, Labeller};
 use measure::Measurement;
 use photopose_frame::ImageView;
@@ -90,7 +90,7 @@ pub struct DetectorOptions {
     pub fill_range: (f64, f64),
     /// The fourth moment along the major axis (2 for a filled ellipse, 1.8
     /// for a bar, about 1.7 for two touching dots) may differ from 2 by this
-    /// much plus `3 / area` (digitisation of small blobs).
+    /// much plus `5 / area` (digitisation of small blobs).
     pub kurtosis_tolerance: f64,
     /// The threshold lies at least this many noise σ above the background.
     pub noise_factor: f64,
@@ -152,7 +152,8 @@ pub struct Detection {
     pub col: f64,
     /// Centre row.
     pub row: f64,
-    /// Semi-major axis of the dot's ellipse, px (from the intensity moments).
+    /// Semi-major axis of the dot's ellipse, px (from the intensity moments,
+    /// pixel area and blur removed).
     pub semi_major: f64,
     /// Semi-minor axis, px.
     pub semi_minor: f64,
@@ -179,7 +180,7 @@ pub struct Detection {
 pub enum RejectReason {
     /// Larger than `max_area`.
     TooLarge,
-    /// Touches the image border (or its window would leave the image).
+    /// Touches the image border, or its window or dark surroundings leave the image.
     Border,
     /// Has saturated pixels.
     Saturated,
@@ -190,6 +191,9 @@ pub enum RejectReason {
     Shape,
     /// No signal above the local background.
     NoSignal,
+    /// The dark zone around the dot (1 to 2 radii) is not dark: a part of
+    /// a code ring, or a dot merged with something.
+    NotIsolated,
     /// Part of a coded target's ring.
     CodeRing,
 }
@@ -283,6 +287,8 @@ struct Candidate {
     blob: u32,
     m: Measurement,
     frame: Option<RingFrame>,
+    /// Deblurred moments of the dot.
+    moments: (f64, f64, f64),
     reading: Reading,
     suppressed: bool,
 }
@@ -476,7 +482,7 @@ impl Detector {
                 self.out.reject(blob, RejectReason::NoSignal);
                 continue;
             };
-            if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 3.0 / blob.area as f64 {
+            if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
                 self.out.reject(blob, RejectReason::Shape);
                 continue;
             }
@@ -484,11 +490,18 @@ impl Detector {
                 self.out.n_dropped += 1;
                 continue;
             }
-            // 5. Code ring.
-            let frame = RingFrame::from_moments(m.col, m.row, m.cxx, m.cyy, m.cxy);
+            // 5. Code ring, sampled on the dot's ellipse with the blur removed.
+            let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
+            for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+                amplitude += plane.bilinear(m.col + dx, m.row + dy).unwrap_or(0.0);
+            }
+            amplitude = amplitude / 5.0 - m.background;
+            let (cxx, cyy, cxy, _) = measure::deblurred(&m, amplitude);
+            let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
             let reading = match &frame {
                 Some(f) => code::read(&plane, f, &code_params, &o.codes),
                 None => Reading {
+                    gap: Gap::NotDark,
                     status: CodeStatus::Uncertain(Uncertainty::LowContrast),
                     ring_present: false,
                     raw: 0,
@@ -496,6 +509,26 @@ impl Detector {
                     dark: 0.0,
                 },
             };
+            if reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage)
+                && !reading.ring_present
+            {
+                // Its ring zone leaves the image and nothing bright is seen
+                // in the part inside: it may be a part of the ring of a
+                // coded target whose dot is outside the frame.
+                self.out.reject(blob, RejectReason::Border);
+                continue;
+            }
+            match reading.gap {
+                Gap::Dark => {}
+                Gap::NotDark => {
+                    self.out.reject(blob, RejectReason::NotIsolated);
+                    continue;
+                }
+                Gap::Outside => {
+                    self.out.reject(blob, RejectReason::Border);
+                    continue;
+                }
+            }
             if reading.ring_present {
                 // Measure again with a window that keeps clear of the ring.
                 if let Some(m2) = measure::measure(
@@ -513,25 +546,34 @@ impl Detector {
                 blob: i as u32,
                 m,
                 frame,
+                moments: (cxx, cyy, cxy),
                 reading,
                 suppressed: false,
             });
         }
 
-        // Ring parts: blobs in the ring zone of a target with a ring, larger
-        // (or decoded) targets first.
+        // Ring parts: blobs in the ring zone of a target with a ring.
+        // Decoded targets come first, then rings with dark surroundings
+        // (whatever their reading), then the rest by decreasing area; the
+        // first two suppress whatever lies in their ring zone (but a decoded
+        // target only yields to a decoded one), the rest only smaller blobs.
         for k in 0..self.candidates.len() {
             self.order.push(k as u32);
         }
         let cands = &mut self.candidates;
+        let rank = |c: &Candidate| -> u8 {
+            if c.reading.status.id().is_some() {
+                0
+            } else if strong_ring(&c.reading) {
+                1
+            } else {
+                2
+            }
+        };
         self.order.sort_unstable_by(|&x, &y| {
-            let (ax, ay) = (
-                blobs[cands[x as usize].blob as usize].area,
-                blobs[cands[y as usize].blob as usize].area,
-            );
-            let dx = cands[x as usize].reading.status.id().is_some();
-            let dy = cands[y as usize].reading.status.id().is_some();
-            dy.cmp(&dx).then(ay.cmp(&ax)).then(x.cmp(&y))
+            let (cx, cy) = (&cands[x as usize], &cands[y as usize]);
+            let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
+            rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
         });
         for oi in 0..self.order.len() {
             let i = self.order[oi] as usize;
@@ -541,15 +583,15 @@ impl Detector {
             }
             let Some(f) = y.frame else { continue };
             let y_area = blobs[y.blob as usize].area;
-            let decoded = y.reading.status.id().is_some();
+            let y_rank = rank(&y);
             for (j, x) in cands.iter_mut().enumerate() {
                 if j == i || x.suppressed {
                     continue;
                 }
-                if !decoded && blobs[x.blob as usize].area > y_area {
+                if y_rank == 2 && blobs[x.blob as usize].area > y_area {
                     continue;
                 }
-                if x.reading.status.id().is_some() && !decoded {
+                if x.reading.status.id().is_some() && y_rank > 0 {
                     continue;
                 }
                 let rho = f.radius_of(x.m.col, x.m.row);
@@ -578,7 +620,7 @@ impl Detector {
                 self.out.n_dropped += 1;
                 continue;
             }
-            let (a, b, angle) = measure::ellipse(c.m.cxx, c.m.cyy, c.m.cxy);
+            let (a, b, angle) = measure::ellipse(c.moments.0, c.moments.1, c.moments.2);
             self.out.targets.push(Detection {
                 col: c.m.col,
                 row: c.m.row,
@@ -603,5 +645,20 @@ impl Detector {
 
 #[cfg(test)]
 mod tests;
+/// Whether a reading found a ring with dark gap and quiet zone (a coded
+/// target, read or not).
+fn strong_ring(r: &Reading) -> bool {
+    r.ring_present
+        && r.gap == Gap::Dark
+        && !matches!(
+            r.status,
+            CodeStatus::Uncertain(
+                Uncertainty::OutsideImage
+                    | Uncertainty::QuietZoneNotDark
+                    | Uncertainty::LowContrast
+            )
+        )
+}
+
 #[cfg(test)]
 mod testutil;

@@ -47,6 +47,32 @@ pub fn ellipse(cxx: f64, cyy: f64, cxy: f64) -> (f64, f64, f64) {
     (2.0 * l1.sqrt(), 2.0 * l2.sqrt(), angle)
 }
 
+/// The dot's own second moments with the blur removed, given its amplitude
+/// (peak above background). Blurring adds the blur's variance `σ²` to both
+/// principal moments and preserves the signal; the signal over the
+/// amplitude is the dot's true area `π a b`. Solving
+/// `(a_m² − 4σ²)(b_m² − 4σ²) = (a b)²` for `σ²` and subtracting it gives
+/// moments that no longer depend on the blur (exact for a Gaussian blur of
+/// a uniform ellipse whose centre reaches the full amplitude). Returns
+/// `(cxx, cyy, cxy, σ²)`.
+pub fn deblurred(m: &Measurement, amplitude: f64) -> (f64, f64, f64, f64) {
+    let (cxx, cyy, cxy) = (m.cxx, m.cyy, m.cxy);
+    if amplitude.is_nan() || amplitude <= 0.0 {
+        return (cxx, cyy, cxy, 0.0);
+    }
+    let tr = cxx + cyy;
+    let d = ((cxx - cyy) * (cxx - cyy) / 4.0 + cxy * cxy).sqrt();
+    let (l1, l2) = ((tr / 2.0 + d).max(0.0), (tr / 2.0 - d).max(0.0));
+    let (a2, b2) = (4.0 * l1, 4.0 * l2);
+    let ab = m.signal / amplitude / std::f64::consts::PI;
+    let p = a2 + b2;
+    let q = a2 * b2 - ab * ab;
+    let disc = (p * p - 4.0 * q).max(0.0);
+    let s = ((p - disc.sqrt()) / 2.0).clamp(0.0, 0.6 * b2);
+    let var = s / 4.0;
+    (cxx - var, cyy - var, cxy, var)
+}
+
 /// Window margin, px.
 pub const GROW: f64 = 2.0;
 /// The window ellipse is at most this multiple of the blob's ellipse.
