@@ -28,16 +28,49 @@ pub struct Normals {
 }
 
 /// Workspace: the used points and their Jacobian rows and residuals.
+///
+/// Each point keeps its x and y equations interleaved,
+/// `[ax0, ay0, ax1, ay1, …, ax5, ay5, vx, vy]`, so that one SIMD pair holds
+/// the same column of both rows and `[A | v]ᵀ [A | v]` — normal matrix,
+/// right-hand side and cost at once — accumulates in registers.
 #[derive(Debug, Clone, Default)]
 pub struct Linearised {
     /// Index into the observation slice of each used point.
     pub idx: Vec<usize>,
     /// Object point and ideal image point of each used point.
     pts: Vec<[f64; 5]>,
-    /// Jacobian rows of `x` then `y` (six columns each) of each point.
-    rows: Vec<[f64; 12]>,
-    /// Residuals observed − computed.
-    v: Vec<[f64; 2]>,
+    /// Interleaved `[A | v]` rows of each point.
+    rows: Vec<[f64; 14]>,
+}
+
+/// Accumulates the rows `I` and `I + 1` of `[A | v]ᵀ [A | v]` (upper part)
+/// in one sweep over the points; few enough accumulators to stay in registers.
+#[inline(always)]
+fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
+    let i1 = (I + 1).min(6);
+    let mut acc0 = [f64x2::ZERO; 7];
+    let mut acc1 = [f64x2::ZERO; 7];
+    for r in rows {
+        let a: [f64x2; 7] = std::array::from_fn(|k| f64x2::new([r[2 * k], r[2 * k + 1]]));
+        for j in I..7 {
+            acc0[j] += a[I] * a[j];
+        }
+        if I < 6 {
+            for j in i1..7 {
+                acc1[j] += a[i1] * a[j];
+            }
+        }
+    }
+    for j in I..7 {
+        p[I][j] = acc0[j].reduce_add();
+        p[j][I] = p[I][j];
+    }
+    if I < 6 {
+        for j in i1..7 {
+            p[i1][j] = acc1[j].reduce_add();
+            p[j][i1] = p[i1][j];
+        }
+    }
 }
 
 impl Linearised {
@@ -45,9 +78,7 @@ impl Linearised {
     pub fn load_from(&mut self, other: &Linearised) {
         self.idx.clone_from(&other.idx);
         self.pts.clone_from(&other.pts);
-        let n = self.idx.len();
-        self.rows.resize(n, [0.0; 12]);
-        self.v.resize(n, [0.0; 2]);
+        self.rows.resize(self.idx.len(), [0.0; 14]);
     }
 
     /// Loads the used observations.
@@ -62,10 +93,8 @@ impl Linearised {
             self.pts
                 .push([o.object.x, o.object.y, o.object.z, o.image.x, o.image.y]);
         }
-        // `evaluate` overwrites every row: only grow or shrink, never clear.
-        let n = self.idx.len();
-        self.rows.resize(n, [0.0; 12]);
-        self.v.resize(n, [0.0; 2]);
+        // `evaluate` overwrites every row: only grow or shrink.
+        self.rows.resize(self.idx.len(), [0.0; 14]);
     }
 
     /// Number of points loaded.
@@ -78,8 +107,7 @@ impl Linearised {
         self.idx.is_empty()
     }
 
-    /// Linearises at `e` (principal distance `c`) and forms the normal
-    /// equations in the same pass.
+    /// Linearises at `e` (principal distance `c`) and forms the normal equations.
     pub fn evaluate(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
         let r = &e.rotation;
         let (cx, cy, cz) = (e.center.x, e.center.y, e.center.z);
@@ -88,112 +116,95 @@ impl Linearised {
             [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
             [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
         ];
-        // Two SIMD lanes per quantity: the x row and the y row of a point.
-        let mut acc = [f64x2::ZERO; 21];
-        let mut g = [f64x2::ZERO; 6];
-        let mut cost = f64x2::ZERO;
         let mut behind = 0usize;
-        for ((p, row), v) in self.pts.iter().zip(&mut self.rows).zip(&mut self.v) {
+        for (p, row) in self.pts.iter().zip(&mut self.rows) {
             let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
             let zx = rr[0][0] * ux + rr[0][1] * uy + rr[0][2] * uz;
             let zy = rr[1][0] * ux + rr[1][1] * uy + rr[1][2] * uz;
             let zz = rr[2][0] * ux + rr[2][1] * uy + rr[2][2] * uz;
             behind += (zz >= 0.0) as usize;
             let inv = 1.0 / zz;
-            let gg = f64x2::new([zx * inv, zy * inv]);
-            let f = f64x2::splat(-c * inv);
-            let vv = f64x2::new([p[3], p[4]]) + f64x2::splat(c) * gg;
-            // a[k] = (dx/dp_k, dy/dp_k).
-            let mut a = [f64x2::ZERO; 6];
+            let gx = zx * inv;
+            let gy = zy * inv;
+            let f = -c * inv;
             for k in 0..3 {
                 let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
                 // Centre: dZ/dC_k = -R e_k.
-                a[k] = f * (gg * f64x2::splat(r2) - f64x2::new([r0, r1]));
+                row[2 * k] = f * (gx * r2 - r0);
+                row[2 * k + 1] = f * (gy * r2 - r1);
                 // Rotation increment k: dZ = 2 (R e_k) × Z.
-                let dz = f64x2::new([2.0 * (r1 * zz - r2 * zy), 2.0 * (r2 * zx - r0 * zz)]);
-                let dzz = f64x2::splat(2.0 * (r0 * zy - r1 * zx));
-                a[3 + k] = f * (dz - gg * dzz);
+                let dzx = 2.0 * (r1 * zz - r2 * zy);
+                let dzy = 2.0 * (r2 * zx - r0 * zz);
+                let dzz = 2.0 * (r0 * zy - r1 * zx);
+                row[6 + 2 * k] = f * (dzx - gx * dzz);
+                row[7 + 2 * k] = f * (dzy - gy * dzz);
             }
-            let mut m = 0;
-            for i in 0..6 {
-                for j in i..6 {
-                    acc[m] += a[i] * a[j];
-                    m += 1;
-                }
-                g[i] += a[i] * vv;
-            }
-            cost += vv * vv;
-            for k in 0..6 {
-                let [x, y] = a[k].to_array();
-                row[k] = x;
-                row[6 + k] = y;
-            }
-            *v = vv.to_array();
+            row[12] = p[3] + c * gx;
+            row[13] = p[4] + c * gy;
         }
         if behind > 0 {
             return Err(GeometryError::BehindCamera { count: behind });
         }
-        let mut nm = Matrix6::zeros();
-        let mut m = 0;
-        for i in 0..6 {
-            for j in i..6 {
-                nm[(i, j)] = acc[m].reduce_add();
-                nm[(j, i)] = nm[(i, j)];
-                m += 1;
-            }
-        }
-        Ok(Normals {
-            n: nm,
-            g: Vector6::from_fn(|i, _| g[i].reduce_add()),
-            cost: cost.reduce_add(),
+        Ok(self.normals())
+    }
+
+    /// The normal equations of the current Jacobian and residuals. No allocation.
+    fn normals(&self) -> Normals {
+        let mut p = [[0.0f64; 7]; 7];
+        sweep::<0>(&self.rows, &mut p);
+        sweep::<2>(&self.rows, &mut p);
+        sweep::<4>(&self.rows, &mut p);
+        sweep::<6>(&self.rows, &mut p);
+        Normals {
+            n: Matrix6::from_fn(|i, j| p[i][j]),
+            g: Vector6::from_fn(|i, _| p[i][6]),
+            cost: p[6][6],
             count: self.len(),
-        })
+        }
     }
 
     /// Moves the residuals by a small parameter step `delta` (linear
     /// prediction: `v - A δ`) and returns the new cost.
     pub fn shift(&mut self, delta: &Vector6<f64>) -> f64 {
-        let mut cost = 0.0;
-        for (row, v) in self.rows.iter().zip(&mut self.v) {
-            let mut dx = 0.0;
-            let mut dy = 0.0;
-            for k in 0..6 {
-                dx += row[k] * delta[k];
-                dy += row[6 + k] * delta[k];
+        let d: [f64x2; 6] = std::array::from_fn(|k| f64x2::splat(delta[k]));
+        let mut cost = f64x2::ZERO;
+        for r in &mut self.rows {
+            let mut v = f64x2::new([r[12], r[13]]);
+            for (k, dk) in d.iter().enumerate() {
+                v -= f64x2::new([r[2 * k], r[2 * k + 1]]) * *dk;
             }
-            v[0] -= dx;
-            v[1] -= dy;
-            cost += v[0] * v[0] + v[1] * v[1];
+            [r[12], r[13]] = v.to_array();
+            cost += v * v;
         }
-        cost
+        cost.reduce_add()
     }
 
     /// Data snooping: the point with the largest standardised residual
     /// `w = |v| / (σ sqrt(q_vv))`, `q_vv = 1 - aᵀ Q a` (unit weights), over
     /// both image coordinates; returns its index among the loaded points and `w`.
     pub fn worst_standardised(&self, q: &Matrix6<f64>, sigma: f64) -> Option<(usize, f64)> {
-        let mut qp = [0.0f64; 21];
-        let mut m = 0;
+        let mut qp = [f64x2::ZERO; 21];
+        let mut t = 0;
         for i in 0..6 {
             for j in i..6 {
-                qp[m] = if i == j { q[(i, i)] } else { 2.0 * q[(i, j)] };
-                m += 1;
+                qp[t] = f64x2::splat(if i == j { q[(i, i)] } else { 2.0 * q[(i, j)] });
+                t += 1;
             }
         }
         let mut worst: Option<(usize, f64)> = None;
-        for (k, (row, v)) in self.rows.iter().zip(&self.v).enumerate() {
-            let a: [f64x2; 6] = std::array::from_fn(|i| f64x2::new([row[i], row[6 + i]]));
+        for (k, r) in self.rows.iter().enumerate() {
+            let a: [f64x2; 6] = std::array::from_fn(|i| f64x2::new([r[2 * i], r[2 * i + 1]]));
             let mut quad = f64x2::ZERO;
-            let mut m = 0;
+            let mut t = 0;
             for i in 0..6 {
                 for j in i..6 {
-                    quad += f64x2::splat(qp[m]) * a[i] * a[j];
-                    m += 1;
+                    quad += qp[t] * a[i] * a[j];
+                    t += 1;
                 }
             }
             let [qx, qy] = quad.to_array();
-            let w = (v[0].abs() / (1.0 - qx).max(1e-12).sqrt())
-                .max(v[1].abs() / (1.0 - qy).max(1e-12).sqrt())
+            let w = (r[12].abs() / (1.0 - qx).max(1e-12).sqrt())
+                .max(r[13].abs() / (1.0 - qy).max(1e-12).sqrt())
                 / sigma;
             if worst.is_none_or(|(_, ww)| w > ww) {
                 worst = Some((k, w));
@@ -205,9 +216,9 @@ impl Linearised {
     /// The two Jacobian rows and residuals of point `i`.
     pub fn row(&self, i: usize) -> (Vector6<f64>, Vector6<f64>, f64, f64) {
         let r = &self.rows[i];
-        let ax = Vector6::from_fn(|k, _| r[k]);
-        let ay = Vector6::from_fn(|k, _| r[6 + k]);
-        (ax, ay, self.v[i][0], self.v[i][1])
+        let ax = Vector6::from_fn(|k, _| r[2 * k]);
+        let ay = Vector6::from_fn(|k, _| r[2 * k + 1]);
+        (ax, ay, r[12], r[13])
     }
 }
 

@@ -229,8 +229,9 @@ impl Resection {
         // refined pose (a closed form from four points extrapolates poorly).
         let gate = self.options.ransac_threshold_px * self.pixel_size;
         let mut e = start;
+        let mut adjusted = None;
         for _ in 0..3 {
-            self.adjust(obs, &mut e)?;
+            let result = self.adjust(obs, &mut e)?;
             let mut changed = false;
             for (k, o) in obs.iter().enumerate() {
                 let ok = e
@@ -241,11 +242,13 @@ impl Resection {
                 self.status[k] = s;
             }
             if !changed {
+                // The workspace holds the adjustment of exactly this set.
+                adjusted = Some(result);
                 break;
             }
         }
         self.check_consensus(obs.len(), hypotheses)?;
-        let mut report = self.snoop(obs, e)?;
+        let mut report = self.snoop(obs, e, adjusted)?;
         report.hypotheses = hypotheses;
         Ok(report)
     }
@@ -259,7 +262,7 @@ impl Resection {
     ) -> Result<ResectionReport, GeometryError> {
         self.reset(obs.len());
         check_input(obs)?;
-        self.snoop(obs, start)
+        self.snoop(obs, start, None)
     }
 
     fn check_consensus(&self, total: usize, _hypotheses: usize) -> Result<(), GeometryError> {
@@ -440,16 +443,22 @@ impl Resection {
 
     /// Adjust, then remove the worst standardised residual above the critical
     /// value, one point at a time; finally compute the precision.
+    /// `adjusted`: the result of an adjustment of the current set that left
+    /// the workspace at `e` (saves repeating it).
     fn snoop(
         &mut self,
         obs: &[Observation],
         mut e: Exterior,
+        mut adjusted: Option<(usize, Normals)>,
     ) -> Result<ResectionReport, GeometryError> {
         let n_total = obs.len();
         let max_snooped = (self.options.max_snooped_ratio * n_total as f64).floor() as usize;
         let mut snooped = 0;
         loop {
-            let (iterations, nm) = self.adjust(obs, &mut e)?;
+            let (iterations, nm) = match adjusted.take() {
+                Some(done) => done,
+                None => self.adjust(obs, &mut e)?,
+            };
             let redundancy = 2 * nm.count - 6;
             if redundancy == 0 {
                 return Err(GeometryError::TooFewPoints {
