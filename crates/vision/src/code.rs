@@ -233,6 +233,16 @@ impl RingFrame {
         )
     }
 
+    /// Like [`RingFrame::point`] with `(cos t, sin t)` given.
+    #[inline(always)]
+    pub fn point_cs(&self, k: f64, (c, s): (f64, f64)) -> (f64, f64) {
+        let (x, y) = (k * c, -k * s);
+        (
+            self.col + self.e[0] * x + self.e[1] * y,
+            self.row + self.e[1] * x + self.e[2] * y,
+        )
+    }
+
     /// Radius (units of the dot radius) of a pixel position in this frame.
     pub fn radius_of(&self, col: f64, row: f64) -> f64 {
         let (dx, dy) = (col - self.col, row - self.row);
@@ -260,12 +270,72 @@ const RING_RADII: [f64; 3] = [2.5, 2.35, 2.65];
 /// of those at the middle.
 const CROSS_MARGIN: f64 = 0.4;
 
-fn zone<P: Pixel>(plane: &Plane<P>, f: &RingFrame, k: f64) -> Option<(f64, f64)> {
+/// `(cos, sin)` of `(j + 0.5) × 60°`, `j = 0..6`.
+const HARMONIC: [(f64, f64); 6] = [
+    (0.866_025_403_784_438_6, 0.5),
+    (0.0, 1.0),
+    (-0.866_025_403_784_438_6, 0.5),
+    (-0.866_025_403_784_438_6, -0.5),
+    (0.0, -1.0),
+    (0.866_025_403_784_438_6, -0.5),
+];
+
+/// Cosines and sines of the fixed sampling angles, computed once.
+#[derive(Debug, Clone)]
+pub struct RingTables {
+    phase: [(f64, f64); PHASE_SAMPLES],
+    zone: [(f64, f64); ZONE_SAMPLES],
+    bright: [(f64, f64); 8],
+    /// Sector `k`, sample `i`: angle `15° + 30° k + offset_i` from the boundary.
+    sector: [[(f64, f64); SECTOR_OFFSETS.len()]; 12],
+}
+
+impl Default for RingTables {
+    fn default() -> Self {
+        let cs = |deg: f64| {
+            let (s, c) = (deg * DEG).sin_cos();
+            (c, s)
+        };
+        let mut t = RingTables {
+            phase: [(0.0, 0.0); PHASE_SAMPLES],
+            zone: [(0.0, 0.0); ZONE_SAMPLES],
+            bright: [(0.0, 0.0); 8],
+            sector: [[(0.0, 0.0); SECTOR_OFFSETS.len()]; 12],
+        };
+        for (j, v) in t.phase.iter_mut().enumerate() {
+            *v = cs(j as f64 * (360.0 / PHASE_SAMPLES as f64));
+        }
+        for (j, v) in t.zone.iter_mut().enumerate() {
+            *v = cs((j as f64 + 0.5) * (360.0 / ZONE_SAMPLES as f64));
+        }
+        for (j, v) in t.bright.iter_mut().enumerate() {
+            *v = cs(j as f64 * 45.0);
+        }
+        for (k, row) in t.sector.iter_mut().enumerate() {
+            for (v, d) in row.iter_mut().zip(SECTOR_OFFSETS) {
+                *v = cs(15.0 + 30.0 * k as f64 + d);
+            }
+        }
+        t
+    }
+}
+
+/// Rotates `(cos a, sin a)` by `(cos b, sin b)`.
+#[inline(always)]
+fn rotate_cs((ca, sa): (f64, f64), (cb, sb): (f64, f64)) -> (f64, f64) {
+    (ca * cb - sa * sb, sa * cb + ca * sb)
+}
+
+fn zone<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    k: f64,
+    tables: &RingTables,
+) -> Option<(f64, f64)> {
     let mut sum = 0.0;
     let mut max = f64::MIN;
-    for j in 0..ZONE_SAMPLES {
-        let t = (j as f64 + 0.5) * (360.0 / ZONE_SAMPLES as f64) * DEG;
-        let (x, y) = f.point(k, t);
+    for &cs in &tables.zone {
+        let (x, y) = f.point_cs(k, cs);
         let v = plane.bilinear(x, y)?;
         sum += v;
         max = max.max(v);
@@ -279,6 +349,7 @@ pub fn read<P: Pixel>(
     f: &RingFrame,
     params: &CodeParams,
     accepted: &CodeSet,
+    tables: &RingTables,
 ) -> Reading {
     let mut out = Reading {
         gap: Gap::Outside,
@@ -293,15 +364,15 @@ pub fn read<P: Pixel>(
         Some(v) => v,
         None => return out,
     };
-    for j in 0..8 {
-        let (x, y) = f.point(0.3, j as f64 * 45.0 * DEG);
+    for &cs in &tables.bright {
+        let (x, y) = f.point_cs(0.3, cs);
         match plane.bilinear(x, y) {
             Some(v) => bright += v,
             None => return out,
         }
     }
     bright /= 9.0;
-    let Some((dark, gap_max)) = zone(plane, f, 1.5) else {
+    let Some((dark, gap_max)) = zone(plane, f, 1.5, tables) else {
         return out;
     };
     out.bright = bright;
@@ -313,18 +384,27 @@ pub fn read<P: Pixel>(
         return out;
     }
     let thr = dark + 0.5 * contrast;
-    // Presence and phase: the ring's middle every 5°.
+    // Presence and phase: the ring's middle every 5°, first every 15° (at
+    // least one sample in the middle half of every sector).
     let mut ring = [0.0f64; PHASE_SAMPLES];
     let mut n_bright = 0;
     let mut outside = false;
-    for (j, s) in ring.iter_mut().enumerate() {
-        let (x, y) = f.point(2.5, j as f64 * (360.0 / PHASE_SAMPLES as f64) * DEG);
-        match plane.bilinear(x, y) {
-            Some(v) => {
-                *s = v;
-                n_bright += (v > thr) as usize;
+    for pass in 0..2 {
+        for (j, s) in ring.iter_mut().enumerate() {
+            if (j % 3 == 0) != (pass == 0) {
+                continue;
             }
-            None => outside = true,
+            let (x, y) = f.point_cs(2.5, tables.phase[j]);
+            match plane.bilinear(x, y) {
+                Some(v) => {
+                    *s = v;
+                    n_bright += (v > thr) as usize;
+                }
+                None => outside = true,
+            }
+        }
+        if pass == 0 && n_bright == 0 {
+            break;
         }
     }
     out.ring_present = n_bright >= 2;
@@ -346,7 +426,7 @@ pub fn read<P: Pixel>(
     if outside {
         return out;
     }
-    match zone(plane, f, 3.5) {
+    match zone(plane, f, 3.5, tables) {
         None => return out,
         Some((_, quiet_max)) if quiet_max > dark_limit => {
             out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);
@@ -358,9 +438,10 @@ pub fn read<P: Pixel>(
     let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
     for j in 0..PHASE_SAMPLES {
         let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
-        let t = (j as f64 + 0.5) * (360.0 / PHASE_SAMPLES as f64) * DEG;
-        re += g * (12.0 * t).cos();
-        im += g * (12.0 * t).sin();
+        // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles.
+        let (c, sn) = HARMONIC[j % 6];
+        re += g * c;
+        im += g * sn;
         total += g;
     }
     if total < params.min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
@@ -374,6 +455,7 @@ pub fn read<P: Pixel>(
         return out;
     }
     let boundary = im.atan2(re) / 12.0;
+    let boundary_cs = (boundary.cos(), boundary.sin());
     // Classify: sector k is centred at boundary + 15° + 30°k.
     let base_margin = params.sector_margin * contrast;
     let base_sample_margin = params.sample_margin * contrast;
@@ -382,11 +464,10 @@ pub fn read<P: Pixel>(
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
         let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
         let mut word = 0u16;
-        for sector in 0..12 {
-            let centre = boundary + (15.0 + 30.0 * sector as f64) * DEG;
+        for angles in &tables.sector {
             let mut s = [0.0f64; SECTOR_OFFSETS.len()];
-            for (v, d) in s.iter_mut().zip(SECTOR_OFFSETS) {
-                let (x, y) = f.point(k, centre + d * DEG);
+            for (v, &a) in s.iter_mut().zip(angles) {
+                let (x, y) = f.point_cs(k, rotate_cs(a, boundary_cs));
                 match plane.bilinear(x, y) {
                     Some(g) => *v = g,
                     None => return out,
@@ -422,6 +503,7 @@ pub fn read<P: Pixel>(
     // but not its edges.
     for (j, &v) in ring.iter().enumerate() {
         let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
+        debug_assert!(!outside);
         let rel = (t - boundary / DEG).rem_euclid(360.0);
         let within = rel % 30.0;
         if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {

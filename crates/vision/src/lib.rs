@@ -303,6 +303,7 @@ pub struct Detector {
     labeller: Labeller,
     candidates: Vec<Candidate>,
     order: Vec<u32>,
+    tables: code::RingTables,
     out: Detections,
 }
 
@@ -320,6 +321,7 @@ impl Detector {
             labeller: Labeller::new(options.max_runs, options.max_blobs),
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
+            tables: code::RingTables::default(),
             out: Detections::with_capacity(options.max_targets),
         })
     }
@@ -499,7 +501,7 @@ impl Detector {
             let (cxx, cyy, cxy, _) = measure::deblurred(&m, amplitude);
             let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
             let reading = match &frame {
-                Some(f) => code::read(&plane, f, &code_params, &o.codes),
+                Some(f) => code::read(&plane, f, &code_params, &o.codes, &self.tables),
                 None => Reading {
                     gap: Gap::NotDark,
                     status: CodeStatus::Uncertain(Uncertainty::LowContrast),
