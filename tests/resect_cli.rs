@@ -219,12 +219,36 @@ fn a_bad_camera_file_is_named_with_its_key() {
         .arg(fixture("observations/oblique-0.1px.csv"))
         .output()
         .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    let v = &lines(&out)[0];
+    assert_eq!(v["ok"], false);
+    let err = v["error"].as_str().unwrap();
     assert!(
         err.contains("cam.toml") && err.contains("sensor.pixel_size"),
         "{err}"
     );
+}
+
+#[test]
+fn a_mirrored_image_is_refused_as_seen_from_behind_the_plate() {
+    let dir = scratch("mirror");
+    let good = std::fs::read_to_string(fixture("observations/oblique-0.1px.csv")).unwrap();
+    let mut text = String::from("id,col,row\n");
+    for line in good.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let col: f64 = f[1].parse().unwrap();
+        text.push_str(&format!("{},{},{}\n", f[0], 1299.0 - col, f[2]));
+    }
+    let p = dir.join("mirrored.csv");
+    std::fs::write(&p, text).unwrap();
+    let out = bin()
+        .args(["resect", "--observations"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    let v = &lines(&out)[0];
+    assert_eq!(v["ok"], false, "{v}");
+    assert!(v["error"].as_str().unwrap().contains("behind"), "{v}");
 }
 
 #[test]

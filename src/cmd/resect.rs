@@ -137,11 +137,28 @@ pub fn observations_for(
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let camera = defaults::camera(args.camera.as_deref())?;
-    let field = defaults::field(args.field.as_deref())?;
     if args.observations.is_empty() {
         anyhow::bail!("no input: give --observations FILE... (images come with target detection)");
     }
+    // A camera or field that cannot be used fails every input, each on its
+    // own line, so that a batch reader sees why.
+    let setup = defaults::camera(args.camera.as_deref())
+        .and_then(|c| Ok((c, defaults::field(args.field.as_deref())?)));
+    let (camera, field) = match setup {
+        Ok(cf) => cf,
+        Err(e) => {
+            let error = format!("{e:#}");
+            for path in &args.observations {
+                let line = ErrorLine {
+                    image: &path.display().to_string(),
+                    ok: false,
+                    error: error.clone(),
+                };
+                println!("{}", serde_json::to_string(&line)?);
+            }
+            return Ok(ExitCode::from(1));
+        }
+    };
     let options = ResectionOptions {
         ransac_threshold_px: args.gate_px,
         snooping_critical: args.critical,

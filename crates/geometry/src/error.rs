@@ -55,6 +55,13 @@ pub enum GeometryError {
         /// How many.
         count: usize,
     },
+    /// The solution puts the camera on the back side of the targets (they
+    /// face `+Z`): the observations are mirrored or wrongly identified.
+    #[error("the only consistent pose puts the camera behind {count} targets (targets face +Z; mirrored or misidentified image?)")]
+    BackSide {
+        /// How many targets face away from the camera.
+        count: usize,
+    },
     /// The normal equations are singular (the configuration determines no pose).
     #[error("normal equations are singular: the configuration does not determine the pose")]
     Singular,

@@ -250,6 +250,15 @@ impl Resection {
         self.check_consensus(obs.len(), hypotheses)?;
         let mut report = self.snoop(obs, e, adjusted)?;
         report.hypotheses = hypotheses;
+        // Retro-reflective targets face +Z: a camera below them sees nothing.
+        let back = obs
+            .iter()
+            .zip(&self.status)
+            .filter(|(o, s)| **s == Status::Used && report.exterior.center.z <= o.object.z)
+            .count();
+        if back > 0 {
+            return Err(GeometryError::BackSide { count: back });
+        }
         Ok(report)
     }
 

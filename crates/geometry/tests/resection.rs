@@ -262,6 +262,16 @@ fn unusable_inputs_are_errors_not_answers() {
         o.image.y = (rng.unit() - 0.5) * 6.0;
     }
     assert!(rs.solve(&noise).is_err());
+    // A mirrored image: only a camera behind the plate could see it.
+    let mut mirrored = obs.clone();
+    for o in &mut mirrored {
+        o.image.x = -o.image.x;
+    }
+    assert!(
+        matches!(rs.solve(&mirrored), Err(GeometryError::BackSide { .. })),
+        "{:?}",
+        rs.solve(&mirrored)
+    );
 }
 
 #[test]
