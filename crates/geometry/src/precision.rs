@@ -79,3 +79,69 @@ pub fn predict(
         n_points: points.len(),
     })
 }
+
+/// Projection of an object point with its uncertainty: the ideal image
+/// coordinates (mm) and their 2×2 covariance (mm²) propagated from the
+/// covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (as in [`crate::ResectionReport`]).
+/// `None` if the point is not in front of the camera.
+pub fn projection_with_covariance(
+    c: f64,
+    exterior: &Exterior,
+    covariance: &Matrix6<f64>,
+    p: &Vector3<f64>,
+) -> Option<(nalgebra::Vector2<f64>, nalgebra::Matrix2<f64>)> {
+    let r = &exterior.rotation;
+    let z = r * (p - exterior.center);
+    if z.z >= 0.0 {
+        return None;
+    }
+    let inv = 1.0 / z.z;
+    let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
+    let mut j = nalgebra::SMatrix::<f64, 2, 6>::zeros();
+    for k in 0..3 {
+        let rk = r.column(k).into_owned();
+        // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by ω_k:
+        // R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
+        let dc = -rk;
+        let dw = rk.cross(&z);
+        for (col, d) in [(k, dc), (3 + k, dw)] {
+            j[(0, col)] = f * (d.x - gx * d.z);
+            j[(1, col)] = f * (d.y - gy * d.z);
+        }
+    }
+    let ideal = nalgebra::Vector2::new(-c * gx, -c * gy);
+    Some((ideal, j * covariance * j.transpose()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+    use crate::rotation::cayley;
+
+    #[test]
+    fn projected_covariance_matches_sampling() {
+        let e = Exterior::from_kuka_pose([10.0, 20.0, 900.0, 15.0, 5.0, -3.0]);
+        let mut cov = Matrix6::zeros();
+        for k in 0..3 {
+            cov[(k, k)] = 0.04; // 0.2 mm
+            cov[(3 + k, 3 + k)] = 1e-8; // 1e-4 rad
+        }
+        let p = Vector3::new(150.0, -100.0, 0.0);
+        let (m, s) = projection_with_covariance(12.0, &e, &cov, &p).unwrap();
+        let mut rng = SplitMix64::new(4);
+        let n = 20000;
+        let mut acc = nalgebra::Matrix2::zeros();
+        for _ in 0..n {
+            let dc = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.2;
+            let w = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 1e-4;
+            let ex = Exterior::new(e.rotation * cayley(w.x / 2.0, w.y / 2.0, w.z / 2.0), e.center + dc);
+            let d = ex.project_ideal(12.0, &p).unwrap() - m;
+            acc += d * d.transpose();
+        }
+        acc /= n as f64;
+        for k in 0..4 {
+            assert!((acc[k] - s[k]).abs() < 0.05 * s[(0, 0)].max(s[(1, 1)]), "{acc} vs {s}");
+        }
+    }
+}

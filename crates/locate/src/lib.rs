@@ -1,0 +1,384 @@
+//! photopose-locate: one camera frame in, the camera's exterior orientation
+//! out — the per-frame pipeline of the reference paper, sections 3.2–3.4.
+//!
+//! 1. detect the targets ([`photopose_vision::Detector`]);
+//! 2. take the coded targets whose ids the field has (never a guess);
+//! 3. first resection from the coded targets (hypothesise-and-verify, so a
+//!    wrong reading cannot carry the pose);
+//! 4. project every uncoded field target with the first pose and take the
+//!    detected blob nearest to it inside a gate derived from the pose's
+//!    uncertainty; two candidates inside the gate, or a blob nearer to
+//!    another projected target, leave it unidentified;
+//! 5. refine the pose over all identified targets (data snooping removes what
+//!    still does not fit).
+//!
+//! Invariant: no IO, and no allocation per frame once a [`Locator`] has seen
+//! a frame with as many targets.
+
+mod gate;
+
+use gate::Grid;
+use photopose_field::{Field, TargetKind};
+use photopose_frame::ImageView;
+use photopose_geometry::precision::projection_with_covariance;
+use photopose_geometry::{
+    Camera, GeometryError, Observation, Resection, ResectionOptions, ResectionReport,
+};
+use photopose_vision::{Detections, Detector, DetectorOptions, FrameStatus, VisionError};
+use thiserror::Error;
+
+/// Why a frame could not be processed at all (as opposed to a frame that
+/// simply shows too few targets, which is a [`PoseStatus`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum LocateError {
+    /// The image does not fit the detector (size, buffer).
+    #[error(transparent)]
+    Vision(#[from] VisionError),
+}
+
+/// Tuning of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocateOptions {
+    /// The resection's options.
+    pub resection: ResectionOptions,
+    /// Gate radius in standard deviations of the projected position.
+    pub gate_sigmas: f64,
+    /// Smallest gate radius, px (centroid error, eccentricity, lens model).
+    pub gate_min_px: f64,
+    /// Largest gate radius as a share of the distance to the nearest other
+    /// projected target (keeps gates from overlapping).
+    pub gate_spacing_ratio: f64,
+    /// Coded targets needed for the first resection.
+    pub min_coded: usize,
+    /// Projected uncoded targets closer than this to the image border are
+    /// not searched, px.
+    pub edge_margin_px: f64,
+}
+
+impl Default for LocateOptions {
+    fn default() -> Self {
+        LocateOptions {
+            resection: ResectionOptions::default(),
+            gate_sigmas: 5.0,
+            gate_min_px: 1.5,
+            gate_spacing_ratio: 0.4,
+            min_coded: 4,
+            edge_margin_px: 2.0,
+        }
+    }
+}
+
+/// What came of a frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PoseStatus {
+    /// A pose was measured.
+    Ok,
+    /// The frame is empty, saturated or cluttered (threshold stage).
+    Frame(FrameStatus),
+    /// Fewer coded targets than needed were identified.
+    TooFewTargets {
+        /// Coded targets identified.
+        coded: usize,
+    },
+    /// The targets do not determine a pose.
+    NoPose(GeometryError),
+}
+
+/// An identified target of the frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Identified {
+    /// Field id.
+    pub id: u64,
+    /// Coded or uncoded.
+    pub kind: TargetKind,
+    /// Measured centre, pixels.
+    pub col: f64,
+    /// Measured centre, pixels.
+    pub row: f64,
+    /// Index into [`Detections::targets`].
+    pub detection: usize,
+    /// Used in the final pose (not rejected by the adjustment).
+    pub used: bool,
+}
+
+/// The result of [`Locator::locate`].
+#[derive(Debug, Clone, Copy)]
+pub struct Location<'a> {
+    /// What came of the frame.
+    pub status: &'a PoseStatus,
+    /// The final pose (status `Ok`).
+    pub pose: Option<&'a ResectionReport>,
+    /// The first pose, from the coded targets only.
+    pub coarse: Option<&'a ResectionReport>,
+    /// Identified targets, coded first, then uncoded.
+    pub targets: &'a [Identified],
+    /// Everything the detector saw.
+    pub detections: &'a Detections,
+    /// Ids rejected by the final adjustment.
+    pub rejected_ids: &'a [u64],
+}
+
+/// The per-frame pipeline with all its buffers.
+#[derive(Debug)]
+pub struct Locator {
+    camera: Camera,
+    field: Field,
+    options: LocateOptions,
+    detector: Detector,
+    resection: Resection,
+    obs: Vec<Observation>,
+    identified: Vec<Identified>,
+    taken: Vec<bool>,
+    grid: Grid,
+    projected: Vec<Projected>,
+    status: PoseStatus,
+    coarse: Option<ResectionReport>,
+    pose: Option<ResectionReport>,
+    rejected: Vec<u64>,
+    /// Field indices of the uncoded targets.
+    uncoded: Vec<usize>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Projected {
+    field_index: usize,
+    col: f64,
+    row: f64,
+    sigma_px: f64,
+}
+
+impl Locator {
+    /// A pipeline for `camera` and `field`; allocates its buffers.
+    pub fn new(camera: Camera, field: Field, options: LocateOptions) -> Result<Self, LocateError> {
+        let detector = Detector::new(
+            camera.sensor.width,
+            camera.sensor.height,
+            DetectorOptions::for_field(&field),
+        )?;
+        Self::with_detector(camera, field, options, detector)
+    }
+
+    /// A pipeline with a detector configured by the caller.
+    pub fn with_detector(
+        camera: Camera,
+        field: Field,
+        options: LocateOptions,
+        detector: Detector,
+    ) -> Result<Self, LocateError> {
+        let n = field.len();
+        let uncoded = (0..n)
+            .filter(|&k| field.targets()[k].kind == TargetKind::Uncoded)
+            .collect();
+        Ok(Locator {
+            resection: Resection::new(&camera, options.resection),
+            grid: Grid::new(camera.sensor.width, camera.sensor.height, 16, 4 * n.max(64)),
+            camera,
+            options,
+            detector,
+            obs: Vec::with_capacity(n),
+            identified: Vec::with_capacity(n),
+            taken: Vec::with_capacity(4 * n.max(64)),
+            projected: Vec::with_capacity(n),
+            status: PoseStatus::TooFewTargets { coded: 0 },
+            coarse: None,
+            pose: None,
+            rejected: Vec::with_capacity(n),
+            uncoded,
+            field,
+        })
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The test field.
+    pub fn field(&self) -> &Field {
+        &self.field
+    }
+
+    /// Detects, identifies and resects one frame.
+    pub fn locate(&mut self, image: ImageView<'_>) -> Result<Location<'_>, LocateError> {
+        self.identified.clear();
+        self.rejected.clear();
+        self.coarse = None;
+        self.pose = None;
+        self.detector.detect(image)?;
+        self.status = self.run();
+        Ok(Location {
+            status: &self.status,
+            pose: self.pose.as_ref(),
+            coarse: self.coarse.as_ref(),
+            targets: &self.identified,
+            detections: self.detector.detections(),
+            rejected_ids: &self.rejected,
+        })
+    }
+
+    fn run(&mut self) -> PoseStatus {
+        let det = self.detector.detections();
+        if det.status != FrameStatus::Normal {
+            return PoseStatus::Frame(det.status);
+        }
+        // 2. Coded targets: ids the field has as coded; an id read twice is
+        // ambiguous and dropped.
+        self.obs.clear();
+        for (k, d) in det.targets.iter().enumerate() {
+            let Some(id) = d.id else { continue };
+            let Some(t) = self.field.get(id) else {
+                continue;
+            };
+            if t.kind != TargetKind::Coded {
+                continue;
+            }
+            let twice = det
+                .targets
+                .iter()
+                .enumerate()
+                .any(|(j, o)| j != k && o.id == Some(id));
+            if twice {
+                continue;
+            }
+            self.identified.push(Identified {
+                id,
+                kind: TargetKind::Coded,
+                col: d.col,
+                row: d.row,
+                detection: k,
+                used: true,
+            });
+            self.obs.push(Observation::from_pixel(
+                &self.camera,
+                id,
+                t.position,
+                d.col,
+                d.row,
+            ));
+        }
+        let coded = self.obs.len();
+        if coded < self.options.min_coded.max(4) {
+            return PoseStatus::TooFewTargets { coded };
+        }
+        // 3. First resection.
+        let coarse = match self.resection.solve(&self.obs) {
+            Ok(r) => r,
+            Err(e) => return PoseStatus::NoPose(e),
+        };
+        self.coarse = Some(coarse);
+        // Coded targets the adjustment rejected are not identified.
+        let rejected = self.resection.rejected_ids();
+        self.identified.retain(|t| !rejected.contains(&t.id));
+        self.obs.retain(|o| !rejected.contains(&o.id));
+        // 4. Uncoded targets by projection.
+        self.identify_uncoded(&coarse);
+        // 5. Final pose over all identified targets.
+        match self.resection.refine(&self.obs, coarse.exterior) {
+            Ok(r) => {
+                let rejected = self.resection.rejected_ids();
+                for t in &mut self.identified {
+                    t.used = !rejected.contains(&t.id);
+                }
+                self.rejected.extend_from_slice(rejected);
+                self.pose = Some(r);
+                PoseStatus::Ok
+            }
+            Err(e) => PoseStatus::NoPose(e),
+        }
+    }
+
+    fn identify_uncoded(&mut self, coarse: &ResectionReport) {
+        let det = self.detector.detections();
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        // Index the uncoded detections.
+        self.taken.clear();
+        self.taken.resize(det.targets.len(), false);
+        self.grid.clear();
+        for (k, d) in det.targets.iter().enumerate() {
+            if d.kind == TargetKind::Uncoded {
+                self.grid.insert(k as u32, d.col, d.row);
+            }
+        }
+        // Project every uncoded field target with its uncertainty.
+        self.projected.clear();
+        for &fi in &self.uncoded {
+            let t = &self.field.targets()[fi];
+            let Some((ideal, cov)) =
+                projection_with_covariance(c, &coarse.exterior, &coarse.covariance, &t.position)
+            else {
+                continue;
+            };
+            let Some(measured) = self.camera.distort(ideal) else {
+                continue;
+            };
+            let p = self.camera.image_to_pixel(measured);
+            if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
+                continue;
+            }
+            // Largest standard deviation of the projected position, px.
+            let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
+            let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+            self.projected.push(Projected {
+                field_index: fi,
+                col: p.x,
+                row: p.y,
+                sigma_px: lmax.max(0.0).sqrt() / px,
+            });
+        }
+        // Match each projection to the nearest blob inside its gate.
+        for i in 0..self.projected.len() {
+            let p = self.projected[i];
+            let spacing = nearest_other(&self.projected, i);
+            let gate = (self.options.gate_min_px + self.options.gate_sigmas * p.sigma_px)
+                .min(self.options.gate_spacing_ratio * spacing);
+            let mut best: Option<(u32, f64)> = None;
+            let mut inside = 0;
+            self.grid.for_each_near(p.col, p.row, gate, |k| {
+                let d = &det.targets[k as usize];
+                let dist = ((d.col - p.col).powi(2) + (d.row - p.row).powi(2)).sqrt();
+                if dist <= gate {
+                    inside += 1;
+                    if best.is_none_or(|(_, b)| dist < b) {
+                        best = Some((k, dist));
+                    }
+                }
+            });
+            let Some((k, _)) = best else { continue };
+            if inside != 1 || self.taken[k as usize] {
+                continue;
+            }
+            self.taken[k as usize] = true;
+            let d = &det.targets[k as usize];
+            let t = &self.field.targets()[p.field_index];
+            self.identified.push(Identified {
+                id: t.id,
+                kind: TargetKind::Uncoded,
+                col: d.col,
+                row: d.row,
+                detection: k as usize,
+                used: true,
+            });
+            self.obs.push(Observation::from_pixel(
+                &self.camera,
+                t.id,
+                t.position,
+                d.col,
+                d.row,
+            ));
+        }
+    }
+}
+
+/// Distance from projection `i` to the nearest other projection, px
+/// (brute force over the projections: a few hundred, once per frame).
+fn nearest_other(p: &[Projected], i: usize) -> f64 {
+    let (x, y) = (p[i].col, p[i].row);
+    let mut best = f64::INFINITY;
+    for (j, q) in p.iter().enumerate() {
+        if j != i {
+            best = best.min((q.col - x).powi(2) + (q.row - y).powi(2));
+        }
+    }
+    best.sqrt()
+}

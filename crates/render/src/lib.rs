@@ -1,0 +1,575 @@
+//! photopose-render: synthetic frames of the test field, for tests,
+//! fixtures, benchmarks and the simulated robot cell.
+//!
+//! Every sub-pixel sample is traced back through the camera model of
+//! `conventions.md` (pixel → measured image coordinates → Brown/Fraser
+//! correction → ray) onto the plane of the plate and looks up the target
+//! pattern of `coded-targets.md`; so a rendered frame obeys the camera model
+//! exactly, distortion included. Supersampling is adaptive: only pixels whose
+//! footprint reaches an edge of the pattern take `supersample²` samples.
+//!
+//! Radiometry of a near-infrared ring light on retro-reflective targets: a
+//! dark background, targets whose brightness falls with the square of their
+//! distance from the camera (relative to `reference_distance_mm`), with the
+//! off-axis angle (cos⁴ vignetting) and gently with the incidence angle;
+//! then a Gaussian blur (`blur_px`) and Gaussian noise (`noise_dn`) from a
+//! seeded generator, rounded and clamped to the image's saturation level.
+//! Same options and seed, same bytes.
+//!
+//! Code-ring phase: sector `k` spans the angles `[k·30°, (k+1)·30°)` measured
+//! counter-clockwise from the plate's `+X` axis seen from `+Z`, and carries
+//! bit `k` of the canonical value (bit 0 the most significant). Readers are
+//! rotation-invariant, so this choice is only a convention of the drawing.
+//!
+//! Invariant: no IO; a [`Renderer`] allocates nothing per frame once it has
+//! rendered one frame of a given size.
+
+mod noise;
+
+use nalgebra::{Vector2, Vector3};
+use noise::Normal;
+use photopose_field::{codes, Field, TargetKind};
+use photopose_frame::{Image, Pixels};
+use photopose_geometry::{Camera, Exterior};
+use thiserror::Error;
+
+/// Why a frame cannot be rendered.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum RenderError {
+    /// The output image's size differs from the camera's sensor.
+    #[error("output image is {got_width}×{got_height}, the camera's sensor is {width}×{height}")]
+    Size {
+        /// Sensor width.
+        width: u32,
+        /// Sensor height.
+        height: u32,
+        /// Image width.
+        got_width: u32,
+        /// Image height.
+        got_height: u32,
+    },
+    /// The field's targets do not lie in one plane.
+    #[error(
+        "the renderer draws planar plates; target {id} lies {distance:.3} mm off the plate's plane"
+    )]
+    NotPlanar {
+        /// Target furthest off.
+        id: u64,
+        /// Its distance from the fitted plane, mm.
+        distance: f64,
+    },
+    /// An option is out of range.
+    #[error("render option `{name}` = {value} is invalid: {why}")]
+    Option {
+        /// Option name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The valid range.
+        why: &'static str,
+    },
+    /// The field is empty.
+    #[error("the test field has no targets")]
+    EmptyField,
+}
+
+/// Rendering options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderOptions {
+    /// Samples per pixel side at pattern edges (1 = no supersampling).
+    pub supersample: u32,
+    /// Gaussian noise, grey values (DN of the output image).
+    pub noise_dn: f64,
+    /// Gaussian blur σ, pixels (0 = none).
+    pub blur_px: f64,
+    /// Seed of the noise.
+    pub seed: u64,
+    /// Background level as a share of the saturation level.
+    pub background: f64,
+    /// Brightness of a target on the optical axis at the reference distance,
+    /// as a share of the saturation level.
+    pub target: f64,
+    /// Distance at which a target has the brightness `target`, mm.
+    pub reference_distance_mm: f64,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            supersample: 4,
+            noise_dn: 2.0,
+            blur_px: 0.6,
+            seed: 1,
+            background: 0.05,
+            target: 0.75,
+            reference_distance_mm: 1000.0,
+        }
+    }
+}
+
+impl RenderOptions {
+    fn check(&self) -> Result<(), RenderError> {
+        let bad = |name, value: f64, why| Err(RenderError::Option { name, value, why });
+        if !(1..=16).contains(&self.supersample) {
+            return bad("supersample", self.supersample as f64, "must be 1..=16");
+        }
+        if !(self.noise_dn.is_finite() && self.noise_dn >= 0.0) {
+            return bad("noise_dn", self.noise_dn, "must be ≥ 0");
+        }
+        if !(self.blur_px.is_finite() && (0.0..=10.0).contains(&self.blur_px)) {
+            return bad("blur_px", self.blur_px, "must be 0..=10 pixels");
+        }
+        if !(self.background.is_finite() && (0.0..1.0).contains(&self.background)) {
+            return bad("background", self.background, "must be in [0, 1)");
+        }
+        if !(self.target.is_finite() && self.target > 0.0 && self.target <= 4.0) {
+            return bad("target", self.target, "must be in (0, 4]");
+        }
+        if !(self.reference_distance_mm.is_finite() && self.reference_distance_mm > 0.0) {
+            return bad(
+                "reference_distance_mm",
+                self.reference_distance_mm,
+                "must be positive",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The truth of one field target in a rendered frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetTruth {
+    /// Field id.
+    pub id: u64,
+    /// Coded or uncoded.
+    pub kind: TargetKind,
+    /// Image of the circle's centre, pixels (`NaN` if behind the camera).
+    pub col: f64,
+    /// Image of the circle's centre, pixels.
+    pub row: f64,
+    /// In front of the camera, and the dot with its ring and quiet zone
+    /// (coded) or dark surround (uncoded) wholly inside the frame.
+    pub visible: bool,
+    /// Radius of the dot's image, pixels (largest axis).
+    pub radius_px: f64,
+}
+
+/// A target in the plate's own 2-D frame.
+#[derive(Debug, Clone, Copy)]
+struct Flat {
+    id: u64,
+    kind: TargetKind,
+    /// Centre in plate coordinates, mm.
+    at: Vector2<f64>,
+    radius: f64,
+    code: u16,
+}
+
+/// The renderer with its scratch buffers.
+#[derive(Debug, Clone)]
+pub struct Renderer {
+    camera: Camera,
+    options: RenderOptions,
+    /// Plate frame: origin, in-plane axes (u × v = n, n towards +Z).
+    origin: Vector3<f64>,
+    u: Vector3<f64>,
+    v: Vector3<f64>,
+    n: Vector3<f64>,
+    targets: Vec<Flat>,
+    /// Excess brightness of the targets over the background, per pixel.
+    excess: Vec<f32>,
+    scratch: Vec<f32>,
+    /// Bounding boxes touched this frame `[c0, r0, c1, r1]`.
+    boxes: Vec<[usize; 4]>,
+    truth: Vec<TargetTruth>,
+    kernel: Vec<f32>,
+    normal: Normal,
+}
+
+impl Renderer {
+    /// A renderer of `field` seen by `camera`.
+    pub fn new(camera: Camera, field: &Field, options: RenderOptions) -> Result<Self, RenderError> {
+        options.check()?;
+        if field.is_empty() {
+            return Err(RenderError::EmptyField);
+        }
+        // The plate's plane: centroid and the normal of least spread.
+        let pts: Vec<Vector3<f64>> = field.targets().iter().map(|t| t.position).collect();
+        let origin = pts.iter().fold(Vector3::zeros(), |a, p| a + p) / pts.len() as f64;
+        let mut cov = nalgebra::Matrix3::zeros();
+        for p in &pts {
+            let d = p - origin;
+            cov += d * d.transpose();
+        }
+        let eig = nalgebra::SymmetricEigen::new(cov);
+        let mut k = 0;
+        for i in 1..3 {
+            if eig.eigenvalues[i] < eig.eigenvalues[k] {
+                k = i;
+            }
+        }
+        let mut n = eig.eigenvectors.column(k).into_owned();
+        if pts.len() < 3 || eig.eigenvalues.iter().filter(|l| **l > 1e-9).count() < 2 {
+            n = Vector3::z();
+        }
+        // Targets face +Z.
+        if n.z < 0.0 {
+            n = -n;
+        }
+        for (t, p) in field.targets().iter().zip(&pts) {
+            let d = (p - origin).dot(&n).abs();
+            if d > 0.01 {
+                return Err(RenderError::NotPlanar {
+                    id: t.id,
+                    distance: d,
+                });
+            }
+        }
+        // In-plane axes: u along +X projected into the plane (or +Y).
+        let seed_axis = if n.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
+        let u = (seed_axis - n * n.dot(&seed_axis)).normalize();
+        let v = n.cross(&u);
+        let targets = field
+            .targets()
+            .iter()
+            .map(|t| {
+                let d = t.position - origin;
+                Flat {
+                    id: t.id,
+                    kind: t.kind,
+                    at: Vector2::new(d.dot(&u), d.dot(&v)),
+                    radius: t.radius,
+                    code: if t.kind == TargetKind::Coded {
+                        codes::value_of(t.id).unwrap_or(0)
+                    } else {
+                        0
+                    },
+                }
+            })
+            .collect::<Vec<_>>();
+        let size = camera.sensor.width as usize * camera.sensor.height as usize;
+        let mut r = Renderer {
+            camera,
+            options,
+            origin,
+            u,
+            v,
+            n,
+            truth: Vec::with_capacity(targets.len()),
+            boxes: Vec::with_capacity(targets.len()),
+            targets,
+            excess: vec![0.0; size],
+            scratch: vec![0.0; size],
+            kernel: Vec::new(),
+            normal: Normal::new(),
+        };
+        r.set_options(options)?;
+        Ok(r)
+    }
+
+    /// Changes the options (noise, blur, seed, ...).
+    pub fn set_options(&mut self, options: RenderOptions) -> Result<(), RenderError> {
+        options.check()?;
+        self.options = options;
+        let s = options.blur_px;
+        self.kernel.clear();
+        if s > 0.0 {
+            let k = (3.5 * s).ceil() as i32;
+            for i in -k..=k {
+                self.kernel
+                    .push((-(i * i) as f64 / (2.0 * s * s)).exp() as f32);
+            }
+            let sum: f32 = self.kernel.iter().sum();
+            self.kernel.iter_mut().for_each(|x| *x /= sum);
+        }
+        Ok(())
+    }
+
+    /// The options in force.
+    pub fn options(&self) -> &RenderOptions {
+        &self.options
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The truth of the last frame, one entry per field target in field order.
+    pub fn truth(&self) -> &[TargetTruth] {
+        &self.truth
+    }
+
+    /// A new black image of the camera's size (8-bit).
+    pub fn new_image(&self) -> Image {
+        Image::new_mono8(self.camera.sensor.width, self.camera.sensor.height)
+    }
+
+    /// The point of the plate's plane hit by the ray through pixel
+    /// `(col, row)`, in plate coordinates, with the distance from the camera
+    /// and the cosine of the incidence angle; `None` if the ray misses.
+    #[inline]
+    fn hit(
+        &self,
+        e: &Exterior,
+        rt: &nalgebra::Matrix3<f64>,
+        col: f64,
+        row: f64,
+    ) -> Option<(Vector2<f64>, f64, f64)> {
+        let ideal = self.camera.correct_pixel(col, row);
+        let d = rt * Vector3::new(ideal.x, ideal.y, -self.camera.interior.c);
+        let denom = d.dot(&self.n);
+        if denom.abs() < 1e-15 {
+            return None;
+        }
+        let s = (self.origin - e.center).dot(&self.n) / denom;
+        if s <= 0.0 {
+            return None;
+        }
+        let q = e.center + d * s - self.origin;
+        let dist = (d * s).norm();
+        let cos_inc = (-denom / d.norm()).max(0.0);
+        Some((Vector2::new(q.dot(&self.u), q.dot(&self.v)), dist, cos_inc))
+    }
+
+    /// Renders the field seen from `exterior` into `out` (8- or 16-bit,
+    /// the camera's size). The truth is available from [`Renderer::truth`].
+    pub fn render(&mut self, exterior: &Exterior, out: &mut Image) -> Result<(), RenderError> {
+        let (w, h) = (self.camera.sensor.width, self.camera.sensor.height);
+        if (out.width(), out.height()) != (w, h) {
+            return Err(RenderError::Size {
+                width: w,
+                height: h,
+                got_width: out.width(),
+                got_height: out.height(),
+            });
+        }
+        let (w, h) = (w as usize, h as usize);
+        self.truth.clear();
+        self.boxes.clear();
+        let rt = exterior.rotation.transpose();
+        // Optical axis in the object frame (the camera looks along -z).
+        let axis = -exterior.rotation.row(2).transpose();
+        let ss = self.options.supersample as usize;
+        for ti in 0..self.targets.len() {
+            let t = self.targets[ti];
+            let centre = self.origin + self.u * t.at.x + self.v * t.at.y;
+            let reach = match t.kind {
+                TargetKind::Coded => 4.0 * t.radius,
+                TargetKind::Uncoded => 2.0 * t.radius,
+            };
+            // Image of the centre and of the target's circles.
+            let centre_px = exterior.project_pixel(&self.camera, &centre);
+            let mut ext: f64 = 0.0;
+            let mut dot_px: f64 = 0.0;
+            let mut all_in_front = centre_px.is_some();
+            for k in 0..16 {
+                let a = k as f64 * std::f64::consts::TAU / 16.0;
+                let dir = self.u * a.cos() + self.v * a.sin();
+                let (Some(c), Some(q), Some(qd)) = (
+                    centre_px,
+                    exterior.project_pixel(&self.camera, &(centre + dir * reach)),
+                    exterior.project_pixel(&self.camera, &(centre + dir * t.radius)),
+                ) else {
+                    all_in_front = false;
+                    continue;
+                };
+                ext = ext.max((q - c).norm());
+                dot_px = dot_px.max((qd - c).norm());
+            }
+            let (col, row) = centre_px
+                .map(|p| (p.x, p.y))
+                .unwrap_or((f64::NAN, f64::NAN));
+            let visible =
+                all_in_front && centre_px.is_some_and(|p| self.camera.contains_pixel(p, ext + 1.0));
+            self.truth.push(TargetTruth {
+                id: t.id,
+                kind: t.kind,
+                col,
+                row,
+                visible,
+                radius_px: dot_px,
+            });
+            let Some(p) = centre_px else { continue };
+            if !all_in_front || !ext.is_finite() {
+                continue;
+            }
+            let margin = ext * 1.05 + 2.0;
+            let c0 = (p.x - margin).floor().max(0.0);
+            let r0 = (p.y - margin).floor().max(0.0);
+            let c1 = (p.x + margin).ceil().min(w as f64 - 1.0);
+            let r1 = (p.y + margin).ceil().min(h as f64 - 1.0);
+            if c0 > c1 || r0 > r1 {
+                continue;
+            }
+            let (c0, r0, c1, r1) = (c0 as usize, r0 as usize, c1 as usize, r1 as usize);
+            self.boxes.push([c0, r0, c1, r1]);
+            // Footprint of a pixel on the plate, mm (for adaptive sampling).
+            let mm_per_px = (reach / ext.max(1e-9)) * 1.5;
+            for row in r0..=r1 {
+                for col in c0..=c1 {
+                    let Some((q, dist, cos_inc)) = self.hit(exterior, &rt, col as f64, row as f64)
+                    else {
+                        continue;
+                    };
+                    let local = (q - t.at) / t.radius;
+                    let rho = local.norm();
+                    if rho > reach / t.radius + 0.5 * mm_per_px / t.radius + 1.0 {
+                        continue;
+                    }
+                    let foot = mm_per_px / t.radius;
+                    let coverage = if ss > 1 && near_edge(&t, local, rho, foot) {
+                        let mut acc = 0.0;
+                        for sy in 0..ss {
+                            for sx in 0..ss {
+                                let pc = col as f64 - 0.5 + (sx as f64 + 0.5) / ss as f64;
+                                let pr = row as f64 - 0.5 + (sy as f64 + 0.5) / ss as f64;
+                                if let Some((qs, _, _)) = self.hit(exterior, &rt, pc, pr) {
+                                    acc += reflectance(&t, (qs - t.at) / t.radius);
+                                }
+                            }
+                        }
+                        acc / (ss * ss) as f64
+                    } else {
+                        reflectance(&t, local)
+                    };
+                    if coverage <= 0.0 {
+                        continue;
+                    }
+                    // Ring light: inverse square of the distance, cos⁴ of
+                    // the off-axis angle, retro-reflection falling gently
+                    // with the incidence angle.
+                    let ray = (centre - exterior.center).normalize();
+                    let off_axis = ray.dot(&axis).clamp(0.0, 1.0);
+                    let gain = (self.options.reference_distance_mm / dist).powi(2)
+                        * off_axis.powi(4)
+                        * (0.6 + 0.4 * cos_inc);
+                    self.excess[row * w + col] += (coverage * gain * self.options.target) as f32;
+                }
+            }
+        }
+        self.blur(w, h);
+        self.quantise(w, h, out);
+        Ok(())
+    }
+
+    /// Blurs the excess brightness inside the touched boxes (the background
+    /// is uniform, so blurring it changes nothing).
+    fn blur(&mut self, w: usize, h: usize) {
+        if self.kernel.is_empty() {
+            return;
+        }
+        let k = self.kernel.len() / 2;
+        for b in 0..self.boxes.len() {
+            let [c0, r0, c1, r1] = self.boxes[b];
+            let (c0, c1) = (c0.saturating_sub(k), (c1 + k).min(w - 1));
+            let (r0, r1) = (r0.saturating_sub(k), (r1 + k).min(h - 1));
+            self.boxes[b] = [c0, r0, c1, r1];
+            for row in r0..=r1 {
+                for col in c0..=c1 {
+                    let mut s = 0.0f32;
+                    for (j, kv) in self.kernel.iter().enumerate() {
+                        let cc = (col + j).saturating_sub(k).min(w - 1);
+                        s += kv * self.excess[row * w + cc];
+                    }
+                    self.scratch[row * w + col] = s;
+                }
+            }
+        }
+        for b in 0..self.boxes.len() {
+            let [c0, r0, c1, r1] = self.boxes[b];
+            for row in r0..=r1 {
+                for col in c0..=c1 {
+                    let mut s = 0.0f32;
+                    for (j, kv) in self.kernel.iter().enumerate() {
+                        let rr = (row + j).saturating_sub(k).min(h - 1);
+                        // Rows outside every box hold no excess: the
+                        // horizontal pass left them zero in `scratch`.
+                        s += kv * self.scratch[rr * w + col];
+                    }
+                    self.excess[row * w + col] = s;
+                }
+            }
+        }
+        // Clear the horizontal pass for the next frame.
+        for b in 0..self.boxes.len() {
+            let [c0, r0, c1, r1] = self.boxes[b];
+            for row in r0..=r1 {
+                self.scratch[row * w + c0..=row * w + c1].fill(0.0);
+            }
+        }
+    }
+
+    /// Background, excess, noise → grey values; clears the excess.
+    fn quantise(&mut self, w: usize, h: usize, out: &mut Image) {
+        let max = out.max_value() as f32;
+        let bg = self.options.background as f32 * max;
+        let noise = self.options.noise_dn as f32;
+        self.normal.reseed(self.options.seed);
+        let normal = &mut self.normal;
+        let excess = &mut self.excess;
+        let mut value = |i: usize| {
+            let v = bg + excess[i] * max + noise * normal.next();
+            excess[i] = 0.0;
+            v.round().clamp(0.0, max)
+        };
+        match out.pixels_mut() {
+            Pixels::Mono8(data) => {
+                for (i, p) in data.iter_mut().enumerate().take(w * h) {
+                    *p = value(i) as u8;
+                }
+            }
+            Pixels::Mono16(data) => {
+                for (i, p) in data.iter_mut().enumerate().take(w * h) {
+                    *p = value(i) as u16;
+                }
+            }
+        }
+    }
+}
+
+/// Reflectance of the pattern at `local` (plate coordinates relative to the
+/// target centre, in dot radii): 1 bright, 0 dark.
+#[inline]
+fn reflectance(t: &Flat, local: Vector2<f64>) -> f64 {
+    let rho2 = local.norm_squared();
+    if rho2 <= 1.0 {
+        return 1.0;
+    }
+    if t.kind == TargetKind::Uncoded || !(4.0..9.0).contains(&rho2) {
+        return 0.0;
+    }
+    let a = local.y.atan2(local.x).rem_euclid(std::f64::consts::TAU);
+    let k = ((a / (std::f64::consts::PI / 6.0)) as u32).min(11);
+    codes::sector_bit(t.code, k) as u8 as f64
+}
+
+/// Whether a pixel whose centre maps to `local` (radius `rho`, in dot radii)
+/// with a footprint of `foot` dot radii may straddle an edge of the pattern.
+#[inline]
+fn near_edge(t: &Flat, local: Vector2<f64>, rho: f64, foot: f64) -> bool {
+    let radii: &[f64] = match t.kind {
+        TargetKind::Coded => &[1.0, 2.0, 3.0],
+        TargetKind::Uncoded => &[1.0],
+    };
+    if radii.iter().any(|r| (rho - r).abs() <= foot) {
+        return true;
+    }
+    if t.kind == TargetKind::Coded && rho > 2.0 - foot && rho < 3.0 + foot {
+        // Distance to the nearest sector boundary ray.
+        let a = local
+            .y
+            .atan2(local.x)
+            .rem_euclid(std::f64::consts::PI / 6.0);
+        let da = a.min(std::f64::consts::PI / 6.0 - a);
+        return rho * da.sin() <= foot;
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,210 @@
+//! Unit tests of the renderer: determinism, truth, geometric fidelity of the
+//! rendered dots, the code-ring drawing.
+
+use super::*;
+use photopose_field::design::default_plate;
+use photopose_geometry::{Distortion, Interior, Sensor};
+
+fn camera(distortion: Distortion) -> Camera {
+    Camera::new(
+        Sensor {
+            width: 1300,
+            height: 1030,
+            pixel_size: 0.0067,
+        },
+        Interior {
+            c: 12.0,
+            x0: 0.02,
+            y0: -0.015,
+        },
+        distortion,
+    )
+    .unwrap()
+}
+
+fn strong() -> Distortion {
+    Distortion {
+        k1: -2.5e-3,
+        k2: 2.0e-5,
+        p1: 3.0e-5,
+        p2: -2.0e-5,
+        b1: 1.0e-4,
+        ..Distortion::default()
+    }
+}
+
+/// Background-subtracted intensity-weighted centroid inside `radius` px.
+fn centroid(img: &Image, col: f64, row: f64, radius: f64, background: f64) -> (f64, f64) {
+    let (mut s, mut sc, mut sr) = (0.0, 0.0, 0.0);
+    let r = radius.ceil() as i64 + 1;
+    for dr in -r..=r {
+        for dc in -r..=r {
+            let (c, rr) = (col.round() as i64 + dc, row.round() as i64 + dr);
+            if (c as f64 - col).hypot(rr as f64 - row) > radius {
+                continue;
+            }
+            let v = img.get(c as u32, rr as u32) as f64 - background;
+            s += v;
+            sc += v * c as f64;
+            sr += v * rr as f64;
+        }
+    }
+    (sc / s, sr / s)
+}
+
+fn exact() -> RenderOptions {
+    RenderOptions {
+        supersample: 8,
+        noise_dn: 0.0,
+        blur_px: 0.0,
+        ..RenderOptions::default()
+    }
+}
+
+/// `tol`: largest error; the RMS must stay below `tol / 1.5`. What remains
+/// at oblique views is the perspective eccentricity of a projected circle
+/// (its image centroid is not the image of its centre), not the renderer.
+fn check_centroids(cam: Camera, e: Exterior, tol: f64) {
+    let field = default_plate();
+    let mut r = Renderer::new(cam, &field, exact()).unwrap();
+    let mut img = Image::new_mono16(1300, 1030, 65535);
+    r.render(&e, &mut img).unwrap();
+    let bg = r.options().background * 65535.0;
+    let mut worst: f64 = 0.0;
+    let mut sum2 = 0.0;
+    let mut n = 0;
+    for t in r
+        .truth()
+        .iter()
+        .filter(|t| t.visible && t.kind == TargetKind::Uncoded)
+    {
+        // Inside 1.5 dot radii: the dot and part of its dark surround (no
+        // ring around an uncoded target).
+        let (c, rr) = centroid(&img, t.col, t.row, 1.5 * t.radius_px, bg);
+        let d = (c - t.col).hypot(rr - t.row);
+        worst = worst.max(d);
+        sum2 += d * d;
+        n += 1;
+    }
+    assert!(n > 50, "only {n} visible targets");
+    let rms = (sum2 / n as f64).sqrt();
+    assert!(
+        worst < tol && rms < tol / 1.5,
+        "centroid error: worst {worst} px, RMS {rms} px over {n} targets"
+    );
+}
+
+#[test]
+fn frontal_dots_are_centred_on_the_truth() {
+    check_centroids(
+        camera(Distortion::default()),
+        Exterior::from_kuka_pose([5.0, -3.0, 1000.0, 0.0, 0.0, 0.0]),
+        0.01,
+    );
+}
+
+#[test]
+fn oblique_dots_with_strong_distortion_are_centred_on_the_truth() {
+    let e = Exterior::look_at(
+        Vector3::new(0.0, -650.0, 650.0),
+        Vector3::new(0.0, 0.0, 0.0),
+        Vector3::z(),
+    )
+    .unwrap();
+    check_centroids(camera(strong()), e, 0.03);
+}
+
+#[test]
+fn same_seed_same_bytes_other_seed_other_bytes() {
+    let field = default_plate();
+    let cam = camera(strong());
+    let e = Exterior::from_kuka_pose([10.0, 20.0, 950.0, 20.0, 5.0, -4.0]);
+    let mut r = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
+    let mut a = r.new_image();
+    let mut b = r.new_image();
+    r.render(&e, &mut a).unwrap();
+    r.render(&e, &mut b).unwrap();
+    assert_eq!(a, b);
+    r.set_options(RenderOptions {
+        seed: 2,
+        ..RenderOptions::default()
+    })
+    .unwrap();
+    r.render(&e, &mut b).unwrap();
+    assert_ne!(a, b);
+}
+
+#[test]
+fn truth_is_the_projection_of_the_centres() {
+    let field = default_plate();
+    let cam = camera(strong());
+    let e = Exterior::from_kuka_pose([-30.0, 20.0, 900.0, 30.0, 10.0, 5.0]);
+    let mut r = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
+    let mut img = r.new_image();
+    r.render(&e, &mut img).unwrap();
+    assert_eq!(r.truth().len(), field.len());
+    for (t, f) in r.truth().iter().zip(field.targets()) {
+        assert_eq!(t.id, f.id);
+        let p = e.project_pixel(&cam, &f.position).unwrap();
+        assert!((p.x - t.col).abs() < 1e-9 && (p.y - t.row).abs() < 1e-9);
+        if t.visible {
+            assert!(cam.contains_pixel(p, 5.0));
+        }
+    }
+}
+
+#[test]
+fn code_sectors_are_drawn_counter_clockwise_from_plus_x() {
+    // Camera looking straight down with its axes along the plate's: plate +X
+    // is image +col, plate +Y is image -row.
+    let field = default_plate();
+    let cam = camera(Distortion::default());
+    let e = Exterior::from_kuka_pose([0.0, 0.0, 800.0, 0.0, 0.0, 0.0]);
+    let mut r = Renderer::new(cam, &field, exact()).unwrap();
+    let mut img = r.new_image();
+    r.render(&e, &mut img).unwrap();
+    let mut checked = 0;
+    for (t, f) in r.truth().iter().zip(field.targets()) {
+        if f.kind != TargetKind::Coded || !t.visible {
+            continue;
+        }
+        let value = codes::value_of(f.id).unwrap();
+        for k in 0..12u32 {
+            let a = (k as f64 + 0.5) * std::f64::consts::PI / 6.0;
+            let rho = 2.5 * t.radius_px;
+            let (c, rr) = (t.col + rho * a.cos(), t.row - rho * a.sin());
+            let v = img.get(c.round() as u32, rr.round() as u32);
+            let bright = v > 128;
+            assert_eq!(
+                bright,
+                codes::sector_bit(value, k),
+                "target {} sector {k}: {v}",
+                f.id
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked >= 10, "only {checked} coded targets checked");
+}
+
+#[test]
+fn wrong_size_and_bad_options_are_errors() {
+    let field = default_plate();
+    let cam = camera(Distortion::default());
+    let mut r = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
+    let mut small = Image::new_mono8(640, 480);
+    let e = Exterior::from_kuka_pose([0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]);
+    let err = r.render(&e, &mut small).unwrap_err().to_string();
+    assert!(
+        err.contains("640×480") && err.contains("1300×1030"),
+        "{err}"
+    );
+    let bad = RenderOptions {
+        blur_px: -1.0,
+        ..RenderOptions::default()
+    };
+    assert!(Renderer::new(cam, &field, bad)
+        .unwrap_err()
+        .to_string()
+        .contains("blur_px"));
+}
