@@ -22,7 +22,8 @@ use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
 use photopose_geometry::precision::projection_with_covariance;
 use photopose_geometry::{
-    Camera, GeometryError, Observation, Resection, ResectionOptions, ResectionReport,
+    Camera, GeometryError, Observation, Resection, ResectionOptions, ResectionReport, Vector2,
+    Vector3,
 };
 use photopose_vision::{Detections, Detector, DetectorOptions, FrameStatus, VisionError};
 use thiserror::Error;
@@ -53,6 +54,10 @@ pub struct LocateOptions {
     /// Projected uncoded targets closer than this to the image border are
     /// not searched, px.
     pub edge_margin_px: f64,
+    /// Correct each centroid for the eccentricity of the projected circle
+    /// (the centre of the imaged ellipse is not the image of the circle's
+    /// centre), with the first pose.
+    pub eccentricity: bool,
 }
 
 impl Default for LocateOptions {
@@ -64,6 +69,7 @@ impl Default for LocateOptions {
             gate_spacing_ratio: 0.4,
             min_coded: 4,
             edge_margin_px: 2.0,
+            eccentricity: true,
         }
     }
 }
@@ -91,10 +97,16 @@ pub struct Identified {
     pub id: u64,
     /// Coded or uncoded.
     pub kind: TargetKind,
-    /// Measured centre, pixels.
+    /// Image of the target's centre, pixels: the blob centre corrected for
+    /// the eccentricity of the projected circle (equal to the blob centre
+    /// when the correction is off).
     pub col: f64,
-    /// Measured centre, pixels.
+    /// Image of the target's centre, pixels.
     pub row: f64,
+    /// Centre of the bright blob as measured, pixels.
+    pub blob_col: f64,
+    /// Centre of the bright blob as measured, pixels.
+    pub blob_row: f64,
     /// Index into [`Detections::targets`].
     pub detection: usize,
     /// Used in the final pose (not rejected by the adjustment).
@@ -245,6 +257,8 @@ impl Locator {
                 kind: TargetKind::Coded,
                 col: d.col,
                 row: d.row,
+                blob_col: d.col,
+                blob_row: d.row,
                 detection: k,
                 used: true,
             });
@@ -272,6 +286,9 @@ impl Locator {
         self.obs.retain(|o| !rejected.contains(&o.id));
         // 4. Uncoded targets by projection.
         self.identify_uncoded(&coarse);
+        if self.options.eccentricity {
+            self.correct_eccentricity(&coarse);
+        }
         // 5. Final pose over all identified targets.
         match self.resection.refine(&self.obs, coarse.exterior) {
             Ok(r) => {
@@ -284,6 +301,60 @@ impl Locator {
                 PoseStatus::Ok
             }
             Err(e) => PoseStatus::NoPose(e),
+        }
+    }
+
+    /// Moves every observation from the centre of the imaged ellipse to the
+    /// image of the circle's centre. The offset is that of the area centroid
+    /// of the projected circle (a 16-gon of its rim, shoelace formula) from
+    /// the projected centre, in ideal image coordinates; the lens distortion
+    /// changes it only in the second order.
+    fn correct_eccentricity(&mut self, coarse: &ResectionReport) {
+        const RIM: usize = 16;
+        let c = self.camera.interior.c;
+        let ps = self.camera.sensor.pixel_size;
+        let e = &coarse.exterior;
+        for (o, t) in self.obs.iter_mut().zip(self.identified.iter_mut()) {
+            debug_assert_eq!(o.id, t.id);
+            let Some(target) = self.field.get(t.id) else {
+                continue;
+            };
+            let Some(centre) = e.project_ideal(c, &target.position) else {
+                continue;
+            };
+            // In-plane axes of a target facing +Z.
+            let (mut area, mut cx, mut cy) = (0.0f64, 0.0f64, 0.0f64);
+            let mut prev = None;
+            let mut first = None;
+            for k in 0..=RIM {
+                let p = if k == RIM {
+                    first
+                } else {
+                    let a = k as f64 * std::f64::consts::TAU / RIM as f64;
+                    let q = target.position + Vector3::new(a.cos(), a.sin(), 0.0) * target.radius;
+                    e.project_ideal(c, &q)
+                };
+                let Some(p) = p else { break };
+                if k == 0 {
+                    first = Some(p);
+                }
+                if let Some(q) = prev {
+                    let q: Vector2<f64> = q;
+                    let cross = q.x * p.y - p.x * q.y;
+                    area += cross;
+                    cx += (q.x + p.x) * cross;
+                    cy += (q.y + p.y) * cross;
+                }
+                prev = Some(p);
+            }
+            if area.abs() < 1e-18 {
+                continue;
+            }
+            let centroid = Vector2::new(cx / (3.0 * area), cy / (3.0 * area));
+            let offset = centroid - centre;
+            o.image -= offset;
+            t.col -= offset.x / ps;
+            t.row += offset.y / ps;
         }
     }
 
@@ -356,6 +427,8 @@ impl Locator {
                 kind: TargetKind::Uncoded,
                 col: d.col,
                 row: d.row,
+                blob_col: d.col,
+                blob_row: d.row,
                 detection: k as usize,
                 used: true,
             });

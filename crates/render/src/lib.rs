@@ -89,8 +89,12 @@ pub struct RenderOptions {
     /// Brightness of a target on the optical axis at the reference distance,
     /// as a share of the saturation level.
     pub target: f64,
-    /// Distance at which a target has the brightness `target`, mm.
+    /// Distance at which a target has the brightness `target`, mm (without
+    /// auto-exposure).
     pub reference_distance_mm: f64,
+    /// Set the exposure per frame so that the nearest target in view has the
+    /// brightness `target`, as a camera's auto-exposure would.
+    pub auto_exposure: bool,
 }
 
 impl Default for RenderOptions {
@@ -101,8 +105,9 @@ impl Default for RenderOptions {
             blur_px: 0.6,
             seed: 1,
             background: 0.05,
-            target: 0.75,
+            target: 0.8,
             reference_distance_mm: 1000.0,
+            auto_exposure: true,
         }
     }
 }
@@ -355,6 +360,25 @@ impl Renderer {
         // Optical axis in the object frame (the camera looks along -z).
         let axis = -exterior.rotation.row(2).transpose();
         let ss = self.options.supersample as usize;
+        // Exposure: fixed (reference distance), or set so that the nearest
+        // target in view has the brightness `target` (an auto-exposure).
+        let mut reference = self.options.reference_distance_mm;
+        if self.options.auto_exposure {
+            let nearest = self
+                .targets
+                .iter()
+                .map(|t| self.origin + self.u * t.at.x + self.v * t.at.y)
+                .filter(|c| {
+                    exterior
+                        .project_pixel(&self.camera, c)
+                        .is_some_and(|p| self.camera.contains_pixel(p, 0.0))
+                })
+                .map(|c| (c - exterior.center).norm())
+                .fold(f64::INFINITY, f64::min);
+            if nearest.is_finite() {
+                reference = nearest;
+            }
+        }
         for ti in 0..self.targets.len() {
             let t = self.targets[ti];
             let centre = self.origin + self.u * t.at.x + self.v * t.at.y;
@@ -384,8 +408,11 @@ impl Renderer {
             let (col, row) = centre_px
                 .map(|p| (p.x, p.y))
                 .unwrap_or((f64::NAN, f64::NAN));
-            let visible =
-                all_in_front && centre_px.is_some_and(|p| self.camera.contains_pixel(p, ext + 1.0));
+            // "Visible": the quiet zone (or dark surround) with 30 % and
+            // 2 px to spare inside the frame — what a detector needs to see
+            // the dark background all round the target.
+            let visible = all_in_front
+                && centre_px.is_some_and(|p| self.camera.contains_pixel(p, 1.3 * ext + 2.0));
             self.truth.push(TargetTruth {
                 id: t.id,
                 kind: t.kind,
@@ -445,9 +472,8 @@ impl Renderer {
                     // with the incidence angle.
                     let ray = (centre - exterior.center).normalize();
                     let off_axis = ray.dot(&axis).clamp(0.0, 1.0);
-                    let gain = (self.options.reference_distance_mm / dist).powi(2)
-                        * off_axis.powi(4)
-                        * (0.6 + 0.4 * cos_inc);
+                    let gain =
+                        (reference / dist).powi(2) * off_axis.powi(4) * (0.6 + 0.4 * cos_inc);
                     self.excess[row * w + col] += (coverage * gain * self.options.target) as f32;
                 }
             }
