@@ -93,7 +93,7 @@ fn sweep(frames: usize, seed: u64) -> Tally {
         for t in loc.targets {
             let tr = by_id(t.id);
             let d = (t.col - tr.col).hypot(t.row - tr.row);
-            if !(d < 1.0) {
+            if d.is_nan() || d >= 1.0 {
                 tally.wrong_ids += 1;
                 eprintln!(
                     "frame {f}: id {} at ({:.2}, {:.2}), truth at ({:.2}, {:.2})",
