@@ -37,8 +37,9 @@ pub struct Normals {
 pub struct Linearised {
     /// Index into the observation slice of each used point.
     pub idx: Vec<usize>,
-    /// Object point and ideal image point of each used point.
-    pts: Vec<[f64; 5]>,
+    /// Object point, ideal image point and square root of the weight of
+    /// each used point.
+    pts: Vec<[f64; 6]>,
     /// Interleaved `[A | v]` rows of each point.
     rows: Vec<[f64; 14]>,
 }
@@ -90,8 +91,14 @@ impl Linearised {
                 continue;
             }
             self.idx.push(k);
-            self.pts
-                .push([o.object.x, o.object.y, o.object.z, o.image.x, o.image.y]);
+            self.pts.push([
+                o.object.x,
+                o.object.y,
+                o.object.z,
+                o.image.x,
+                o.image.y,
+                o.weight.sqrt(),
+            ]);
         }
         // `evaluate` overwrites every row: only grow or shrink.
         self.rows.resize(self.idx.len(), [0.0; 14]);
@@ -126,7 +133,9 @@ impl Linearised {
             let inv = 1.0 / zz;
             let gx = zx * inv;
             let gy = zy * inv;
-            let f = -c * inv;
+            // Rows and residual scaled by the square root of the weight.
+            let sw = p[5];
+            let f = -c * inv * sw;
             for k in 0..3 {
                 let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
                 // Centre: dZ/dC_k = -R e_k.
@@ -139,8 +148,8 @@ impl Linearised {
                 row[6 + 2 * k] = f * (dzx - gx * dzz);
                 row[7 + 2 * k] = f * (dzy - gy * dzz);
             }
-            row[12] = p[3] + c * gx;
-            row[13] = p[4] + c * gy;
+            row[12] = (p[3] + c * gx) * sw;
+            row[13] = (p[4] + c * gy) * sw;
         }
         if behind > 0 {
             return Err(GeometryError::BehindCamera { count: behind });
@@ -237,6 +246,7 @@ mod tests {
             id: 1,
             object: Vector3::new(120.0, 45.0, 3.0),
             image: Vector2::new(0.1, -0.2),
+            weight: 1.0,
         };
         let e = Exterior::new(r, center);
         assert!(e.to_camera(&o.object).z < 0.0);

@@ -135,13 +135,19 @@ mod tests {
         for _ in 0..n {
             let dc = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.2;
             let w = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 1e-4;
-            let ex = Exterior::new(e.rotation * cayley(w.x / 2.0, w.y / 2.0, w.z / 2.0), e.center + dc);
+            let ex = Exterior::new(
+                e.rotation * cayley(w.x / 2.0, w.y / 2.0, w.z / 2.0),
+                e.center + dc,
+            );
             let d = ex.project_ideal(12.0, &p).unwrap() - m;
             acc += d * d.transpose();
         }
         acc /= n as f64;
         for k in 0..4 {
-            assert!((acc[k] - s[k]).abs() < 0.05 * s[(0, 0)].max(s[(1, 1)]), "{acc} vs {s}");
+            assert!(
+                (acc[k] - s[k]).abs() < 0.05 * s[(0, 0)].max(s[(1, 1)]),
+                "{acc} vs {s}"
+            );
         }
     }
 }

@@ -30,6 +30,9 @@ pub struct Observation {
     pub object: Vector3<f64>,
     /// Ideal (corrected) image coordinates, mm: see [`Camera::correct`].
     pub image: Vector2<f64>,
+    /// Weight of both image coordinates relative to an observation of unit
+    /// weight (`σ² = σ0² / weight`); 1 for equally precise observations.
+    pub weight: f64,
 }
 
 impl Observation {
@@ -39,6 +42,7 @@ impl Observation {
             id,
             object,
             image: camera.correct_pixel(col, row),
+            weight: 1.0,
         }
     }
 }
@@ -163,6 +167,7 @@ pub fn normal_matrix(
             id: 0,
             object: *p,
             image: Vector2::zeros(),
+            weight: 1.0,
         })
         .collect();
     let mut lin = Linearised::default();
@@ -522,7 +527,9 @@ fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
         });
     }
     for (index, o) in obs.iter().enumerate() {
-        if !o.object.iter().chain(o.image.iter()).all(|v| v.is_finite()) {
+        if !o.object.iter().chain(o.image.iter()).all(|v| v.is_finite())
+            || !(o.weight.is_finite() && o.weight > 0.0)
+        {
             return Err(GeometryError::NonFinite { index });
         }
     }

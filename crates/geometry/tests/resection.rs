@@ -285,3 +285,31 @@ fn a_workspace_solves_the_same_way_twice() {
     let b = rs.solve(&obs).unwrap();
     assert_eq!(a, b);
 }
+
+#[test]
+fn uniform_weights_change_nothing_but_sigma0() {
+    let cam = camera();
+    let truth = Exterior::from_kuka_pose([10.0, 10.0, 1000.0, 5.0, 3.0, 2.0]);
+    let mut rng = SplitMix64::new(6);
+    let obs = observe(&cam, &truth, 0.1, &mut rng);
+    let mut rs = Resection::new(&cam, ResectionOptions::default());
+    let a = rs.solve(&obs).unwrap();
+    let heavy: Vec<Observation> = obs
+        .iter()
+        .map(|o| Observation { weight: 4.0, ..*o })
+        .collect();
+    let b = rs.solve(&heavy).unwrap();
+    assert!((a.exterior.center - b.exterior.center).norm() < 1e-9);
+    assert!(((a.covariance - b.covariance).norm() / a.covariance.norm()) < 1e-6);
+    assert!(
+        (b.sigma0 / a.sigma0 - 2.0).abs() < 1e-6,
+        "σ0 of unit weight doubles"
+    );
+    // A bad weight is refused.
+    let mut bad = obs.clone();
+    bad[3].weight = -1.0;
+    assert!(matches!(
+        rs.solve(&bad),
+        Err(GeometryError::NonFinite { index: 3 })
+    ));
+}

@@ -54,7 +54,12 @@ struct Tally {
     wrong_ids: usize,
     centroid_sq: f64,
     centroid_n: usize,
+    mahalanobis: Vec<f64>,
+    normalised: [f64; 6],
 }
+
+/// χ²(6) quantile at 99.73 % (the probability of ±3σ in one dimension).
+const CHI2_6_3SIGMA: f64 = 20.06;
 
 fn sweep(frames: usize, seed: u64) -> Tally {
     let cam = camera();
@@ -170,12 +175,28 @@ fn sweep(frames: usize, seed: u64) -> Tally {
                 (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
                 (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
             ];
-            let ok =
-                (0..3).all(|k| dc[k].abs() <= 3.0 * s[k] && w[k].to_degrees().abs() <= 3.0 * sr[k]);
+            // Jointly: the Mahalanobis distance of the six errors under the
+            // reported covariance, against the χ²(6) quantile of 3σ (99.73 %).
+            let err = nalgebra::Vector6::new(dc.x, dc.y, dc.z, w[0], w[1], w[2]);
+            let m2 = p
+                .covariance
+                .cholesky()
+                .map(|ch| err.dot(&ch.solve(&err)))
+                .unwrap_or(f64::INFINITY);
+            let ok = m2 <= CHI2_6_3SIGMA;
+            tally.mahalanobis.push(m2);
+            for k in 0..6 {
+                tally.normalised[k] += err[k] / p.covariance[(k, k)].sqrt();
+            }
             tally.within_3_sigma += ok as usize;
             if !ok {
                 eprintln!(
-                    "frame {f}: pose off: dc {dc:?} σ {s:?}, angle {:.5}°",
+                    "frame {f}: pose off (d² = {m2:.1}; {distance:.0} mm, tilt {tilt:.0}°, σ0 {:.3} px, {} points): dc {:?} σ {:?} (σ° {:?}), angle {:.5}°",
+                    p.sigma0_px,
+                    p.n_points,
+                    dc.as_slice(),
+                    s.as_slice(),
+                    sr.as_slice(),
                     angle_between(&p.exterior.rotation, &truth_pose.rotation).to_degrees()
                 );
             }
@@ -216,6 +237,18 @@ fn check(t: &Tally) {
         "uncoded identification rate {uncoded_rate}"
     );
     assert!(rms <= 0.02, "centroid RMS {rms} px");
+    eprintln!(
+        "mean normalised error per unknown: {:?}",
+        t.normalised.map(|x| x / t.poses as f64)
+    );
+    let mut m = t.mahalanobis.clone();
+    m.sort_by(f64::total_cmp);
+    eprintln!(
+        "Mahalanobis d² of the pose error: median {:.2} (χ²(6): 5.35), 90 % {:.2} (10.64), 99 % {:.2} (16.81)",
+        m[m.len() / 2],
+        m[m.len() * 9 / 10],
+        m[m.len() * 99 / 100]
+    );
     assert!(
         t.within_3_sigma as f64 >= 0.99 * t.poses as f64 || t.poses - t.within_3_sigma <= 1,
         "poses within 3σ: {} of {}",
