@@ -527,9 +527,9 @@ fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
         });
     }
     for (index, o) in obs.iter().enumerate() {
-        if !o.object.iter().chain(o.image.iter()).all(|v| v.is_finite())
-            || !(o.weight.is_finite() && o.weight > 0.0)
-        {
+        let finite = o.object.iter().chain(o.image.iter()).all(|v| v.is_finite());
+        let weighted = o.weight.is_finite() && o.weight > 0.0;
+        if !(finite && weighted) {
             return Err(GeometryError::NonFinite { index });
         }
     }
