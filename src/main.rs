@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Exterior orientation from observations (or images): one JSON line per input.
     Resect(cmd::resect::Args),
+    /// Per-stage timing of the frame pipeline on rendered frames.
+    Bench(cmd::bench::Args),
     /// Predicted precision of a configuration without images (and a Monte Carlo check).
     Simulate(cmd::simulate::Args),
 }
@@ -26,6 +28,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Resect(args) => cmd::resect::run(args),
+        Command::Bench(args) => cmd::bench::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
     };
     match result {

@@ -1,5 +1,6 @@
 //! The subcommands of the `photopose` binary, one module each.
 
+pub mod bench;
 pub mod defaults;
 pub mod pose_arg;
 pub mod resect;

@@ -74,6 +74,19 @@ impl Default for LocateOptions {
     }
 }
 
+/// The stages of [`Locator::locate_probed`], in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// Threshold, labelling, centroids, code reading.
+    Detect,
+    /// Coded targets taken and the first resection done.
+    FirstPose,
+    /// Uncoded targets identified (and centroids corrected).
+    Uncoded,
+    /// Final resection over all targets.
+    FinalPose,
+}
+
 /// What came of a frame.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PoseStatus {
@@ -147,8 +160,9 @@ pub struct Locator {
     coarse: Option<ResectionReport>,
     pose: Option<ResectionReport>,
     rejected: Vec<u64>,
-    /// Field indices of the uncoded targets.
-    uncoded: Vec<usize>,
+    /// Field indices of the uncoded targets, each with the field index of
+    /// its nearest other target (for the gate's upper bound).
+    uncoded: Vec<(usize, usize)>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -157,6 +171,7 @@ struct Projected {
     col: f64,
     row: f64,
     sigma_px: f64,
+    spacing: f64,
 }
 
 impl Locator {
@@ -178,8 +193,20 @@ impl Locator {
         detector: Detector,
     ) -> Result<Self, LocateError> {
         let n = field.len();
+        let targets = field.targets();
         let uncoded = (0..n)
-            .filter(|&k| field.targets()[k].kind == TargetKind::Uncoded)
+            .filter(|&k| targets[k].kind == TargetKind::Uncoded)
+            .map(|k| {
+                let nearest = (0..n)
+                    .filter(|&j| j != k)
+                    .min_by(|&a, &b| {
+                        let da = (targets[a].position - targets[k].position).norm_squared();
+                        let db = (targets[b].position - targets[k].position).norm_squared();
+                        da.total_cmp(&db)
+                    })
+                    .unwrap_or(k);
+                (k, nearest)
+            })
             .collect();
         Ok(Locator {
             resection: Resection::new(&camera, options.resection),
@@ -212,12 +239,23 @@ impl Locator {
 
     /// Detects, identifies and resects one frame.
     pub fn locate(&mut self, image: ImageView<'_>) -> Result<Location<'_>, LocateError> {
+        self.locate_probed(image, &mut |_| {})
+    }
+
+    /// [`Locator::locate`], calling `probe` as each [`Stage`] ends (the
+    /// caller may read a clock there: this crate reads none).
+    pub fn locate_probed(
+        &mut self,
+        image: ImageView<'_>,
+        probe: &mut dyn FnMut(Stage),
+    ) -> Result<Location<'_>, LocateError> {
         self.identified.clear();
         self.rejected.clear();
         self.coarse = None;
         self.pose = None;
         self.detector.detect(image)?;
-        self.status = self.run();
+        probe(Stage::Detect);
+        self.status = self.run(probe);
         Ok(Location {
             status: &self.status,
             pose: self.pose.as_ref(),
@@ -228,7 +266,7 @@ impl Locator {
         })
     }
 
-    fn run(&mut self) -> PoseStatus {
+    fn run(&mut self, probe: &mut dyn FnMut(Stage)) -> PoseStatus {
         let det = self.detector.detections();
         if det.status != FrameStatus::Normal {
             return PoseStatus::Frame(det.status);
@@ -280,6 +318,7 @@ impl Locator {
             Err(e) => return PoseStatus::NoPose(e),
         };
         self.coarse = Some(coarse);
+        probe(Stage::FirstPose);
         // Coded targets the adjustment rejected are not identified.
         let rejected = self.resection.rejected_ids();
         self.identified.retain(|t| !rejected.contains(&t.id));
@@ -289,6 +328,7 @@ impl Locator {
         if self.options.eccentricity {
             self.correct_eccentricity(&coarse);
         }
+        probe(Stage::Uncoded);
         // 5. Final pose over all identified targets.
         match self.resection.refine(&self.obs, coarse.exterior) {
             Ok(r) => {
@@ -298,6 +338,7 @@ impl Locator {
                 }
                 self.rejected.extend_from_slice(rejected);
                 self.pose = Some(r);
+                probe(Stage::FinalPose);
                 PoseStatus::Ok
             }
             Err(e) => PoseStatus::NoPose(e),
@@ -306,11 +347,11 @@ impl Locator {
 
     /// Moves every observation from the centre of the imaged ellipse to the
     /// image of the circle's centre. The offset is that of the area centroid
-    /// of the projected circle (a 16-gon of its rim, shoelace formula) from
+    /// of the projected circle (an octagon of its rim, shoelace formula) from
     /// the projected centre, in ideal image coordinates; the lens distortion
     /// changes it only in the second order.
     fn correct_eccentricity(&mut self, coarse: &ResectionReport) {
-        const RIM: usize = 16;
+        const RIM: usize = 8;
         let c = self.camera.interior.c;
         let ps = self.camera.sensor.pixel_size;
         let e = &coarse.exterior;
@@ -373,7 +414,7 @@ impl Locator {
         }
         // Project every uncoded field target with its uncertainty.
         self.projected.clear();
-        for &fi in &self.uncoded {
+        for &(fi, neighbour) in &self.uncoded {
             let t = &self.field.targets()[fi];
             let Some((ideal, cov)) =
                 projection_with_covariance(c, &coarse.exterior, &coarse.covariance, &t.position)
@@ -390,17 +431,24 @@ impl Locator {
             // Largest standard deviation of the projected position, px.
             let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
             let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+            // Image distance to the nearest other target (pinhole is close
+            // enough for a bound).
+            let spacing = coarse
+                .exterior
+                .project_ideal(c, &self.field.targets()[neighbour].position)
+                .map_or(f64::INFINITY, |q| (q - ideal).norm() / px);
             self.projected.push(Projected {
                 field_index: fi,
                 col: p.x,
                 row: p.y,
                 sigma_px: lmax.max(0.0).sqrt() / px,
+                spacing,
             });
         }
         // Match each projection to the nearest blob inside its gate.
         for i in 0..self.projected.len() {
             let p = self.projected[i];
-            let spacing = nearest_other(&self.projected, i);
+            let spacing = p.spacing;
             let gate = (self.options.gate_min_px + self.options.gate_sigmas * p.sigma_px)
                 .min(self.options.gate_spacing_ratio * spacing);
             let mut best: Option<(u32, f64)> = None;
@@ -441,17 +489,4 @@ impl Locator {
             ));
         }
     }
-}
-
-/// Distance from projection `i` to the nearest other projection, px
-/// (brute force over the projections: a few hundred, once per frame).
-fn nearest_other(p: &[Projected], i: usize) -> f64 {
-    let (x, y) = (p[i].col, p[i].row);
-    let mut best = f64::INFINITY;
-    for (j, q) in p.iter().enumerate() {
-        if j != i {
-            best = best.min((q.col - x).powi(2) + (q.row - y).powi(2));
-        }
-    }
-    best.sqrt()
 }
