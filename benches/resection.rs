@@ -3,6 +3,8 @@
 //! least-squares refinement from the closed-form start, and the full
 //! resection (hypothesise-and-verify, refinement, snooping, precision).
 
+#![allow(missing_docs)] // criterion_group! generates an undocumented public function
+
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use photopose_field::design::default_plate;
 use photopose_geometry::closed_form::resect_four_coplanar;
