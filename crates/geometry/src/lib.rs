@@ -22,5 +22,5 @@ pub mod rotation;
 pub use camera::{Camera, Distortion, Interior, Sensor};
 pub use error::GeometryError;
 pub use exterior::Exterior;
-pub use nalgebra::{Matrix3, Matrix6, Point3, Vector2, Vector3, Vector6};
+pub use nalgebra::{Matrix2, Matrix3, Matrix6, Point3, Vector2, Vector3, Vector6};
 pub use resection::{Observation, Resection, ResectionOptions, ResectionReport};

@@ -37,9 +37,10 @@ pub struct Normals {
 pub struct Linearised {
     /// Index into the observation slice of each used point.
     pub idx: Vec<usize>,
-    /// Object point, ideal image point and square root of the weight of
+    /// Object point, ideal image point and the Cholesky factor
+    /// `U = [[u00, u01], [0, u11]]` of the weight matrix (`W = UᵀU`) of
     /// each used point.
-    pts: Vec<[f64; 6]>,
+    pts: Vec<[f64; 8]>,
     /// Interleaved `[A | v]` rows of each point.
     rows: Vec<[f64; 14]>,
 }
@@ -91,13 +92,12 @@ impl Linearised {
                 continue;
             }
             self.idx.push(k);
+            let w = &o.weight;
+            let u00 = w[(0, 0)].sqrt();
+            let u01 = w[(0, 1)] / u00;
+            let u11 = (w[(1, 1)] - u01 * u01).max(0.0).sqrt();
             self.pts.push([
-                o.object.x,
-                o.object.y,
-                o.object.z,
-                o.image.x,
-                o.image.y,
-                o.weight.sqrt(),
+                o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u00, u01, u11,
             ]);
         }
         // `evaluate` overwrites every row: only grow or shrink.
@@ -133,9 +133,7 @@ impl Linearised {
             let inv = 1.0 / zz;
             let gx = zx * inv;
             let gy = zy * inv;
-            // Rows and residual scaled by the square root of the weight.
-            let sw = p[5];
-            let f = -c * inv * sw;
+            let f = -c * inv;
             for k in 0..3 {
                 let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
                 // Centre: dZ/dC_k = -R e_k.
@@ -148,8 +146,15 @@ impl Linearised {
                 row[6 + 2 * k] = f * (dzx - gx * dzz);
                 row[7 + 2 * k] = f * (dzy - gy * dzz);
             }
-            row[12] = (p[3] + c * gx) * sw;
-            row[13] = (p[4] + c * gy) * sw;
+            row[12] = p[3] + c * gx;
+            row[13] = p[4] + c * gy;
+            // Whitening by the weight's Cholesky factor: (x, y) ← U (x, y).
+            let (u00, u01, u11) = (p[5], p[6], p[7]);
+            for k in 0..7 {
+                let (x, y) = (row[2 * k], row[2 * k + 1]);
+                row[2 * k] = u00 * x + u01 * y;
+                row[2 * k + 1] = u11 * y;
+            }
         }
         if behind > 0 {
             return Err(GeometryError::BehindCamera { count: behind });
@@ -246,7 +251,7 @@ mod tests {
             id: 1,
             object: Vector3::new(120.0, 45.0, 3.0),
             image: Vector2::new(0.1, -0.2),
-            weight: 1.0,
+            weight: nalgebra::Matrix2::identity(),
         };
         let e = Exterior::new(r, center);
         assert!(e.to_camera(&o.object).z < 0.0);

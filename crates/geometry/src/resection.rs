@@ -19,7 +19,7 @@ use crate::exterior::Exterior;
 use crate::linearised::{Linearised, Normals};
 use crate::rng::SplitMix64;
 use crate::rotation::cayley;
-use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
 
 /// One control point seen in the image.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -30,9 +30,11 @@ pub struct Observation {
     pub object: Vector3<f64>,
     /// Ideal (corrected) image coordinates, mm: see [`Camera::correct`].
     pub image: Vector2<f64>,
-    /// Weight of both image coordinates relative to an observation of unit
-    /// weight (`σ² = σ0² / weight`); 1 for equally precise observations.
-    pub weight: f64,
+    /// Weight (information) matrix of the two image coordinates relative to
+    /// an observation of unit weight: the covariance of `image` is
+    /// `σ0² · weight⁻¹`. The identity for equally precise, uncorrelated
+    /// coordinates; must be symmetric positive definite.
+    pub weight: Matrix2<f64>,
 }
 
 impl Observation {
@@ -42,7 +44,7 @@ impl Observation {
             id,
             object,
             image: camera.correct_pixel(col, row),
-            weight: 1.0,
+            weight: Matrix2::identity(),
         }
     }
 }
@@ -167,7 +169,7 @@ pub fn normal_matrix(
             id: 0,
             object: *p,
             image: Vector2::zeros(),
-            weight: 1.0,
+            weight: Matrix2::identity(),
         })
         .collect();
     let mut lin = Linearised::default();
@@ -528,7 +530,11 @@ fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
     }
     for (index, o) in obs.iter().enumerate() {
         let finite = o.object.iter().chain(o.image.iter()).all(|v| v.is_finite());
-        let weighted = o.weight.is_finite() && o.weight > 0.0;
+        let w = &o.weight;
+        let weighted = w.iter().all(|v| v.is_finite())
+            && (w[(0, 1)] - w[(1, 0)]).abs() <= 1e-12 * w.abs().max()
+            && w[(0, 0)] > 0.0
+            && w.determinant() > 0.0;
         if !(finite && weighted) {
             return Err(GeometryError::NonFinite { index });
         }

@@ -296,7 +296,10 @@ fn uniform_weights_change_nothing_but_sigma0() {
     let a = rs.solve(&obs).unwrap();
     let heavy: Vec<Observation> = obs
         .iter()
-        .map(|o| Observation { weight: 4.0, ..*o })
+        .map(|o| Observation {
+            weight: photopose_geometry::Matrix2::identity() * 4.0,
+            ..*o
+        })
         .collect();
     let b = rs.solve(&heavy).unwrap();
     assert!((a.exterior.center - b.exterior.center).norm() < 1e-9);
@@ -307,7 +310,7 @@ fn uniform_weights_change_nothing_but_sigma0() {
     );
     // A bad weight is refused.
     let mut bad = obs.clone();
-    bad[3].weight = -1.0;
+    bad[3].weight = -photopose_geometry::Matrix2::identity();
     assert!(matches!(
         rs.solve(&bad),
         Err(GeometryError::NonFinite { index: 3 })

@@ -22,8 +22,8 @@ use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
 use photopose_geometry::precision::projection_with_covariance;
 use photopose_geometry::{
-    Camera, GeometryError, Observation, Resection, ResectionOptions, ResectionReport, Vector2,
-    Vector3,
+    Camera, GeometryError, Matrix2, Matrix3, Observation, Resection, ResectionOptions,
+    ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{Detections, Detector, DetectorOptions, FrameStatus, VisionError};
 use thiserror::Error;
@@ -346,15 +346,17 @@ impl Locator {
     }
 
     /// Moves every observation from the centre of the imaged ellipse to the
-    /// image of the circle's centre. The offset is that of the area centroid
-    /// of the projected circle (an octagon of its rim, shoelace formula) from
-    /// the projected centre, in ideal image coordinates; the lens distortion
-    /// changes it only in the second order.
+    /// image of the circle's centre. Under the collinearity equations the
+    /// image of the dot's rim is exactly an ellipse — the conic
+    /// `Q' = M⁻ᵀ diag(1, 1, −r²) M⁻¹` with `M` the plane-to-image
+    /// transformation of the target's plane — and the centroid of the imaged
+    /// dot is that ellipse's centre; its offset from the projected centre is
+    /// taken off (lens distortion changes it only in the second order).
     fn correct_eccentricity(&mut self, coarse: &ResectionReport) {
-        const RIM: usize = 8;
         let c = self.camera.interior.c;
         let ps = self.camera.sensor.pixel_size;
         let e = &coarse.exterior;
+        let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
         for (o, t) in self.obs.iter_mut().zip(self.identified.iter_mut()) {
             debug_assert_eq!(o.id, t.id);
             let Some(target) = self.field.get(t.id) else {
@@ -363,36 +365,26 @@ impl Locator {
             let Some(centre) = e.project_ideal(c, &target.position) else {
                 continue;
             };
-            // In-plane axes of a target facing +Z.
-            let (mut area, mut cx, mut cy) = (0.0f64, 0.0f64, 0.0f64);
-            let mut prev = None;
-            let mut first = None;
-            for k in 0..=RIM {
-                let p = if k == RIM {
-                    first
-                } else {
-                    let a = k as f64 * std::f64::consts::TAU / RIM as f64;
-                    let q = target.position + Vector3::new(a.cos(), a.sin(), 0.0) * target.radius;
-                    e.project_ideal(c, &q)
-                };
-                let Some(p) = p else { break };
-                if k == 0 {
-                    first = Some(p);
-                }
-                if let Some(q) = prev {
-                    let q: Vector2<f64> = q;
-                    let cross = q.x * p.y - p.x * q.y;
-                    area += cross;
-                    cx += (q.x + p.x) * cross;
-                    cy += (q.y + p.y) * cross;
-                }
-                prev = Some(p);
-            }
-            if area.abs() < 1e-18 {
+            // Plane (s, t) of a target facing +Z, origin at its centre.
+            let plane =
+                Matrix3::from_columns(&[Vector3::x(), Vector3::y(), target.position - e.center]);
+            let Some(m_inv) = (k * e.rotation * plane).try_inverse() else {
+                continue;
+            };
+            let r2 = target.radius * target.radius;
+            let q =
+                m_inv.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -r2)) * m_inv;
+            let a2 = Matrix2::new(q[(0, 0)], q[(0, 1)], q[(1, 0)], q[(1, 1)]);
+            let Some(ellipse_centre) = a2
+                .try_inverse()
+                .map(|i| -(i * Vector2::new(q[(0, 2)], q[(1, 2)])))
+            else {
+                continue;
+            };
+            let offset = ellipse_centre - centre;
+            if !(offset.x.is_finite() && offset.y.is_finite()) {
                 continue;
             }
-            let centroid = Vector2::new(cx / (3.0 * area), cy / (3.0 * area));
-            let offset = centroid - centre;
             o.image -= offset;
             t.col -= offset.x / ps;
             t.row += offset.y / ps;

@@ -110,6 +110,18 @@ fn sweep(frames: usize, seed: u64) -> Tally {
             if 2.0 * minor_radius(&cam, &truth_pose, t.id, &field) >= 8.0 {
                 tally.centroid_sq += d * d;
                 tally.centroid_n += 1;
+                if std::env::var_os("PHOTOPOSE_AXES").is_some() {
+                    let det = &loc.detections.targets[t.detection];
+                    let (ca, sa) = (det.angle.cos(), det.angle.sin());
+                    let (ex, ey) = (t.col - tr.col, t.row - tr.row);
+                    eprintln!(
+                        "axes {:.3} {:.3} {:.5} {:.5}",
+                        det.semi_major,
+                        det.semi_minor,
+                        ex * ca + ey * sa,
+                        -ex * sa + ey * ca
+                    );
+                }
                 if std::env::var_os("PHOTOPOSE_DIAG").is_some() {
                     let det = &loc.detections.targets[t.detection];
                     eprintln!(
