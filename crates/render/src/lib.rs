@@ -315,8 +315,7 @@ impl Renderer {
     }
 
     /// The point of the plate's plane hit by the ray through pixel
-    /// `(col, row)`, in plate coordinates, with the distance from the camera
-    /// and the cosine of the incidence angle; `None` if the ray misses.
+    /// `(col, row)`, in plate coordinates; `None` if the ray misses.
     #[inline]
     fn hit(
         &self,
@@ -324,7 +323,7 @@ impl Renderer {
         rt: &nalgebra::Matrix3<f64>,
         col: f64,
         row: f64,
-    ) -> Option<(Vector2<f64>, f64, f64)> {
+    ) -> Option<Vector2<f64>> {
         let ideal = self.camera.correct_pixel(col, row);
         let d = rt * Vector3::new(ideal.x, ideal.y, -self.camera.interior.c);
         let denom = d.dot(&self.n);
@@ -336,9 +335,7 @@ impl Renderer {
             return None;
         }
         let q = e.center + d * s - self.origin;
-        let dist = (d * s).norm();
-        let cos_inc = (-denom / d.norm()).max(0.0);
-        Some((Vector2::new(q.dot(&self.u), q.dot(&self.v)), dist, cos_inc))
+        Some(Vector2::new(q.dot(&self.u), q.dot(&self.v)))
     }
 
     /// Renders the field seen from `exterior` into `out` (8- or 16-bit,
@@ -449,8 +446,7 @@ impl Renderer {
             let mm_per_px = (reach / ext.max(1e-9)) * 1.5;
             for row in r0..=r1 {
                 for col in c0..=c1 {
-                    let Some((q, _, _)) = self.hit(exterior, &rt, col as f64, row as f64)
-                    else {
+                    let Some(q) = self.hit(exterior, &rt, col as f64, row as f64) else {
                         continue;
                     };
                     let local = (q - t.at) / t.radius;
@@ -465,7 +461,7 @@ impl Renderer {
                             for sx in 0..ss {
                                 let pc = col as f64 - 0.5 + (sx as f64 + 0.5) / ss as f64;
                                 let pr = row as f64 - 0.5 + (sy as f64 + 0.5) / ss as f64;
-                                if let Some((qs, _, _)) = self.hit(exterior, &rt, pc, pr) {
+                                if let Some(qs) = self.hit(exterior, &rt, pc, pr) {
                                     acc += reflectance(&t, (qs - t.at) / t.radius);
                                 }
                             }
