@@ -87,6 +87,71 @@ const BG_OUTER: f64 = 1.75;
 /// Most background pixels kept for the median.
 const BG_SAMPLES: usize = 512;
 
+/// A blob's ellipse as the quadratic form
+/// `ρ²(dx, dy) = qxx dx² + 2 qxy dx dy + qyy dy²` about `(bx, ·)`: the
+/// columns of a row inside `ρ² ≤ s` come from the roots of the quadratic,
+/// so that only the pixels that count are visited.
+#[derive(Debug, Clone, Copy)]
+struct Conic {
+    qxx: f64,
+    qyy: f64,
+    qxy: f64,
+    bx: f64,
+}
+
+/// An empty inclusive range.
+const EMPTY: (i64, i64) = (1, 0);
+
+impl Conic {
+    /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`
+    /// (`s_in ≤ s_out`), as inclusive ranges, unclipped.
+    #[inline(always)]
+    fn spans(&self, dy: f64, s_in: f64, s_out: f64) -> ((i64, i64), (i64, i64)) {
+        let b = self.qxy * dy;
+        let base = b * b - self.qxx * self.qyy * dy * dy;
+        let disc_out = base + self.qxx * s_out;
+        if !(disc_out >= 0.0) {
+            return (EMPTY, EMPTY);
+        }
+        let mid = self.bx - b / self.qxx;
+        let h_out = disc_out.sqrt() / self.qxx;
+        let out = (ceil_i64(mid - h_out), floor_i64(mid + h_out));
+        let disc_in = base + self.qxx * s_in;
+        if !(disc_in >= 0.0) {
+            return (EMPTY, out);
+        }
+        let h_in = disc_in.sqrt() / self.qxx;
+        ((ceil_i64(mid - h_in), floor_i64(mid + h_in)), out)
+    }
+}
+
+/// `floor` for values well inside the `i64` range (no libm call on
+/// baseline x86-64).
+#[inline(always)]
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t - ((t as f64) > x) as i64
+}
+
+/// `ceil`, see [`floor_i64`].
+#[inline(always)]
+fn ceil_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t + ((t as f64) < x) as i64
+}
+
+/// Nearest integer, see [`floor_i64`].
+#[inline(always)]
+fn round_i64(x: f64) -> i64 {
+    floor_i64(x + 0.5)
+}
+
+/// `Σ_{k=1}^{m} k²`, valid for every integer `m` (telescoping).
+#[inline(always)]
+fn sum_sq_to(m: i64) -> i64 {
+    m * (m + 1) * (2 * m + 1) / 6
+}
+
 /// Measures a blob; `None` if the window holds no signal.
 pub fn measure<P: Pixel>(
     plane: &Plane<P>,
@@ -98,7 +163,9 @@ pub fn measure<P: Pixel>(
 ) -> Option<Measurement> {
     let (bx, by) = blob.centre();
     let (cxx, cyy, cxy) = blob.covariance();
-    let (a, b, angle) = ellipse(cxx, cyy, cxy);
+    // Semi-minor axis as in `ellipse` (without its angle).
+    let d = ((cxx - cyy) * (cxx - cyy) / 4.0 + cxy * cxy).sqrt();
+    let b = 2.0 * ((cxx + cyy) / 2.0 - d).max(0.0).sqrt();
     if b.is_nan() || b <= 0.0 {
         return None;
     }
@@ -110,48 +177,147 @@ pub fn measure<P: Pixel>(
         return None;
     }
     let (qxx, qyy, qxy) = (cyy / (4.0 * det), cxx / (4.0 * det), -cxy / (4.0 * det));
-    let rho2 = |dx: f64, dy: f64| qxx * dx * dx + 2.0 * qxy * dx * dy + qyy * dy * dy;
     let (s_in, s_out) = (scale * scale, bg_outer * bg_outer);
-    let (ux, uy) = (angle.cos(), angle.sin());
-    let _ = a;
+    // Direction of the major axis (for the fourth moment, whose sign does
+    // not matter): the half angle of `(cxx − cyy, 2 cxy)`.
+    let (t, t2) = (cxx - cyy, 2.0 * cxy);
+    let r = (t * t + t2 * t2).sqrt();
+    let (ux, uy) = if r > 0.0 {
+        let c2 = t / r;
+        (
+            ((1.0 + c2) / 2.0).max(0.0).sqrt(),
+            ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
+        )
+    } else {
+        (1.0, 0.0)
+    };
 
     // Window: the box grown by GROW (and one more pixel for the background).
-    let g = grow.ceil() as i64 + 2;
-    let c0 = (blob.col0 as i64 - g).max(0) as usize;
+    let g = ceil_i64(grow) + 2;
+    let c0 = (blob.col0 as i64 - g).max(0);
     let r0 = (blob.row0 as i64 - g).max(0) as usize;
-    let c1 = ((blob.col1 as i64 + g) as usize).min(plane.width - 1);
+    let c1 = (blob.col1 as i64 + g).min(plane.width as i64 - 1);
     let r1 = ((blob.row1 as i64 + g) as usize).min(plane.height - 1);
     let (wc0, wr0) = (blob.col0 as f64 - grow, blob.row0 as f64 - grow);
     let (wc1, wr1) = (blob.col1 as f64 + grow, blob.row1 as f64 + grow);
+    // Columns of the box proper (`wc0 ≤ col ≤ wc1`), for the background.
+    let (bc0, bc1) = (c0.max(ceil_i64(wc0)), c1.min(floor_i64(wc1)));
+    // Rows and columns of the weighted window.
+    let wr0i = wr0.max(0.0) as usize;
+    let wr1i = (wr1 as usize).min(plane.height - 1);
+    let wc0i = wc0.max(0.0) as i64;
+    let wc1i = (wc1 as i64).min(plane.width as i64 - 1);
+    let q = Conic {
+        qxx,
+        qyy,
+        qxy,
+        bx,
+    };
 
-    // Background: 30th percentile of the dark pixels in the ring just
-    // outside the window (robust against a coded target's ring reaching
-    // into it; the small downward bias for pure noise moves the centre by
-    // nothing, as the window is centred on the blob).
+    // One pass over the rows collects
+    // - the background: 30th percentile of the dark pixels in the ring just
+    //   outside the window (robust against a coded target's ring reaching
+    //   into it; the small downward bias for pure noise moves the centre by
+    //   nothing, as the window is centred on the blob), every `stride`-th
+    //   one kept;
+    // - the window's grey-value moments: exact integer sums of `g`, `g k`
+    //   and `g k²` per row (`k` the column relative to the blob's nearest
+    //   integer column), turned into moments about the blob's centre in
+    //   closed form, with the matching pixel-count moments so that the
+    //   background is subtracted once it is known;
+    // - the fourth moment of the foreground pixels along the major axis.
     let mut bg_buf = [0u32; BG_SAMPLES];
     let est = std::f64::consts::PI * (s_out - s_in) * 4.0 * det.sqrt();
-    let stride = (est / BG_SAMPLES as f64).ceil().max(1.0) as usize;
-    let (mut bg_n, mut seen) = (0usize, 0usize);
+    let stride = ceil_i64(est / BG_SAMPLES as f64).max(1) as usize;
+    let (mut bg_n, mut seen, mut next) = (0usize, 0usize, 0usize);
+    // Σg·(1, dx, dx², dy, dy², dx dy) and Σ1·(...).
+    let mut gm = [0.0f64; 6];
+    let mut nm = [0.0f64; 6];
+    let (mut n_fg, mut su2, mut su4) = (0.0, 0.0, 0.0);
+    let cc = round_i64(bx);
+    let d0 = cc as f64 - bx;
     for row in r0..=r1 {
         let dy = row as f64 - by;
-        for col in c0..=c1 {
-            let dx = col as f64 - bx;
-            let r2 = rho2(dx, dy);
-            let in_box = (col as f64) >= wc0
-                && (col as f64) <= wc1
-                && (row as f64) >= wr0
-                && (row as f64) <= wr1;
-            if (r2 > s_in || !in_box) && r2 <= s_out {
-                let v = plane.at(col, row);
-                if v <= threshold as f64 {
-                    if seen % stride == 0 && bg_n < BG_SAMPLES {
-                        bg_buf[bg_n] = v as u32;
-                        bg_n += 1;
+        let ((ia, ib), (oa, ob)) = q.spans(dy, s_in, s_out);
+        let (oa, ob) = (oa.max(c0), ob.min(c1));
+        if oa > ob {
+            continue;
+        }
+        let line = &plane.data[row * plane.width..(row + 1) * plane.width];
+        // Background: the outer span minus the window's span inside the box.
+        let in_rows = (row as f64) >= wr0 && (row as f64) <= wr1;
+        let (xa, xb) = if in_rows {
+            (ia.max(bc0).max(oa), ib.min(bc1).min(ob))
+        } else {
+            EMPTY
+        };
+        let parts = if xa > xb {
+            [(oa, ob), EMPTY]
+        } else {
+            [(oa, xa - 1), (xb + 1, ob)]
+        };
+        for (a, b) in parts {
+            if a > b {
+                continue;
+            }
+            for p in &line[a as usize..=b as usize] {
+                let v = p.value();
+                if v <= threshold {
+                    if seen == next {
+                        if bg_n < BG_SAMPLES {
+                            bg_buf[bg_n] = v;
+                            bg_n += 1;
+                        }
+                        next += stride;
                     }
                     seen += 1;
                 }
             }
         }
+        // Window.
+        if row < wr0i || row > wr1i {
+            continue;
+        }
+        let (a, b) = (ia.max(wc0i), ib.min(wc1i));
+        if a > b {
+            continue;
+        }
+        let (mut t0, mut t1, mut t2) = (0i64, 0i64, 0i64);
+        let mut k = a - cc;
+        for p in &line[a as usize..=b as usize] {
+            let v = p.value();
+            let vi = v as i64;
+            t0 += vi;
+            t1 += vi * k;
+            t2 += vi * k * k;
+            if v > threshold {
+                let u = (k as f64 + d0) * ux + dy * uy;
+                let u2 = u * u;
+                n_fg += 1.0;
+                su2 += u2;
+                su4 += u2 * u2;
+            }
+            k += 1;
+        }
+        let (ka, kb) = (a - cc, b - cc);
+        let n = (b - a + 1) as f64;
+        let k1 = ((ka + kb) * (kb - ka + 1) / 2) as f64;
+        let k2 = (sum_sq_to(kb) - sum_sq_to(ka - 1)) as f64;
+        let (t0, t1, t2) = (t0 as f64, t1 as f64, t2 as f64);
+        let gx = t1 + d0 * t0;
+        let nx = k1 + n * d0;
+        gm[0] += t0;
+        gm[1] += gx;
+        gm[2] += t2 + 2.0 * d0 * t1 + d0 * d0 * t0;
+        gm[3] += dy * t0;
+        gm[4] += dy * dy * t0;
+        gm[5] += dy * gx;
+        nm[0] += n;
+        nm[1] += nx;
+        nm[2] += k2 + 2.0 * d0 * k1 + n * d0 * d0;
+        nm[3] += dy * n;
+        nm[4] += dy * dy * n;
+        nm[5] += dy * nx;
     }
     let background = if bg_n >= 4 {
         let buf = &mut bg_buf[..bg_n];
@@ -160,38 +326,8 @@ pub fn measure<P: Pixel>(
     } else {
         fallback_background
     };
-
-    // Weighted sums over the window.
-    let (mut sw, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    let (mut n_fg, mut su2, mut su4) = (0.0, 0.0, 0.0);
-    let wr0i = wr0.max(0.0) as usize;
-    let wr1i = (wr1 as usize).min(plane.height - 1);
-    let wc0i = wc0.max(0.0) as usize;
-    let wc1i = (wc1 as usize).min(plane.width - 1);
-    for row in wr0i..=wr1i {
-        let dy = row as f64 - by;
-        for col in wc0i..=wc1i {
-            let dx = col as f64 - bx;
-            if rho2(dx, dy) > s_in {
-                continue;
-            }
-            let v = plane.at(col, row);
-            let w = v - background;
-            sw += w;
-            sx += w * dx;
-            sy += w * dy;
-            sxx += w * dx * dx;
-            syy += w * dy * dy;
-            sxy += w * dx * dy;
-            if v > threshold as f64 {
-                let u = dx * ux + dy * uy;
-                let u2 = u * u;
-                n_fg += 1.0;
-                su2 += u2;
-                su4 += u2 * u2;
-            }
-        }
-    }
+    let m = |i: usize| gm[i] - background * nm[i];
+    let (sw, sx, sxx, sy, syy, sxy) = (m(0), m(1), m(2), m(3), m(4), m(5));
     if sw.is_nan() || sw <= 0.0 {
         return None;
     }

@@ -4,6 +4,8 @@
 
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
+    /// Largest value of the type.
+    const MAX: u32;
     /// The grey value.
     fn value(self) -> u32;
     /// Largest value of a slice (vectorises).
@@ -11,6 +13,7 @@ pub trait Pixel: Copy + Send + Sync + 'static {
 }
 
 impl Pixel for u8 {
+    const MAX: u32 = u8::MAX as u32;
     #[inline(always)]
     fn value(self) -> u32 {
         self as u32
@@ -22,6 +25,7 @@ impl Pixel for u8 {
 }
 
 impl Pixel for u16 {
+    const MAX: u32 = u16::MAX as u32;
     #[inline(always)]
     fn value(self) -> u32 {
         self as u32
