@@ -5,7 +5,7 @@
 # source, systemd for the unit checks).
 set -euo pipefail
 
-PACKAGES=(pkg-config)
+PACKAGES=(pkg-config systemd)
 
 command -v cargo >/dev/null || { echo "deps: cargo is missing: install the Rust toolchain first" >&2; exit 1; }
 

@@ -18,6 +18,10 @@ struct Cli {
 enum Command {
     /// Exterior orientation from observations (or images): one JSON line per input.
     Resect(cmd::resect::Args),
+    /// The daemon: frames → poses → streams (default: synthetic camera).
+    Run(cmd::run::Args),
+    /// Checks a daemon configuration file (for systemd's ExecStartPre).
+    CheckConfig(cmd::run::CheckArgs),
     /// Per-stage timing of the frame pipeline on rendered frames.
     Bench(cmd::bench::Args),
     /// Predicted precision of a configuration without images (and a Monte Carlo check).
@@ -25,9 +29,12 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Resect(args) => cmd::resect::run(args),
+        Command::Run(args) => cmd::run::run(args),
+        Command::CheckConfig(args) => cmd::run::check(args),
         Command::Bench(args) => cmd::bench::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
     };
@@ -38,4 +45,18 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Logs to stderr, one line per event, no colours unless on a terminal
+/// (journald keeps each line); `RUST_LOG` filters (default `info`).
+fn init_logging() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_target(false)
+        .try_init();
 }

@@ -4,4 +4,5 @@ pub mod bench;
 pub mod defaults;
 pub mod pose_arg;
 pub mod resect;
+pub mod run;
 pub mod simulate;

@@ -1,0 +1,434 @@
+//! The daemon's configuration file (TOML): the typed file as written by the
+//! user, unknown keys rejected, and its validation into [`Config`] with
+//! errors that name the key. `config/photopose.toml` documents every key.
+
+use serde::Deserialize;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// A configuration that cannot be used, with the key and why.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed or has an unknown or mistyped key.
+    #[error("{path}: {message}")]
+    Syntax {
+        /// The file.
+        path: String,
+        /// toml's message (names the key and line).
+        message: String,
+    },
+    /// A value is out of range.
+    #[error("{path}: `{key}` = {value}: {why}")]
+    Value {
+        /// The file.
+        path: String,
+        /// The key, dotted.
+        key: &'static str,
+        /// The value as written.
+        value: String,
+        /// The valid range.
+        why: &'static str,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    #[serde(default)]
+    camera: CameraSection,
+    source: SourceSection,
+    #[serde(default)]
+    pipeline: PipelineSection,
+    #[serde(default)]
+    output: OutputSection,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct CameraSection {
+    camera_file: Option<PathBuf>,
+    field_file: Option<PathBuf>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SourceSection {
+    kind: SourceKind,
+    synthetic: Option<SyntheticSection>,
+}
+
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+enum SourceKind {
+    Synthetic,
+}
+
+#[derive(Debug, Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+struct SyntheticSection {
+    #[serde(default = "default_rate")]
+    rate_hz: f64,
+    #[serde(default)]
+    frames: u64,
+    #[serde(default = "default_centre")]
+    center_mm: [f64; 3],
+    #[serde(default = "default_radius")]
+    radius_mm: f64,
+    #[serde(default = "default_period")]
+    period_s: f64,
+    #[serde(default = "default_noise")]
+    noise_dn: f64,
+    #[serde(default = "default_blur")]
+    blur_px: f64,
+    #[serde(default = "default_seed")]
+    seed: u64,
+}
+
+fn default_rate() -> f64 {
+    20.0
+}
+fn default_centre() -> [f64; 3] {
+    [0.0, 0.0, 1000.0]
+}
+fn default_radius() -> f64 {
+    50.0
+}
+fn default_period() -> f64 {
+    10.0
+}
+fn default_noise() -> f64 {
+    2.0
+}
+fn default_blur() -> f64 {
+    0.6
+}
+fn default_seed() -> u64 {
+    1
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct PipelineSection {
+    workers: u32,
+    slots: u32,
+    overflow: Overflow,
+    max_age_ms: f64,
+}
+
+impl Default for PipelineSection {
+    fn default() -> Self {
+        PipelineSection {
+            workers: 2,
+            slots: 8,
+            overflow: Overflow::DropNewest,
+            max_age_ms: 200.0,
+        }
+    }
+}
+
+/// What the grabber does when every frame slot is in use.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Overflow {
+    /// Drop the frame just arriving (count it).
+    DropNewest,
+    /// Drop the oldest frame waiting for a worker (count it) and queue the new one.
+    DropOldest,
+    /// Wait for a free slot (only for sources that can wait: replay, synthetic).
+    Block,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct OutputSection {
+    #[serde(default)]
+    udp: Vec<String>,
+    tcp_listen: Option<String>,
+    #[serde(default = "default_queue")]
+    tcp_client_queue: usize,
+}
+
+fn default_queue() -> usize {
+    256
+}
+
+/// The synthetic source: frames rendered along a circle in a horizontal
+/// plane, the camera looking straight down at the plate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Synthetic {
+    /// Frames per second.
+    pub rate_hz: f64,
+    /// Frames to produce, 0 for endless.
+    pub frames: u64,
+    /// Centre of the circle (camera positions), mm.
+    pub center_mm: [f64; 3],
+    /// Radius of the circle, mm.
+    pub radius_mm: f64,
+    /// Time for one turn, s.
+    pub period_s: f64,
+    /// Image noise, DN.
+    pub noise_dn: f64,
+    /// Blur, px.
+    pub blur_px: f64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+/// Where frames come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Source {
+    /// Rendered frames of the plate.
+    Synthetic(Synthetic),
+}
+
+/// The validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Camera file; `None`: the built-in camera.
+    pub camera_file: Option<PathBuf>,
+    /// Test field file; `None`: the built-in plate.
+    pub field_file: Option<PathBuf>,
+    /// The frame source.
+    pub source: Source,
+    /// Detection workers.
+    pub workers: usize,
+    /// Frame slots in the ring.
+    pub slots: usize,
+    /// Overflow policy of the ring.
+    pub overflow: Overflow,
+    /// Age after which the last pose is stale, ms.
+    pub max_age_ms: f64,
+    /// UDP destinations.
+    pub udp: Vec<SocketAddr>,
+    /// TCP listen address.
+    pub tcp_listen: Option<SocketAddr>,
+    /// Lines queued per TCP client.
+    pub tcp_client_queue: usize,
+}
+
+impl Config {
+    /// Loads and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates configuration text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let f: File = toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|s| {
+                    format!(
+                        "line {}: ",
+                        text[..s.start.min(text.len())].matches('\n').count() + 1
+                    )
+                })
+                .unwrap_or_default();
+            ConfigError::Syntax {
+                path: origin.into(),
+                message: format!("{line}{}", e.message()),
+            }
+        })?;
+        let bad = |key: &'static str, value: String, why: &'static str| ConfigError::Value {
+            path: origin.into(),
+            key,
+            value,
+            why,
+        };
+        let source = match f.source.kind {
+            SourceKind::Synthetic => {
+                let s = f.source.synthetic.clone().unwrap_or(SyntheticSection {
+                    rate_hz: default_rate(),
+                    frames: 0,
+                    center_mm: default_centre(),
+                    radius_mm: default_radius(),
+                    period_s: default_period(),
+                    noise_dn: default_noise(),
+                    blur_px: default_blur(),
+                    seed: default_seed(),
+                });
+                if !(s.rate_hz.is_finite() && s.rate_hz > 0.0 && s.rate_hz <= 10_000.0) {
+                    return Err(bad(
+                        "source.synthetic.rate_hz",
+                        s.rate_hz.to_string(),
+                        "must be in (0, 10000] frames per second",
+                    ));
+                }
+                if !s.center_mm.iter().all(|v| v.is_finite()) || s.center_mm[2] <= 0.0 {
+                    return Err(bad(
+                        "source.synthetic.center_mm",
+                        format!("{:?}", s.center_mm),
+                        "must be finite with Z above the plate (> 0)",
+                    ));
+                }
+                if !(s.radius_mm.is_finite() && s.radius_mm >= 0.0) {
+                    return Err(bad(
+                        "source.synthetic.radius_mm",
+                        s.radius_mm.to_string(),
+                        "must be ≥ 0",
+                    ));
+                }
+                if !(s.period_s.is_finite() && s.period_s > 0.0) {
+                    return Err(bad(
+                        "source.synthetic.period_s",
+                        s.period_s.to_string(),
+                        "must be > 0",
+                    ));
+                }
+                if !(s.noise_dn.is_finite() && s.noise_dn >= 0.0) {
+                    return Err(bad(
+                        "source.synthetic.noise_dn",
+                        s.noise_dn.to_string(),
+                        "must be ≥ 0",
+                    ));
+                }
+                if !(s.blur_px.is_finite() && (0.0..=10.0).contains(&s.blur_px)) {
+                    return Err(bad(
+                        "source.synthetic.blur_px",
+                        s.blur_px.to_string(),
+                        "must be in [0, 10]",
+                    ));
+                }
+                Source::Synthetic(Synthetic {
+                    rate_hz: s.rate_hz,
+                    frames: s.frames,
+                    center_mm: s.center_mm,
+                    radius_mm: s.radius_mm,
+                    period_s: s.period_s,
+                    noise_dn: s.noise_dn,
+                    blur_px: s.blur_px,
+                    seed: s.seed,
+                })
+            }
+        };
+        let p = &f.pipeline;
+        if !(1..=64).contains(&p.workers) {
+            return Err(bad(
+                "pipeline.workers",
+                p.workers.to_string(),
+                "must be 1..=64",
+            ));
+        }
+        if !(2..=1024).contains(&p.slots) || p.slots < p.workers + 1 {
+            return Err(bad(
+                "pipeline.slots",
+                p.slots.to_string(),
+                "must be 2..=1024 and more than the workers",
+            ));
+        }
+        if !(p.max_age_ms.is_finite() && p.max_age_ms > 0.0) {
+            return Err(bad(
+                "pipeline.max_age_ms",
+                p.max_age_ms.to_string(),
+                "must be > 0",
+            ));
+        }
+        let mut udp = Vec::new();
+        for d in &f.output.udp {
+            udp.push(d.parse::<SocketAddr>().map_err(|_| {
+                bad(
+                    "output.udp",
+                    d.clone(),
+                    "must be host:port addresses (IP literal)",
+                )
+            })?);
+        }
+        let tcp_listen = match &f.output.tcp_listen {
+            Some(a) => Some(a.parse::<SocketAddr>().map_err(|_| {
+                bad(
+                    "output.tcp_listen",
+                    a.clone(),
+                    "must be an IP:port to listen on",
+                )
+            })?),
+            None => None,
+        };
+        if !(1..=1_000_000).contains(&f.output.tcp_client_queue) {
+            return Err(bad(
+                "output.tcp_client_queue",
+                f.output.tcp_client_queue.to_string(),
+                "must be 1..=1000000",
+            ));
+        }
+        Ok(Config {
+            camera_file: f.camera.camera_file,
+            field_file: f.camera.field_file,
+            source,
+            workers: p.workers as usize,
+            slots: p.slots as usize,
+            overflow: p.overflow,
+            max_age_ms: p.max_age_ms,
+            udp,
+            tcp_listen,
+            tcp_client_queue: f.output.tcp_client_queue,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXAMPLE: &str = include_str!("../../../config/photopose.toml");
+
+    #[test]
+    fn the_shipped_example_is_valid() {
+        let c = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
+        assert!(matches!(c.source, Source::Synthetic(_)));
+        assert!(c.tcp_listen.is_some());
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let cases = [
+            (
+                EXAMPLE.replace("workers = 2", "workers = 0"),
+                "pipeline.workers",
+            ),
+            (
+                EXAMPLE.replace("workers = 2", "workers = 2\nthreads = 4"),
+                "threads",
+            ),
+            (
+                EXAMPLE.replace("rate_hz = 20.0", "rate_hz = -1.0"),
+                "source.synthetic.rate_hz",
+            ),
+            (
+                EXAMPLE.replace("kind = \"synthetic\"", "kind = \"webcam\""),
+                "webcam",
+            ),
+            (
+                EXAMPLE.replace("overflow = \"drop-newest\"", "overflow = \"sometimes\""),
+                "sometimes",
+            ),
+            (
+                EXAMPLE.replace(
+                    "tcp_listen = \"127.0.0.1:5006\"",
+                    "tcp_listen = \"localhost\"",
+                ),
+                "output.tcp_listen",
+            ),
+            ("[source]\n".to_string(), "kind"),
+        ];
+        for (text, want) in cases {
+            let e = Config::parse(&text, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
+        }
+    }
+}

@@ -1,0 +1,418 @@
+//! The running pipeline: grabber thread, ring, detection workers, ordered
+//! output, and its counters. See the crate documentation for the picture.
+
+use crate::config::{Config, Overflow};
+use crate::notify::Notifier;
+use crate::source::{host_time_ns, Frame, FrameSource, SourceEvent};
+use crossbeam_channel::{bounded, Receiver, RecvTimeoutError};
+use photopose_field::Field;
+use photopose_geometry::rotation::quaternion_from_matrix;
+use photopose_geometry::Camera;
+use photopose_locate::{LocateOptions, Locator, PoseStatus as LocateStatus};
+use photopose_stream::{PoseMessage, PoseStatus, TcpServer, UdpSender};
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Why the pipeline could not start.
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    /// A pose stream could not be opened.
+    #[error(transparent)]
+    Stream(#[from] photopose_stream::StreamError),
+    /// The frame locator could not be built.
+    #[error("frame locator: {0}")]
+    Locate(#[from] photopose_locate::LocateError),
+    /// A thread could not be started.
+    #[error("cannot start thread {name}: {source}")]
+    Thread {
+        /// Thread name.
+        name: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+}
+
+/// Counters of a running pipeline (read them any time).
+#[derive(Debug, Default)]
+pub struct Counters {
+    /// Frames delivered by the source.
+    pub frames_in: AtomicU64,
+    /// Frames dropped by the overflow policy.
+    pub frames_dropped: AtomicU64,
+    /// Frames processed by the workers.
+    pub frames_processed: AtomicU64,
+    /// Messages with a pose.
+    pub poses_ok: AtomicU64,
+    /// Messages without a pose (too few targets, error).
+    pub poses_failed: AtomicU64,
+    /// Stale messages sent while no frame came.
+    pub stale: AtomicU64,
+    /// Sum of latencies (frame hand-over → message sent), µs.
+    pub latency_us_sum: AtomicU64,
+}
+
+/// One worker result, or the notice that an admitted frame was dropped.
+enum Outcome {
+    Message {
+        order: u64,
+        message: PoseMessage,
+        received: Instant,
+    },
+    Skipped {
+        order: u64,
+    },
+}
+
+/// A running pipeline.
+pub struct Pipeline {
+    stop: Arc<AtomicBool>,
+    counters: Arc<Counters>,
+    threads: Vec<JoinHandle<()>>,
+    tcp_addr: Option<SocketAddr>,
+}
+
+impl std::fmt::Debug for Pipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pipeline")
+            .field("threads", &self.threads.len())
+            .finish()
+    }
+}
+
+fn spawn(name: &str, f: impl FnOnce() + Send + 'static) -> Result<JoinHandle<()>, PipelineError> {
+    std::thread::Builder::new()
+        .name(name.to_string())
+        .spawn(f)
+        .map_err(|source| PipelineError::Thread {
+            name: name.to_string(),
+            source,
+        })
+}
+
+impl Pipeline {
+    /// Starts the threads: grabber on `source`, `config.workers` detection
+    /// workers, the ordered output.
+    pub fn start(
+        config: &Config,
+        camera: Camera,
+        field: Field,
+        mut source: Box<dyn FrameSource>,
+    ) -> Result<Self, PipelineError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let counters = Arc::new(Counters::default());
+        let slots = config.slots;
+        let (free_tx, free_rx) = bounded::<Box<Frame>>(slots);
+        let (work_tx, work_rx) = bounded::<Box<Frame>>(slots);
+        let (out_tx, out_rx) = bounded::<Outcome>(slots * 2);
+        for _ in 0..slots {
+            let _ = free_tx.send(Box::new(Frame::new(
+                camera.sensor.width,
+                camera.sensor.height,
+            )));
+        }
+        let udp = if config.udp.is_empty() {
+            None
+        } else {
+            Some(UdpSender::new(
+                "0.0.0.0:0".parse().expect("literal address"),
+                &config.udp,
+            )?)
+        };
+        let tcp = match config.tcp_listen {
+            Some(a) => Some(TcpServer::bind(a, config.tcp_client_queue)?),
+            None => None,
+        };
+        let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
+        let mut threads = Vec::new();
+        // Workers.
+        for k in 0..config.workers {
+            let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
+            let (work_rx, free_tx, out_tx) = (work_rx.clone(), free_tx.clone(), out_tx.clone());
+            let counters = counters.clone();
+            threads.push(spawn(&format!("detect-{k}"), move || {
+                for frame in work_rx.iter() {
+                    let message = locate(&mut locator, &frame);
+                    counters.frames_processed.fetch_add(1, Ordering::Relaxed);
+                    let outcome = Outcome::Message {
+                        order: frame.order,
+                        message,
+                        received: frame.received,
+                    };
+                    let _ = free_tx.send(frame);
+                    if out_tx.send(outcome).is_err() {
+                        return;
+                    }
+                }
+            })?);
+        }
+        // Grabber.
+        {
+            let (stop, counters, overflow) = (stop.clone(), counters.clone(), config.overflow);
+            let (steal_rx, out_tx) = (work_rx.clone(), out_tx.clone());
+            let describe = source.describe();
+            // The slot that receives frames dropped by `drop-newest`.
+            let mut scratch = (overflow == Overflow::DropNewest)
+                .then(|| Box::new(Frame::new(camera.sensor.width, camera.sensor.height)));
+            threads.push(spawn("grabber", move || {
+                tracing::info!(source = %describe, "acquisition started");
+                let mut order = 0u64;
+                let poll = Duration::from_millis(100);
+                while !stop.load(Ordering::Acquire) {
+                    // A slot by the overflow policy; `true`: the frame is dropped.
+                    let (mut slot, drop_it) = match overflow {
+                        Overflow::Block => match free_rx.recv_timeout(poll) {
+                            Ok(s) => (s, false),
+                            Err(RecvTimeoutError::Timeout) => continue,
+                            Err(RecvTimeoutError::Disconnected) => break,
+                        },
+                        Overflow::DropNewest => match free_rx.try_recv() {
+                            Ok(s) => (s, false),
+                            Err(_) => match scratch.take() {
+                                Some(s) => (s, true),
+                                None => break,
+                            },
+                        },
+                        Overflow::DropOldest => match free_rx.try_recv() {
+                            Ok(s) => (s, false),
+                            Err(_) => match steal_rx.try_recv() {
+                                Ok(old) => {
+                                    counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+                                    let _ = out_tx.send(Outcome::Skipped { order: old.order });
+                                    (old, false)
+                                }
+                                Err(_) => match free_rx.recv_timeout(poll) {
+                                    Ok(s) => (s, false),
+                                    Err(_) => continue,
+                                },
+                            },
+                        },
+                    };
+                    match source.next_frame(&mut slot, poll) {
+                        Ok(SourceEvent::Frame) => {
+                            counters.frames_in.fetch_add(1, Ordering::Relaxed);
+                            if drop_it {
+                                counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+                                scratch = Some(slot);
+                                continue;
+                            }
+                            slot.order = order;
+                            order += 1;
+                            if work_tx.send(slot).is_err() {
+                                break;
+                            }
+                        }
+                        Ok(SourceEvent::Timeout) => {
+                            if drop_it {
+                                scratch = Some(slot);
+                            } else {
+                                let _ = free_tx.send(slot);
+                            }
+                        }
+                        Ok(SourceEvent::End) => {
+                            tracing::info!(frames = order, "source ended");
+                            break;
+                        }
+                        Err(e) => {
+                            tracing::error!(error = %e, "frame source failed; stopping acquisition");
+                            break;
+                        }
+                    }
+                }
+                // Dropping the work sender lets the workers finish the queue.
+            })?);
+        }
+        drop(work_rx);
+        drop(out_tx);
+        // Output.
+        {
+            let (stop_out, counters) = (stop.clone(), counters.clone());
+            let max_age = Duration::from_secs_f64(config.max_age_ms / 1000.0);
+            let window = slots * 2 + config.workers;
+            threads.push(spawn("output", move || {
+                output_loop(out_rx, udp, tcp, counters, max_age, window, stop_out);
+            })?);
+        }
+        Ok(Pipeline {
+            stop,
+            counters,
+            threads,
+            tcp_addr,
+        })
+    }
+
+    /// The TCP stream's address, if one is configured.
+    pub fn tcp_addr(&self) -> Option<SocketAddr> {
+        self.tcp_addr
+    }
+
+    /// The counters.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// Asks the pipeline to stop: the grabber stops, queued frames are
+    /// finished, outputs flushed.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+
+    /// Whether every thread has ended (the source ended and everything was
+    /// processed and sent).
+    pub fn finished(&self) -> bool {
+        self.threads.iter().all(|t| t.is_finished())
+    }
+
+    /// A flag that stops the pipeline when set (for signal handlers).
+    pub fn stop_flag(&self) -> Arc<AtomicBool> {
+        self.stop.clone()
+    }
+
+    /// Waits for every thread to end (after [`Pipeline::stop`] or the end of
+    /// the source).
+    pub fn join(self) -> Arc<Counters> {
+        for t in self.threads {
+            let _ = t.join();
+        }
+        self.counters
+    }
+}
+
+/// Locates one frame into a message.
+fn locate(locator: &mut Locator, frame: &Frame) -> PoseMessage {
+    let mut m = PoseMessage::without_pose(
+        frame.seq,
+        frame.camera_time_ns,
+        frame.host_time_ns,
+        PoseStatus::Error,
+    );
+    let Ok(loc) = locator.locate(frame.image.view()) else {
+        return m;
+    };
+    match (loc.status, loc.pose) {
+        (LocateStatus::Ok, Some(p)) => {
+            let e = &p.exterior;
+            let r = e.rotation;
+            m.status = PoseStatus::Ok;
+            m.center = Some([e.center.x, e.center.y, e.center.z]);
+            m.rotation = Some([
+                [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
+                [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
+                [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
+            ]);
+            m.quaternion_wxyz = quaternion_from_matrix(&r).map(|q| [q.w, q.i, q.j, q.k]);
+            m.std_center = Some(p.std_center().into());
+            m.std_rotation_deg = Some(p.std_rotation_deg().into());
+            m.sigma0_px = Some(p.sigma0_px);
+            m.n_targets = p.n_points as u32;
+        }
+        (LocateStatus::TooFewTargets { .. }, _) | (LocateStatus::Frame(_), _) => {
+            m.status = PoseStatus::TooFewTargets;
+        }
+        _ => {}
+    }
+    m
+}
+
+#[allow(clippy::too_many_arguments)]
+fn output_loop(
+    rx: Receiver<Outcome>,
+    mut udp: Option<UdpSender>,
+    mut tcp: Option<TcpServer>,
+    counters: Arc<Counters>,
+    max_age: Duration,
+    window: usize,
+    stop: Arc<AtomicBool>,
+) {
+    let notifier = Notifier::from_env();
+    notifier.notify("READY=1");
+    // Re-ordering window indexed by admission order.
+    let mut pending: Vec<Option<Outcome>> = (0..window).map(|_| None).collect();
+    let mut next = 0u64;
+    let mut line = Vec::with_capacity(1024);
+    let mut last_sent = Instant::now();
+    let mut last_message: Option<PoseMessage> = None;
+    let mut last_watchdog = Instant::now();
+    let emit = |m: &PoseMessage,
+                line: &mut Vec<u8>,
+                udp: &mut Option<UdpSender>,
+                tcp: &mut Option<TcpServer>| {
+        m.encode_line(line);
+        if let Some(u) = udp.as_mut() {
+            u.send(line);
+        }
+        if let Some(t) = tcp.as_mut() {
+            t.publish(line);
+        }
+    };
+    loop {
+        match rx.recv_timeout(max_age.min(Duration::from_millis(100))) {
+            Ok(o) => {
+                let order = match &o {
+                    Outcome::Message { order, .. } | Outcome::Skipped { order } => *order,
+                };
+                let idx = (order % window as u64) as usize;
+                pending[idx] = Some(o);
+                // Emit everything that is now in order.
+                loop {
+                    let idx = (next % window as u64) as usize;
+                    let Some(o) = pending[idx].take() else { break };
+                    next += 1;
+                    if let Outcome::Message {
+                        mut message,
+                        received,
+                        ..
+                    } = o
+                    {
+                        let latency = received.elapsed();
+                        message.latency_us = latency.as_secs_f64() * 1e6;
+                        counters
+                            .latency_us_sum
+                            .fetch_add(latency.as_micros() as u64, Ordering::Relaxed);
+                        if message.status == PoseStatus::Ok {
+                            counters.poses_ok.fetch_add(1, Ordering::Relaxed);
+                        } else {
+                            counters.poses_failed.fetch_add(1, Ordering::Relaxed);
+                        }
+                        emit(&message, &mut line, &mut udp, &mut tcp);
+                        last_message = Some(message);
+                        last_sent = Instant::now();
+                    }
+                }
+                if last_watchdog.elapsed() >= Duration::from_secs(1) {
+                    // Pinged only on progress: a stuck pipeline stops pinging.
+                    notifier.notify("WATCHDOG=1");
+                    last_watchdog = Instant::now();
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                if let Some(m) = last_message.as_mut() {
+                    if last_sent.elapsed() >= max_age && !stop.load(Ordering::Acquire) {
+                        // No fresh pose: say so, keep the last pose's data.
+                        let mut s = *m;
+                        s.status = PoseStatus::Stale;
+                        s.host_time_ns = host_time_ns();
+                        emit(&s, &mut line, &mut udp, &mut tcp);
+                        counters.stale.fetch_add(1, Ordering::Relaxed);
+                        last_sent = Instant::now();
+                        tracing::debug!("no fresh pose: stale message sent");
+                    }
+                }
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    notifier.notify("STOPPING=1");
+    if let Some(t) = tcp {
+        t.shutdown();
+    }
+    tracing::info!(
+        poses_ok = counters.poses_ok.load(Ordering::Relaxed),
+        poses_failed = counters.poses_failed.load(Ordering::Relaxed),
+        dropped = counters.frames_dropped.load(Ordering::Relaxed),
+        "pose output stopped"
+    );
+}

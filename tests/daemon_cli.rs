@@ -1,0 +1,143 @@
+//! The daemon binary end to end: `photopose run` on the synthetic source
+//! streams poses over UDP, stops on SIGTERM with exit 0; `check-config`
+//! accepts the shipped example and names the key of a bad value; the
+//! systemd unit passes `systemd-analyze verify`.
+
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_photopose"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("photopose-daemon-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn run_streams_poses_and_stops_on_sigterm() {
+    let dir = scratch("run");
+    let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
+    rx.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let config = std::fs::read_to_string(root().join("config/photopose.toml"))
+        .unwrap()
+        .replace(
+            "udp = [\"127.0.0.1:5005\"]",
+            &format!("udp = [\"{}\"]", rx.local_addr().unwrap()),
+        )
+        .replace(
+            "tcp_listen = \"127.0.0.1:5006\"",
+            "tcp_listen = \"127.0.0.1:0\"",
+        );
+    let path = dir.join("photopose.toml");
+    std::fs::write(&path, config).unwrap();
+    let child = bin()
+        .args(["run", "--config"])
+        .arg(&path)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut buf = [0u8; 4096];
+    let mut seqs = Vec::new();
+    while seqs.len() < 10 {
+        let n = rx.recv(&mut buf).expect("a pose datagram within 20 s");
+        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
+        assert_eq!(v["status"], "ok", "{v}");
+        seqs.push(v["seq"].as_u64().unwrap());
+    }
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "in order: {seqs:?}");
+    let kill = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "exit status {:?}\n{log}", out.status);
+    assert!(
+        log.contains("signal received") && log.contains("photopose stopped"),
+        "{log}"
+    );
+}
+
+#[test]
+fn check_config_accepts_the_example_and_names_bad_keys() {
+    let out = bin()
+        .args(["check-config"])
+        .arg(root().join("config/photopose.toml"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = scratch("check");
+    let bad = dir.join("bad.toml");
+    let text = std::fs::read_to_string(root().join("config/photopose.toml"))
+        .unwrap()
+        .replace("slots = 8", "slots = 1");
+    std::fs::write(&bad, text).unwrap();
+    let out = bin().args(["check-config"]).arg(&bad).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.toml") && err.contains("pipeline.slots"),
+        "{err}"
+    );
+    let out = bin()
+        .args(["check-config"])
+        .arg(dir.join("missing.toml"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.toml: cannot read"));
+}
+
+#[test]
+fn the_systemd_unit_verifies() {
+    let analyze = Path::new("/usr/bin/systemd-analyze");
+    assert!(
+        analyze.exists(),
+        "systemd-analyze is missing: run .ci/deps.sh"
+    );
+    let dir = scratch("unit");
+    let unit = std::fs::read_to_string(root().join("systemd/photopose.service"))
+        .unwrap()
+        .replace("/usr/local/bin/photopose", env!("CARGO_BIN_EXE_photopose"));
+    let path = dir.join("photopose.service");
+    std::fs::write(&path, unit).unwrap();
+    let out = Command::new(analyze)
+        .arg("verify")
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = Command::new(analyze)
+        .args(["security", "--offline=true"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let score: f64 = text
+        .lines()
+        .find_map(|l| l.split("exposure level for photopose.service:").nth(1))
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no score in {text}"));
+    assert!(score <= 3.0, "hardening score {score} (want ≤ 3.0 'OK')");
+}
