@@ -22,6 +22,10 @@ pub struct Args {
     /// built-in configuration (synthetic camera over the default plate).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Stop after this many frames of the synthetic source (overrides
+    /// `source.synthetic.frames`).
+    #[arg(long)]
+    pub frames: Option<u64>,
 }
 
 /// The built-in configuration (`config/photopose.toml`).
@@ -37,7 +41,10 @@ pub fn load(path: Option<&std::path::Path>) -> Result<Config> {
 
 /// Runs the daemon until a signal or the end of the source.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let config = load(args.config.as_deref())?;
+    let mut config = load(args.config.as_deref())?;
+    if let (Some(n), Source::Synthetic(s)) = (args.frames, &mut config.source) {
+        s.frames = n;
+    }
     let camera = defaults::camera(config.camera_file.as_deref())?;
     let field = defaults::field(config.field_file.as_deref())?;
     let source: Box<dyn photopose_pipeline::FrameSource> = match &config.source {
@@ -51,6 +58,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     let pipeline =
         Pipeline::start(&config, camera, field, source).context("cannot start the pipeline")?;
+    let pipeline_started = Instant::now();
     tracing::info!(
         workers = config.workers,
         slots = config.slots,
@@ -77,7 +85,21 @@ pub fn run(args: Args) -> Result<ExitCode> {
         tracing::info!("signal received: stopping");
     }
     pipeline.stop();
+    let started = pipeline_started;
     let c = pipeline.join();
+    let secs = started.elapsed().as_secs_f64();
+    let ok = c.poses_ok.load(Ordering::Relaxed);
+    let done = ok + c.poses_failed.load(Ordering::Relaxed);
+    println!(
+        "{} frames in, {} dropped, {} poses ({} ok) in {:.1} s ({:.1} poses/s), mean latency {:.2} ms",
+        c.frames_in.load(Ordering::Relaxed),
+        c.frames_dropped.load(Ordering::Relaxed),
+        done,
+        ok,
+        secs,
+        done as f64 / secs.max(1e-9),
+        c.latency_us_sum.load(Ordering::Relaxed) as f64 / done.max(1) as f64 / 1000.0
+    );
     tracing::info!(
         frames_in = c.frames_in.load(Ordering::Relaxed),
         dropped = c.frames_dropped.load(Ordering::Relaxed),
