@@ -2,6 +2,8 @@
 //! 16-bit frames, and bilinear interpolation at sub-pixel positions
 //! (integer coordinates are pixel centres).
 
+use wide::u8x16;
+
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
     /// Largest value of the type.
@@ -10,6 +12,16 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn value(self) -> u32;
     /// Largest value of a slice (vectorises).
     fn max_of(chunk: &[Self]) -> u32;
+    /// Bit `i` set if `block[i] > threshold`, for a block of at most 64 pixels.
+    #[inline]
+    fn above_mask(block: &[Self], threshold: u32) -> u64 {
+        debug_assert!(block.len() <= 64);
+        let mut m = 0u64;
+        for (i, p) in block.iter().enumerate() {
+            m |= ((p.value() > threshold) as u64) << i;
+        }
+        m
+    }
 }
 
 impl Pixel for u8 {
@@ -21,6 +33,47 @@ impl Pixel for u8 {
     #[inline(always)]
     fn max_of(chunk: &[Self]) -> u32 {
         chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
+    }
+    /// Sixteen pixels at a time (SSE2 on x86-64).
+    #[inline]
+    fn above_mask(block: &[Self], threshold: u32) -> u64 {
+        debug_assert!(block.len() <= 64);
+        if threshold >= u8::MAX as u32 {
+            return 0;
+        }
+        let t = u8x16::splat(threshold as u8);
+        let zero = u8x16::splat(0);
+        // 0xffff where all sixteen are `≤ t`, else the lanes `≤ t`.
+        let dark = |v: u8x16| v.saturating_sub(t).cmp_eq(zero).move_mask() as u32 & 0xffff;
+        let load = |c: &[u8]| u8x16::new(c.try_into().unwrap_or([0; 16]));
+        if let Ok(b) = <&[u8; 64]>::try_from(block) {
+            let v = [
+                load(&b[..16]),
+                load(&b[16..32]),
+                load(&b[32..48]),
+                load(&b[48..]),
+            ];
+            // A dark block (most of a frame) costs one test.
+            if dark(v[0].max(v[1]).max(v[2].max(v[3]))) == 0xffff {
+                return 0;
+            }
+            let mut m = 0u64;
+            for (k, &x) in v.iter().enumerate() {
+                m |= ((!dark(x) & 0xffff) as u64) << (16 * k);
+            }
+            return m;
+        }
+        let mut chunks = block.chunks_exact(16);
+        let mut m = 0u64;
+        let mut shift = 0;
+        for c in &mut chunks {
+            m |= ((!dark(load(c)) & 0xffff) as u64) << shift;
+            shift += 16;
+        }
+        for (i, &p) in chunks.remainder().iter().enumerate() {
+            m |= ((p as u32 > threshold) as u64) << (shift + i);
+        }
+        m
     }
 }
 
@@ -58,28 +111,27 @@ impl<P: Pixel> Plane<'_, P> {
     /// centres' hull.
     #[inline]
     pub fn bilinear(&self, col: f64, row: f64) -> Option<f64> {
-        if !(col >= 0.0 && row >= 0.0) {
+        let (w, h) = (self.width, self.height);
+        // Inside the hull of the pixel centres (false for NaN).
+        // (Signed conversions: a single instruction each on x86-64.)
+        let (wl, hl) = (w as i64 - 1, h as i64 - 1);
+        if !(col >= 0.0 && row >= 0.0 && col <= wl as f64 && row <= hl as f64) {
             return None;
         }
-        let c0 = col.floor();
-        let r0 = row.floor();
-        let (ci, ri) = (c0 as usize, r0 as usize);
-        if ci + 1 >= self.width || ri + 1 >= self.height {
-            // Exactly on the last column or row is still inside.
-            if (ci + 1 == self.width && col == c0 && ri < self.height)
-                || (ri + 1 == self.height && row == r0 && ci < self.width)
-            {
-                return Some(self.at(ci.min(self.width - 1), ri.min(self.height - 1)));
-            }
-            return None;
+        if w < 2 || h < 2 {
+            return Some(self.at(col as usize, row as usize));
         }
-        let fx = col - c0;
-        let fy = row - r0;
-        let i = ri * self.width + ci;
-        let p00 = self.data[i].value() as f64;
-        let p01 = self.data[i + 1].value() as f64;
-        let p10 = self.data[i + self.width].value() as f64;
-        let p11 = self.data[i + self.width + 1].value() as f64;
+        // Truncation is the floor for non-negative values (and needs no
+        // libm call on baseline x86-64). On the last column or row, the
+        // cell to the left or above is used with a fraction of exactly 1.
+        let (ci, ri) = ((col as i64).min(wl - 1), (row as i64).min(hl - 1));
+        let fx = col - ci as f64;
+        let fy = row - ri as f64;
+        let i = ri as usize * w + ci as usize;
+        let top = &self.data[i..i + 2];
+        let bottom = &self.data[i + w..i + w + 2];
+        let (p00, p01) = (top[0].value() as f64, top[1].value() as f64);
+        let (p10, p11) = (bottom[0].value() as f64, bottom[1].value() as f64);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         Some(top + fy * (bottom - top))
@@ -102,6 +154,10 @@ mod tests {
         assert_eq!(p.bilinear(0.5, 0.0), Some(5.0));
         assert_eq!(p.bilinear(1.0, 0.5), Some(25.0));
         assert_eq!(p.bilinear(2.0, 1.0), Some(50.0));
+        assert_eq!(p.bilinear(2.0, 0.5), Some(35.0));
+        assert_eq!(p.bilinear(1.5, 1.0), Some(45.0));
+        assert_eq!(p.bilinear(0.0, 1.1), None);
+        assert_eq!(p.bilinear(f64::NAN, 0.0), None);
         assert_eq!(p.bilinear(2.1, 0.0), None);
         assert_eq!(p.bilinear(-0.1, 0.0), None);
         assert_eq!(u16::max_of(&[3, 900, 7]), 900);
