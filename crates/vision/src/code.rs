@@ -257,6 +257,8 @@ impl RingFrame {
 const DEG: f64 = std::f64::consts::PI / 180.0;
 /// Phase samples around the ring (every 5°: six per sector).
 const PHASE_SAMPLES: usize = 72;
+/// Radii of the gap and the quiet zone samples.
+const ZONE_RADII: [f64; 2] = [1.5, 3.5];
 /// Samples of the gap and the quiet zone.
 const ZONE_SAMPLES: usize = 24;
 /// Offsets of the classification samples from a sector's centre, degrees.
@@ -326,8 +328,42 @@ fn rotate_cs((ca, sa): (f64, f64), (cb, sb): (f64, f64)) -> (f64, f64) {
     (ca * cb - sa * sb, sa * cb + ca * sb)
 }
 
+/// Bilinear sampling for one ring: when the whole target (out to its
+/// quiet zone) lies inside the image, every sample skips the range checks.
+struct Sampler<'p, 'a, P> {
+    plane: &'p Plane<'a, P>,
+    inside: bool,
+}
+
+impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
+    fn new(plane: &'p Plane<'a, P>, f: &RingFrame) -> Self {
+        // Farthest reach of the samples (the quiet zone), with a margin for
+        // rounding: |E·(cos t, −sin t)| ≤ the norm of E's rows.
+        let k = ZONE_RADII[1] * (1.0 + 1e-9) + 1e-9;
+        let hx = k * (f.e[0] * f.e[0] + f.e[1] * f.e[1]).sqrt();
+        let hy = k * (f.e[1] * f.e[1] + f.e[2] * f.e[2]).sqrt();
+        let (w, h) = (plane.width as f64, plane.height as f64);
+        let inside = plane.width >= 2
+            && plane.height >= 2
+            && f.col - hx >= 0.0
+            && f.row - hy >= 0.0
+            && f.col + hx <= w - 1.0
+            && f.row + hy <= h - 1.0;
+        Sampler { plane, inside }
+    }
+
+    #[inline(always)]
+    fn at(&self, col: f64, row: f64) -> Option<f64> {
+        if self.inside {
+            Some(self.plane.bilinear_inside(col, row))
+        } else {
+            self.plane.bilinear(col, row)
+        }
+    }
+}
+
 fn zone<P: Pixel>(
-    plane: &Plane<P>,
+    plane: &Sampler<'_, '_, P>,
     f: &RingFrame,
     k: f64,
     tables: &RingTables,
@@ -336,7 +372,7 @@ fn zone<P: Pixel>(
     let mut max = f64::MIN;
     for &cs in &tables.zone {
         let (x, y) = f.point_cs(k, cs);
-        let v = plane.bilinear(x, y)?;
+        let v = plane.at(x, y)?;
         sum += v;
         max = max.max(v);
     }
@@ -360,19 +396,20 @@ pub fn read<P: Pixel>(
         dark: 0.0,
     };
     // Bright level: the dot's centre and eight points at 0.3 r.
-    let mut bright = match plane.bilinear(f.col, f.row) {
+    let plane = &Sampler::new(plane, f);
+    let mut bright = match plane.at(f.col, f.row) {
         Some(v) => v,
         None => return out,
     };
     for &cs in &tables.bright {
         let (x, y) = f.point_cs(0.3, cs);
-        match plane.bilinear(x, y) {
+        match plane.at(x, y) {
             Some(v) => bright += v,
             None => return out,
         }
     }
     bright /= 9.0;
-    let Some((dark, gap_max)) = zone(plane, f, 1.5, tables) else {
+    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], tables) else {
         return out;
     };
     out.bright = bright;
@@ -395,7 +432,7 @@ pub fn read<P: Pixel>(
                 continue;
             }
             let (x, y) = f.point_cs(2.5, tables.phase[j]);
-            match plane.bilinear(x, y) {
+            match plane.at(x, y) {
                 Some(v) => {
                     *s = v;
                     n_bright += (v > thr) as usize;
@@ -426,7 +463,7 @@ pub fn read<P: Pixel>(
     if outside {
         return out;
     }
-    match zone(plane, f, 3.5, tables) {
+    match zone(plane, f, ZONE_RADII[1], tables) {
         None => return out,
         Some((_, quiet_max)) if quiet_max > dark_limit => {
             out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);
@@ -468,7 +505,7 @@ pub fn read<P: Pixel>(
             let mut s = [0.0f64; SECTOR_OFFSETS.len()];
             for (v, &a) in s.iter_mut().zip(angles) {
                 let (x, y) = f.point_cs(k, rotate_cs(a, boundary_cs));
-                match plane.bilinear(x, y) {
+                match plane.at(x, y) {
                     Some(g) => *v = g,
                     None => return out,
                 }
@@ -501,15 +538,26 @@ pub fn read<P: Pixel>(
     // Every phase sample clear of a sector boundary must agree with its
     // sector: catches marks (a bar's shadow) that hide a sector's middle
     // but not its edges.
+    let boundary_deg = boundary / DEG;
     for (j, &v) in ring.iter().enumerate() {
         let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
         debug_assert!(!outside);
-        let rel = (t - boundary / DEG).rem_euclid(360.0);
-        let within = rel % 30.0;
+        // `(t − boundary) mod 360` and its remainder modulo 30, exactly
+        // (the offset lies within (−30°, 390°); no libm `fmod`).
+        let d = t - boundary_deg;
+        let rel = if d < 0.0 {
+            d + 360.0
+        } else if d >= 360.0 {
+            d - 360.0
+        } else {
+            d
+        };
+        let q = (rel / 30.0) as u32;
+        let within = rel - 30.0 * q as f64;
         if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
             continue;
         }
-        let sector = (rel / 30.0) as u32 % 12;
+        let sector = q % 12;
         let bit = (raw >> (11 - sector)) & 1 == 1;
         if bit != (v > thr) {
             out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);

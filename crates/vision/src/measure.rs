@@ -96,6 +96,7 @@ struct Conic {
     qxx: f64,
     qyy: f64,
     qxy: f64,
+    inv_qxx: f64,
     bx: f64,
 }
 
@@ -113,14 +114,14 @@ impl Conic {
         if !(disc_out >= 0.0) {
             return (EMPTY, EMPTY);
         }
-        let mid = self.bx - b / self.qxx;
-        let h_out = disc_out.sqrt() / self.qxx;
+        let mid = self.bx - b * self.inv_qxx;
+        let h_out = disc_out.sqrt() * self.inv_qxx;
         let out = (ceil_i64(mid - h_out), floor_i64(mid + h_out));
         let disc_in = base + self.qxx * s_in;
         if !(disc_in >= 0.0) {
             return (EMPTY, out);
         }
-        let h_in = disc_in.sqrt() / self.qxx;
+        let h_in = disc_in.sqrt() * self.inv_qxx;
         ((ceil_i64(mid - h_in), floor_i64(mid + h_in)), out)
     }
 }
@@ -146,10 +147,41 @@ fn round_i64(x: f64) -> i64 {
     floor_i64(x + 0.5)
 }
 
+/// `Σ_{k=1}^{m} k^j` for `j = 0..=4` (Faulhaber), so that the sums over
+/// `ka..=kb` are `power_sums(kb) − power_sums(ka − 1)` for any integers.
+#[inline(always)]
+fn power_sums(m: i64) -> [i64; 5] {
+    let s1 = m * (m + 1) / 2;
+    let s2 = m * (m + 1) * (2 * m + 1) / 6;
+    [m, s1, s2, s1 * s1, s2 * (3 * m * m + 3 * m - 1) / 5]
+}
+
 /// `Σ_{k=1}^{m} k²`, valid for every integer `m` (telescoping).
 #[inline(always)]
 fn sum_sq_to(m: i64) -> i64 {
     m * (m + 1) * (2 * m + 1) / 6
+}
+
+/// The `k`-th smallest of `values` (all `≤ max`): by counting when the
+/// values are small (8-bit frames), else by selection (reorders `values`).
+#[inline]
+fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
+    const SMALL: usize = 256;
+    if (max as usize) < SMALL {
+        let mut count = [0u16; SMALL];
+        for &v in values.iter() {
+            count[v as usize & (SMALL - 1)] += 1;
+        }
+        let mut acc = 0usize;
+        for (v, &c) in count.iter().enumerate() {
+            acc += c as usize;
+            if acc > k {
+                return v as u32;
+            }
+        }
+    }
+    let (_, &mut q, _) = values.select_nth_unstable(k);
+    q
 }
 
 /// Measures a blob; `None` if the window holds no signal.
@@ -211,6 +243,7 @@ pub fn measure<P: Pixel>(
         qxx,
         qyy,
         qxy,
+        inv_qxx: 1.0 / qxx,
         bx,
     };
 
@@ -282,22 +315,46 @@ pub fn measure<P: Pixel>(
         if a > b {
             continue;
         }
+        let px = &line[a as usize..=b as usize];
         let (mut t0, mut t1, mut t2) = (0i64, 0i64, 0i64);
         let mut k = a - cc;
-        for p in &line[a as usize..=b as usize] {
-            let v = p.value();
-            let vi = v as i64;
+        for p in px {
+            let vi = p.value() as i64;
             t0 += vi;
             t1 += vi * k;
             t2 += vi * k * k;
-            if v > threshold {
-                let u = (k as f64 + d0) * ux + dy * uy;
-                let u2 = u * u;
-                n_fg += 1.0;
-                su2 += u2;
-                su4 += u2 * u2;
-            }
             k += 1;
+        }
+        // Σ k^j, j = 0..4, over the foreground pixels, run by run.
+        let mut f = [0i64; 5];
+        let mut i = 0;
+        while i < px.len() {
+            if px[i].value() <= threshold {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < px.len() && px[i].value() > threshold {
+                i += 1;
+            }
+            let (ka, kb) = (a - cc + start as i64, a - cc + i as i64 - 1);
+            let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
+            for j in 0..5 {
+                f[j] += hi[j] - lo[j];
+            }
+        }
+        if f[0] > 0 {
+            // u = ux (k + d0) + uy dy = ux k + c: Σu² and Σu⁴ from the sums.
+            let c = ux * d0 + uy * dy;
+            let [f0, f1, f2, f3, f4] = f.map(|x| x as f64);
+            let (ux2, c2) = (ux * ux, c * c);
+            n_fg += f0;
+            su2 += ux2 * f2 + 2.0 * ux * c * f1 + c2 * f0;
+            su4 += ux2 * ux2 * f4
+                + 4.0 * ux2 * ux * c * f3
+                + 6.0 * ux2 * c2 * f2
+                + 4.0 * ux * c2 * c * f1
+                + c2 * c2 * f0;
         }
         let (ka, kb) = (a - cc, b - cc);
         let n = (b - a + 1) as f64;
@@ -320,9 +377,7 @@ pub fn measure<P: Pixel>(
         nm[5] += dy * nx;
     }
     let background = if bg_n >= 4 {
-        let buf = &mut bg_buf[..bg_n];
-        let (_, &mut q, _) = buf.select_nth_unstable(bg_n * 3 / 10);
-        q as f64
+        quantile(&mut bg_buf[..bg_n], bg_n * 3 / 10, threshold) as f64
     } else {
         fallback_background
     };
@@ -352,6 +407,28 @@ pub fn measure<P: Pixel>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quantile_by_counting_is_the_order_statistic() {
+        let mut v: Vec<u32> = (0..300).map(|i| (i * 37 % 101) as u32).collect();
+        for k in [0, 1, 77, 150, 299] {
+            let mut sorted = v.clone();
+            sorted.sort_unstable();
+            assert_eq!(quantile(&mut v, k, 100), sorted[k]);
+            assert_eq!(quantile(&mut v.clone(), k, 4000), sorted[k]);
+        }
+    }
+
+    #[test]
+    fn power_sums_telescope_over_any_range() {
+        for (ka, kb) in [(-7i64, 5i64), (-3, -1), (0, 0), (2, 9), (-12, -12)] {
+            let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
+            for j in 0..5u32 {
+                let want: i64 = (ka..=kb).map(|k| k.pow(j)).sum();
+                assert_eq!(hi[j as usize] - lo[j as usize], want, "j = {j}, {ka}..={kb}");
+            }
+        }
+    }
 
     #[test]
     fn ellipse_of_moments() {

@@ -138,6 +138,29 @@ impl<P: Pixel> Plane<'_, P> {
     }
 }
 
+impl<P: Pixel> Plane<'_, P> {
+    /// [`Plane::bilinear`] at a position the caller knows to lie inside the
+    /// pixel centres' hull (`0 ≤ col ≤ width − 1`, `0 ≤ row ≤ height − 1`,
+    /// at least 2 × 2 pixels); outside it, the value is that of a nearby
+    /// position (never a panic for finite positions).
+    #[inline(always)]
+    pub fn bilinear_inside(&self, col: f64, row: f64) -> f64 {
+        let (w, h) = (self.width, self.height);
+        let ci = (col as u32 as usize).min(w - 2);
+        let ri = (row as u32 as usize).min(h - 2);
+        let fx = col - ci as f64;
+        let fy = row - ri as f64;
+        let i = ri * w + ci;
+        let top = &self.data[i..i + 2];
+        let bottom = &self.data[i + w..i + w + 2];
+        let (p00, p01) = (top[0].value() as f64, top[1].value() as f64);
+        let (p10, p11) = (bottom[0].value() as f64, bottom[1].value() as f64);
+        let top = p00 + fx * (p01 - p00);
+        let bottom = p10 + fx * (p11 - p10);
+        top + fy * (bottom - top)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,6 +181,9 @@ mod tests {
         assert_eq!(p.bilinear(1.5, 1.0), Some(45.0));
         assert_eq!(p.bilinear(0.0, 1.1), None);
         assert_eq!(p.bilinear(f64::NAN, 0.0), None);
+        for (c, r) in [(0.0, 0.0), (0.5, 0.0), (1.0, 0.5), (2.0, 1.0), (1.7, 0.2)] {
+            assert_eq!(Some(p.bilinear_inside(c, r)), p.bilinear(c, r));
+        }
         assert_eq!(p.bilinear(2.1, 0.0), None);
         assert_eq!(p.bilinear(-0.1, 0.0), None);
         assert_eq!(u16::max_of(&[3, 900, 7]), 900);
