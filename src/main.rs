@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Exterior orientation from observations (or images): one JSON line per input.
     Resect(cmd::resect::Args),
+    /// Records the frames of the configured source into an MCAP file.
+    Record(cmd::record::Args),
     /// The daemon: frames → poses → streams (default: synthetic camera).
     Run(cmd::run::Args),
     /// Checks a daemon configuration file (for systemd's ExecStartPre).
@@ -33,6 +35,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Resect(args) => cmd::resect::run(args),
+        Command::Record(args) => cmd::record::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::CheckConfig(args) => cmd::run::check(args),
         Command::Bench(args) => cmd::bench::run(args),

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod defaults;
 pub mod pose_arg;
+pub mod record;
 pub mod resect;
 pub mod run;
 pub mod simulate;

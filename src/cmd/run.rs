@@ -7,7 +7,7 @@ use crate::cmd::defaults;
 use anyhow::{Context, Result};
 use clap::Parser;
 use photopose_pipeline::config::Source;
-use photopose_pipeline::source::SyntheticSource;
+use photopose_pipeline::source::{ReplaySource, SyntheticSource};
 use photopose_pipeline::{Config, Pipeline};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -39,6 +39,20 @@ pub fn load(path: Option<&std::path::Path>) -> Result<Config> {
     })
 }
 
+/// The configured frame source.
+pub fn open_source(
+    config: &Config,
+    camera: &photopose_geometry::Camera,
+    field: &photopose_field::Field,
+) -> Result<Box<dyn photopose_pipeline::FrameSource>> {
+    Ok(match &config.source {
+        Source::Synthetic(s) => {
+            Box::new(SyntheticSource::new(*camera, field, s.clone()).context("synthetic source")?)
+        }
+        Source::Replay(r) => Box::new(ReplaySource::open(camera, r)?),
+    })
+}
+
 /// Runs the daemon until a signal or the end of the source.
 pub fn run(args: Args) -> Result<ExitCode> {
     let mut config = load(args.config.as_deref())?;
@@ -47,11 +61,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     let camera = defaults::camera(config.camera_file.as_deref())?;
     let field = defaults::field(config.field_file.as_deref())?;
-    let source: Box<dyn photopose_pipeline::FrameSource> = match &config.source {
-        Source::Synthetic(s) => {
-            Box::new(SyntheticSource::new(camera, &field, s.clone()).context("synthetic source")?)
-        }
-    };
+    let source = open_source(&config, &camera, &field)?;
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(sig, stop.clone()).context("cannot install signal handlers")?;

@@ -64,12 +64,51 @@ struct CameraSection {
 struct SourceSection {
     kind: SourceKind,
     synthetic: Option<SyntheticSection>,
+    replay: Option<ReplaySection>,
+}
+
+#[derive(Debug, Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+struct ReplaySection {
+    path: PathBuf,
+    #[serde(default = "default_speed")]
+    speed: SpeedToml,
+}
+
+#[derive(Debug, Deserialize, Clone)]
+#[serde(untagged)]
+enum SpeedToml {
+    Word(String),
+    Factor(f64),
+}
+
+fn default_speed() -> SpeedToml {
+    SpeedToml::Word("recorded".into())
+}
+
+/// How fast a recording is replayed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Speed {
+    /// At the recorded pace times this factor (1 = as recorded).
+    Factor(f64),
+    /// As fast as the pipeline takes the frames.
+    Max,
+}
+
+/// Replay of a recording (see `photopose-record`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Replay {
+    /// The MCAP recording.
+    pub path: PathBuf,
+    /// Pace.
+    pub speed: Speed,
 }
 
 #[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 enum SourceKind {
     Synthetic,
+    Replay,
 }
 
 #[derive(Debug, Deserialize, Clone)]
@@ -147,7 +186,7 @@ pub enum Overflow {
     Block,
 }
 
-#[derive(Debug, Deserialize, Default)]
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct OutputSection {
     #[serde(default)]
@@ -159,6 +198,16 @@ struct OutputSection {
 
 fn default_queue() -> usize {
     256
+}
+
+impl Default for OutputSection {
+    fn default() -> Self {
+        OutputSection {
+            udp: Vec::new(),
+            tcp_listen: None,
+            tcp_client_queue: default_queue(),
+        }
+    }
 }
 
 /// The synthetic source: frames rendered along a circle in a horizontal
@@ -188,6 +237,8 @@ pub struct Synthetic {
 pub enum Source {
     /// Rendered frames of the plate.
     Synthetic(Synthetic),
+    /// Recorded frames.
+    Replay(Replay),
 }
 
 /// The validated configuration.
@@ -248,8 +299,8 @@ impl Config {
             value,
             why,
         };
-        let source = match f.source.kind {
-            SourceKind::Synthetic => {
+        let source = match (f.source.kind, &f.source.replay) {
+            (SourceKind::Synthetic, _) => Source::Synthetic({
                 let s = f.source.synthetic.clone().unwrap_or(SyntheticSection {
                     rate_hz: default_rate(),
                     frames: 0,
@@ -302,7 +353,7 @@ impl Config {
                         "must be in [0, 10]",
                     ));
                 }
-                Source::Synthetic(Synthetic {
+                Synthetic {
                     rate_hz: s.rate_hz,
                     frames: s.frames,
                     center_mm: s.center_mm,
@@ -311,6 +362,40 @@ impl Config {
                     noise_dn: s.noise_dn,
                     blur_px: s.blur_px,
                     seed: s.seed,
+                }
+            }),
+            (SourceKind::Replay, None) => {
+                return Err(bad(
+                    "source.replay.path",
+                    "(missing)".into(),
+                    "a replay source needs [source.replay] with `path`",
+                ));
+            }
+            (SourceKind::Replay, Some(r)) => {
+                let speed = match &r.speed {
+                    SpeedToml::Word(w) if w == "recorded" => Speed::Factor(1.0),
+                    SpeedToml::Word(w) if w == "max" => Speed::Max,
+                    SpeedToml::Factor(x) if x.is_finite() && *x > 0.0 && *x <= 1000.0 => {
+                        Speed::Factor(*x)
+                    }
+                    SpeedToml::Word(w) => {
+                        return Err(bad(
+                            "source.replay.speed",
+                            w.clone(),
+                            "must be \"recorded\", \"max\" or a factor in (0, 1000]",
+                        ))
+                    }
+                    SpeedToml::Factor(x) => {
+                        return Err(bad(
+                            "source.replay.speed",
+                            x.to_string(),
+                            "must be \"recorded\", \"max\" or a factor in (0, 1000]",
+                        ))
+                    }
+                };
+                Source::Replay(Replay {
+                    path: r.path.clone(),
+                    speed,
                 })
             }
         };
@@ -392,6 +477,21 @@ mod tests {
     }
 
     #[test]
+    fn missing_sections_take_their_defaults() {
+        let c = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
+        assert_eq!(c.tcp_client_queue, 256);
+        assert_eq!((c.workers, c.slots), (2, 8));
+        let r = Config::parse(
+            "[source]\nkind = \"replay\"\n[source.replay]\npath = \"a.mcap\"\nspeed = 2.5\n",
+            "x",
+        )
+        .unwrap();
+        assert!(
+            matches!(r.source, Source::Replay(Replay { speed: Speed::Factor(f), .. }) if f == 2.5)
+        );
+    }
+
+    #[test]
     fn errors_name_the_key() {
         let cases = [
             (
@@ -422,6 +522,8 @@ mod tests {
                 "output.tcp_listen",
             ),
             ("[source]\n".to_string(), "kind"),
+            ("[source]\nkind = \"replay\"\n".to_string(), "source.replay.path"),
+            ("[source]\nkind = \"replay\"\n[source.replay]\npath = \"r.mcap\"\nspeed = \"fast\"\n".to_string(), "source.replay.speed"),
         ];
         for (text, want) in cases {
             let e = Config::parse(&text, "x.toml").unwrap_err().to_string();

@@ -1,6 +1,7 @@
-//! Frame sources: the [`FrameSource`] seam and the synthetic source, which
+//! Frame sources: the [`FrameSource`] seam, the synthetic source, which
 //! renders the plate along a configured camera path in real time (the
-//! default of `photopose run`, so the whole chain runs without hardware).
+//! default of `photopose run`, so the whole chain runs without hardware),
+//! and the replay of recordings.
 
 use crate::config::Synthetic;
 use photopose_field::Field;
@@ -58,6 +59,9 @@ pub enum SourceError {
     /// The renderer refused (synthetic source).
     #[error("synthetic source: {0}")]
     Render(#[from] RenderError),
+    /// A recorded frame could not be read (replay).
+    #[error("replay: {0}")]
+    Record(photopose_record::RecordError),
 }
 
 /// A source of frames: GigE camera, recording or renderer.
@@ -165,6 +169,118 @@ impl FrameSource for SyntheticSource {
         format!(
             "synthetic: {} frames/s on a circle of {} mm radius at {:?} mm",
             self.config.rate_hz, self.config.radius_mm, self.config.center_mm
+        )
+    }
+}
+
+/// Recorded frames (see `photopose-record`), at the recorded pace times a
+/// factor, or as fast as the pipeline takes them.
+#[derive(Debug)]
+pub struct ReplaySource {
+    recording: photopose_record::Recording,
+    speed: crate::config::Speed,
+    next: usize,
+    start: Option<(Instant, u64)>,
+}
+
+/// Why a replay cannot start.
+#[derive(Debug, Error)]
+pub enum ReplayError {
+    /// The recording cannot be read.
+    #[error(transparent)]
+    Record(#[from] photopose_record::RecordError),
+    /// The recording's frames do not fit the camera.
+    #[error("{path}: frames are {width}×{height}, the camera file says {cam_width}×{cam_height}")]
+    Size {
+        /// The recording.
+        path: String,
+        /// Frame width.
+        width: u32,
+        /// Frame height.
+        height: u32,
+        /// Camera width.
+        cam_width: u32,
+        /// Camera height.
+        cam_height: u32,
+    },
+}
+
+impl ReplaySource {
+    /// Opens a recording for `camera`.
+    pub fn open(camera: &Camera, config: &crate::config::Replay) -> Result<Self, ReplayError> {
+        let recording = photopose_record::Recording::open(&config.path)?;
+        let (_, width, height) = recording.meta(0);
+        if (width, height) != (camera.sensor.width, camera.sensor.height) {
+            return Err(ReplayError::Size {
+                path: recording.path().to_string(),
+                width,
+                height,
+                cam_width: camera.sensor.width,
+                cam_height: camera.sensor.height,
+            });
+        }
+        Ok(ReplaySource {
+            recording,
+            speed: config.speed,
+            next: 0,
+            start: None,
+        })
+    }
+
+    /// Frames in the recording.
+    pub fn len(&self) -> usize {
+        self.recording.len()
+    }
+
+    /// Whether the recording is empty (never once opened).
+    pub fn is_empty(&self) -> bool {
+        self.recording.is_empty()
+    }
+}
+
+impl FrameSource for ReplaySource {
+    fn next_frame(
+        &mut self,
+        frame: &mut Frame,
+        timeout: Duration,
+    ) -> Result<SourceEvent, SourceError> {
+        if self.next >= self.recording.len() {
+            return Ok(SourceEvent::End);
+        }
+        let (meta, _, _) = self.recording.meta(self.next);
+        if let crate::config::Speed::Factor(f) = self.speed {
+            let (t0, c0) = *self
+                .start
+                .get_or_insert((Instant::now(), meta.camera_time_ns));
+            let offset = meta.camera_time_ns.saturating_sub(c0) as f64 / 1e9 / f;
+            let due = t0 + Duration::from_secs_f64(offset);
+            let now = Instant::now();
+            if due > now {
+                if due - now > timeout {
+                    std::thread::sleep(timeout);
+                    return Ok(SourceEvent::Timeout);
+                }
+                std::thread::sleep(due - now);
+            }
+        }
+        let meta = self
+            .recording
+            .copy_into(self.next, &mut frame.image)
+            .map_err(SourceError::Record)?;
+        frame.seq = meta.seq;
+        frame.camera_time_ns = meta.camera_time_ns;
+        frame.host_time_ns = host_time_ns();
+        frame.received = Instant::now();
+        self.next += 1;
+        Ok(SourceEvent::Frame)
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "replay of {} ({} frames, {:?})",
+            self.recording.path(),
+            self.recording.len(),
+            self.speed
         )
     }
 }

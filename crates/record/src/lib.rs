@@ -1,0 +1,322 @@
+//! photopose-record: recordings of camera frames with their metadata.
+//!
+//! A recording is an MCAP file (the container robotics tools such as
+//! Foxglove Studio open) with one channel, topic `/camera/frames`, message
+//! encoding `photopose.frame.v1`: each message is one frame, a fixed
+//! little-endian header followed by the pixels row by row:
+//!
+//! | bytes | field |
+//! | --- | --- |
+//! | 8 | `seq` (u64) |
+//! | 8 | `camera_time_ns` (u64) |
+//! | 8 | `host_time_ns` (u64) |
+//! | 4 | `width` (u32) |
+//! | 4 | `height` (u32) |
+//! | 1 | bytes per pixel: 1 (Mono8) or 2 (Mono16, little-endian) |
+//! | 2 | `max_value` (u16, saturation level) |
+//! | … | `width × height × bytes per pixel` pixels |
+//!
+//! The MCAP message's `log_time` is the host time, `publish_time` the
+//! camera time, `sequence` the low 32 bits of `seq`. We write MCAP without
+//! compression so a recording can be replayed with a plain copy per frame.
+
+use photopose_frame::{Image, Pixels};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use thiserror::Error;
+
+/// The topic of the frames.
+pub const TOPIC: &str = "/camera/frames";
+/// The message encoding of the frames.
+pub const ENCODING: &str = "photopose.frame.v1";
+const HEADER: usize = 35;
+
+/// A recording that cannot be written or read, with the file and why.
+#[derive(Debug, Error)]
+pub enum RecordError {
+    /// The file could not be created, written or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The MCAP container is invalid.
+    #[error("{path}: not a readable MCAP recording: {message}")]
+    Mcap {
+        /// The file.
+        path: String,
+        /// What the MCAP library said.
+        message: String,
+    },
+    /// A frame message is malformed.
+    #[error("{path}: frame message {index}: {what}")]
+    Frame {
+        /// The file.
+        path: String,
+        /// Index of the message on the frame channel.
+        index: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// The file has no frames.
+    #[error("{path}: the recording holds no frames on {TOPIC}")]
+    Empty {
+        /// The file.
+        path: String,
+    },
+}
+
+/// The metadata of a recorded frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameMeta {
+    /// Sequence number.
+    pub seq: u64,
+    /// Camera timestamp, ns.
+    pub camera_time_ns: u64,
+    /// Host time at reception, ns since the Unix epoch.
+    pub host_time_ns: u64,
+}
+
+/// Writes a recording.
+pub struct Recorder {
+    path: String,
+    writer: mcap::Writer<BufWriter<std::fs::File>>,
+    channel: u16,
+    buf: Vec<u8>,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder")
+            .field("path", &self.path)
+            .finish()
+    }
+}
+
+impl Recorder {
+    /// Creates (or replaces) the recording at `path`.
+    pub fn create(path: &Path) -> Result<Self, RecordError> {
+        let name = path.display().to_string();
+        let file = std::fs::File::create(path).map_err(|source| RecordError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        let mcap_err = |e: mcap::McapError| RecordError::Mcap {
+            path: name.clone(),
+            message: e.to_string(),
+        };
+        let mut writer = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .create(BufWriter::new(file))
+            .map_err(mcap_err)?;
+        let channel = writer
+            .add_channel(0, TOPIC, ENCODING, &Default::default())
+            .map_err(mcap_err)?;
+        Ok(Recorder {
+            path: name,
+            writer,
+            channel,
+            buf: Vec::new(),
+        })
+    }
+
+    /// Appends one frame.
+    pub fn write(&mut self, meta: FrameMeta, image: &Image) -> Result<(), RecordError> {
+        let (bpp, bytes): (u8, &[u8]) = match image.pixels() {
+            Pixels::Mono8(p) => (1, p),
+            Pixels::Mono16(_) => (2, &[]),
+        };
+        self.buf.clear();
+        self.buf.extend_from_slice(&meta.seq.to_le_bytes());
+        self.buf
+            .extend_from_slice(&meta.camera_time_ns.to_le_bytes());
+        self.buf.extend_from_slice(&meta.host_time_ns.to_le_bytes());
+        self.buf.extend_from_slice(&image.width().to_le_bytes());
+        self.buf.extend_from_slice(&image.height().to_le_bytes());
+        self.buf.push(bpp);
+        self.buf.extend_from_slice(&image.max_value().to_le_bytes());
+        match image.pixels() {
+            Pixels::Mono8(_) => self.buf.extend_from_slice(bytes),
+            Pixels::Mono16(p) => {
+                for v in p {
+                    self.buf.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id: self.channel,
+            sequence: meta.seq as u32,
+            log_time: meta.host_time_ns,
+            publish_time: meta.camera_time_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| RecordError::Mcap {
+                path: self.path.clone(),
+                message: e.to_string(),
+            })
+    }
+
+    /// Finishes the file (summary and footer) and flushes it to disk.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        let path = self.path.clone();
+        self.writer.finish().map_err(|e| RecordError::Mcap {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        let mut inner = self.writer.into_inner();
+        inner.flush().map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        inner
+            .get_ref()
+            .sync_all()
+            .map_err(|source| RecordError::Io { path, source })
+    }
+}
+
+/// A recording read into memory: the frames' byte ranges in file order.
+#[derive(Debug)]
+pub struct Recording {
+    path: String,
+    frames: Vec<Vec<u8>>,
+}
+
+impl Recording {
+    /// Reads and checks a recording.
+    pub fn open(path: &Path) -> Result<Self, RecordError> {
+        let name = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        let stream = mcap::MessageStream::new(&bytes).map_err(|e| RecordError::Mcap {
+            path: name.clone(),
+            message: e.to_string(),
+        })?;
+        let mut frames = Vec::new();
+        for message in stream {
+            let m = message.map_err(|e| RecordError::Mcap {
+                path: name.clone(),
+                message: e.to_string(),
+            })?;
+            if m.channel.topic != TOPIC {
+                continue;
+            }
+            if m.channel.message_encoding != ENCODING {
+                return Err(RecordError::Frame {
+                    path: name,
+                    index: frames.len(),
+                    what: format!(
+                        "encoding `{}`, expected `{ENCODING}`",
+                        m.channel.message_encoding
+                    ),
+                });
+            }
+            check_frame(&m.data).map_err(|what| RecordError::Frame {
+                path: name.clone(),
+                index: frames.len(),
+                what,
+            })?;
+            frames.push(m.data.into_owned());
+        }
+        if frames.is_empty() {
+            return Err(RecordError::Empty { path: name });
+        }
+        Ok(Recording { path: name, frames })
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether there are no frames (never, for an opened recording).
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// The file.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// The metadata and size `(width, height)` of frame `index`.
+    pub fn meta(&self, index: usize) -> (FrameMeta, u32, u32) {
+        let d = &self.frames[index];
+        let u64_at = |o: usize| u64::from_le_bytes(d[o..o + 8].try_into().unwrap_or([0; 8]));
+        let u32_at = |o: usize| u32::from_le_bytes(d[o..o + 4].try_into().unwrap_or([0; 4]));
+        (
+            FrameMeta {
+                seq: u64_at(0),
+                camera_time_ns: u64_at(8),
+                host_time_ns: u64_at(16),
+            },
+            u32_at(24),
+            u32_at(28),
+        )
+    }
+
+    /// Copies frame `index` into `image` (which must have its size and
+    /// depth); returns its metadata.
+    pub fn copy_into(&self, index: usize, image: &mut Image) -> Result<FrameMeta, RecordError> {
+        let (meta, w, h) = self.meta(index);
+        let d = &self.frames[index];
+        let bpp = d[32];
+        if (image.width(), image.height()) != (w, h) {
+            return Err(RecordError::Frame {
+                path: self.path.clone(),
+                index,
+                what: format!(
+                    "frame is {w}×{h}, the camera is {}×{}",
+                    image.width(),
+                    image.height()
+                ),
+            });
+        }
+        let px = &d[HEADER..];
+        match (image.pixels_mut(), bpp) {
+            (Pixels::Mono8(out), 1) => out.copy_from_slice(px),
+            (Pixels::Mono16(out), 2) => {
+                for (o, b) in out.iter_mut().zip(px.chunks_exact(2)) {
+                    *o = u16::from_le_bytes([b[0], b[1]]);
+                }
+            }
+            _ => {
+                return Err(RecordError::Frame {
+                    path: self.path.clone(),
+                    index,
+                    what: format!("{} bytes per pixel do not fit the frame slot", bpp),
+                })
+            }
+        }
+        Ok(meta)
+    }
+}
+
+fn check_frame(d: &[u8]) -> Result<(), String> {
+    if d.len() < HEADER {
+        return Err(format!(
+            "{} bytes, shorter than the {HEADER}-byte header",
+            d.len()
+        ));
+    }
+    let w = u32::from_le_bytes([d[24], d[25], d[26], d[27]]) as usize;
+    let h = u32::from_le_bytes([d[28], d[29], d[30], d[31]]) as usize;
+    let bpp = d[32] as usize;
+    if !(bpp == 1 || bpp == 2) {
+        return Err(format!("{bpp} bytes per pixel (1 or 2 expected)"));
+    }
+    if w == 0 || h == 0 || w > 65_536 || h > 65_536 {
+        return Err(format!("frame size {w}×{h} is out of range"));
+    }
+    let need = HEADER + w * h * bpp;
+    if d.len() != need {
+        return Err(format!("{} bytes, a {w}×{h} frame needs {need}", d.len()));
+    }
+    Ok(())
+}
