@@ -151,10 +151,10 @@ impl<P: Pixel> Plane<'_, P> {
         let fx = col - ci as f64;
         let fy = row - ri as f64;
         let i = ri * w + ci;
-        let top = &self.data[i..i + 2];
-        let bottom = &self.data[i + w..i + w + 2];
-        let (p00, p01) = (top[0].value() as f64, top[1].value() as f64);
-        let (p10, p11) = (bottom[0].value() as f64, bottom[1].value() as f64);
+        // One range check for the 2 × 2 cell.
+        let cell = &self.data[i..i + w + 2];
+        let (p00, p01) = (cell[0].value() as f64, cell[1].value() as f64);
+        let (p10, p11) = (cell[w].value() as f64, cell[w + 1].value() as f64);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
