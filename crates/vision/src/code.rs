@@ -374,7 +374,9 @@ fn zone<P: Pixel>(
         let (x, y) = f.point_cs(k, cs);
         let v = plane.at(x, y)?;
         sum += v;
-        max = max.max(v);
+        if v > max {
+            max = v;
+        }
     }
     Some((sum / ZONE_SAMPLES as f64, max))
 }
@@ -426,22 +428,28 @@ pub fn read<P: Pixel>(
     let mut ring = [0.0f64; PHASE_SAMPLES];
     let mut n_bright = 0;
     let mut outside = false;
-    for pass in 0..2 {
-        for (j, s) in ring.iter_mut().enumerate() {
-            if (j % 3 == 0) != (pass == 0) {
-                continue;
-            }
-            let (x, y) = f.point_cs(2.5, tables.phase[j]);
-            match plane.at(x, y) {
-                Some(v) => {
-                    *s = v;
-                    n_bright += (v > thr) as usize;
-                }
-                None => outside = true,
-            }
+    // Returns whether the sample is bright; `None` outside the image.
+    let sample = |j: usize, ring: &mut [f64; PHASE_SAMPLES]| {
+        let (x, y) = f.point_cs(2.5, tables.phase[j]);
+        plane.at(x, y).map(|v| {
+            ring[j] = v;
+            v > thr
+        })
+    };
+    for j in (0..PHASE_SAMPLES).step_by(3) {
+        match sample(j, &mut ring) {
+            Some(b) => n_bright += b as usize,
+            None => outside = true,
         }
-        if pass == 0 && n_bright == 0 {
-            break;
+    }
+    if n_bright > 0 {
+        for j in 0..PHASE_SAMPLES / 3 {
+            for j in [3 * j + 1, 3 * j + 2] {
+                match sample(j, &mut ring) {
+                    Some(b) => n_bright += b as usize,
+                    None => outside = true,
+                }
+            }
         }
     }
     out.ring_present = n_bright >= 2;

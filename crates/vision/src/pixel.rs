@@ -146,8 +146,13 @@ impl<P: Pixel> Plane<'_, P> {
     #[inline(always)]
     pub fn bilinear_inside(&self, col: f64, row: f64) -> f64 {
         let (w, h) = (self.width, self.height);
-        let ci = (col as u32 as usize).min(w - 2);
-        let ri = (row as u32 as usize).min(h - 2);
+        // The cell's corner: `col − 0.5` rounded to an integer by adding
+        // 1.5 · 2⁵² (its low mantissa bits are the integer). That is the
+        // floor of `col`, or one less for an integer `col`, where the
+        // fraction is then 1 and the interpolation gives the same value.
+        const ROUND: f64 = 6_755_399_441_055_744.0;
+        let ci = (((col - 0.5) + ROUND).to_bits() as u32 as usize).min(w - 2);
+        let ri = (((row - 0.5) + ROUND).to_bits() as u32 as usize).min(h - 2);
         let fx = col - ci as f64;
         let fy = row - ri as f64;
         let i = ri * w + ci;
@@ -181,7 +186,15 @@ mod tests {
         assert_eq!(p.bilinear(1.5, 1.0), Some(45.0));
         assert_eq!(p.bilinear(0.0, 1.1), None);
         assert_eq!(p.bilinear(f64::NAN, 0.0), None);
-        for (c, r) in [(0.0, 0.0), (0.5, 0.0), (1.0, 0.5), (2.0, 1.0), (1.7, 0.2)] {
+        for (c, r) in [
+            (0.0, 0.0),
+            (0.5, 0.0),
+            (1.0, 0.5),
+            (2.0, 1.0),
+            (1.7, 0.2),
+            (1.0, 1.0),
+            (0.25, 0.75),
+        ] {
             assert_eq!(Some(p.bilinear_inside(c, r)), p.bilinear(c, r));
         }
         assert_eq!(p.bilinear(2.1, 0.0), None);
