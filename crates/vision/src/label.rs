@@ -134,6 +134,9 @@ fn sum_sq_below(k: f64) -> f64 {
     (k - 1.0) * k * (2.0 * k - 1.0) / 6.0
 }
 
+/// Length of the dark stretches that [`Labeller`] skips with one test.
+const DARK_SKIP: usize = 256;
+
 impl Labeller {
     /// A labeller for at most `max_runs` runs and `max_blobs` blobs per frame.
     pub fn new(max_runs: usize, max_blobs: usize) -> Self {
@@ -265,6 +268,14 @@ impl Labeller {
         let mut open = NONE;
         let mut base = 0usize;
         while base < width {
+            // Dark stretches (most of a frame) in steps of 256 pixels.
+            if open == NONE
+                && width - base >= DARK_SKIP
+                && P::max_of(&line[base..base + DARK_SKIP]) <= threshold
+            {
+                base += DARK_SKIP;
+                continue;
+            }
             let n = (width - base).min(64);
             let m = P::above_mask(&line[base..base + n], threshold);
             if m == 0 && open == NONE {
