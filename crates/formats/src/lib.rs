@@ -1,13 +1,18 @@
 //! photopose-formats: reading and writing the project's files.
 //!
-//! Owns the camera TOML file, loading of test-field CSV files and the
-//! observation CSV (`id,col,row`). Parsing functions take text and an origin
+//! Owns the camera TOML file, loading of test-field CSV files, the
+//! observation CSV (`id,col,row`) and image files (greyscale PGM and PNG). Parsing functions take text and an origin
 //! (file name) for error messages; `load_*` functions read the file first.
 
 pub mod camera;
+pub mod image;
 pub mod observations;
 
 pub use camera::{camera_to_toml, load_camera, parse_camera};
+pub use image::{
+    check_size, decode_image, decode_pgm, decode_png, encode_pgm, encode_png, load_image,
+    save_image, ImageFormat,
+};
 pub use observations::{load_observations, parse_observations, PixelObservation};
 
 use std::path::Path;
@@ -23,6 +28,73 @@ pub enum FormatError {
         path: String,
         /// The IO error.
         source: std::io::Error,
+    },
+    /// The file does not exist.
+    #[error("{path}: no such file")]
+    Missing {
+        /// The path.
+        path: String,
+    },
+    /// The file could not be written.
+    #[error("{path}: cannot write: {source}")]
+    Write {
+        /// The path.
+        path: String,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// An image file ends before its data does.
+    #[error("{origin}: truncated: {what} needs {expected} bytes, the file has {found}")]
+    Truncated {
+        /// File name.
+        origin: String,
+        /// What the bytes were needed for.
+        what: String,
+        /// Bytes the file should have (at least).
+        expected: usize,
+        /// Bytes it has.
+        found: usize,
+    },
+    /// An image file's header cannot be read.
+    #[error("{origin}: corrupt image header: {what}")]
+    ImageHeader {
+        /// File name.
+        origin: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// An image file's pixel data are invalid (a bad compressed stream,
+    /// values above the header's `maxval`).
+    #[error("{origin}: corrupt image data: {what}")]
+    ImageData {
+        /// File name.
+        origin: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// A valid image of a kind photopose does not read (colour, palette, ...).
+    #[error("{origin}: unsupported image: {what}")]
+    UnsupportedImage {
+        /// File name.
+        origin: String,
+        /// The kind of image and what is supported.
+        what: String,
+    },
+    /// An image whose size differs from the camera's sensor.
+    #[error(
+        "{origin}: image is {width}×{height}, camera file says {camera_width}×{camera_height}"
+    )]
+    ImageSize {
+        /// File name.
+        origin: String,
+        /// Image width, px.
+        width: u32,
+        /// Image height, px.
+        height: u32,
+        /// Sensor width of the camera file, px.
+        camera_width: u32,
+        /// Sensor height of the camera file, px.
+        camera_height: u32,
     },
     /// The camera file is not valid.
     #[error("{origin}: {what}")]
