@@ -21,21 +21,25 @@ pub struct Prediction {
 impl Prediction {
     /// Standard deviations of `Xc, Yc, Zc`, mm.
     pub fn std_center(&self) -> Vector3<f64> {
-        Vector3::new(
-            self.covariance[(0, 0)].sqrt(),
-            self.covariance[(1, 1)].sqrt(),
-            self.covariance[(2, 2)].sqrt(),
-        )
+        std_center(&self.covariance)
     }
 
     /// Standard deviations of the rotations about the field's axes, degrees.
     pub fn std_rotation_deg(&self) -> Vector3<f64> {
-        Vector3::new(
-            self.covariance[(3, 3)].sqrt().to_degrees(),
-            self.covariance[(4, 4)].sqrt().to_degrees(),
-            self.covariance[(5, 5)].sqrt().to_degrees(),
-        )
+        std_rotation_deg(&self.covariance)
     }
+}
+
+/// Standard deviations of `Xc, Yc, Zc` (mm) from a covariance of
+/// `(Xc, Yc, Zc, ωX, ωY, ωZ)`.
+pub fn std_center(covariance: &Matrix6<f64>) -> Vector3<f64> {
+    Vector3::from_fn(|k, _| covariance[(k, k)].sqrt())
+}
+
+/// Standard deviations of `ωX, ωY, ωZ` in degrees from a covariance of
+/// `(Xc, Yc, Zc, ωX, ωY, ωZ)`.
+pub fn std_rotation_deg(covariance: &Matrix6<f64>) -> Vector3<f64> {
+    Vector3::from_fn(|k, _| covariance[(3 + k, 3 + k)].sqrt().to_degrees())
 }
 
 /// The points of `field` that `camera` at `exterior` sees: in front and

@@ -116,20 +116,12 @@ pub struct ResectionReport {
 impl ResectionReport {
     /// Standard deviations of `Xc, Yc, Zc`, mm.
     pub fn std_center(&self) -> Vector3<f64> {
-        Vector3::new(
-            self.covariance[(0, 0)].sqrt(),
-            self.covariance[(1, 1)].sqrt(),
-            self.covariance[(2, 2)].sqrt(),
-        )
+        crate::precision::std_center(&self.covariance)
     }
 
     /// Standard deviations of the rotations about the field's X, Y, Z axes, degrees.
     pub fn std_rotation_deg(&self) -> Vector3<f64> {
-        Vector3::new(
-            self.covariance[(3, 3)].sqrt().to_degrees(),
-            self.covariance[(4, 4)].sqrt().to_degrees(),
-            self.covariance[(5, 5)].sqrt().to_degrees(),
-        )
+        crate::precision::std_rotation_deg(&self.covariance)
     }
 }
 

@@ -1,29 +1,14 @@
 //! Once warm, locating a frame — detection, identification, both
 //! resections — allocates nothing: a counting global allocator watches.
-#![allow(unsafe_code)] // a counting global allocator is the one way to observe allocations
 
 use photopose_field::design::default_plate;
 use photopose_geometry::Exterior;
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-}
+use photopose_testkit::{allocations, CountingAllocator};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 #[test]
 fn locating_allocates_nothing_once_warm() {
@@ -49,16 +34,12 @@ fn locating_allocates_nothing_once_warm() {
     for img in &frames {
         assert_eq!(*locator.locate(img.view()).unwrap().status, PoseStatus::Ok);
     }
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = allocations();
     for _ in 0..3 {
         for img in &frames {
             let loc = locator.locate(img.view()).unwrap();
             assert_eq!(*loc.status, PoseStatus::Ok);
         }
     }
-    assert_eq!(
-        ALLOCS.load(Ordering::Relaxed) - before,
-        0,
-        "allocations per frame once warm"
-    );
+    assert_eq!(allocations() - before, 0, "allocations per frame once warm");
 }

@@ -56,6 +56,9 @@ pub struct Counters {
 }
 
 /// One worker result, or the notice that an admitted frame was dropped.
+// Moved by value through a bounded channel: boxing the large variant would
+// allocate per frame.
+#[allow(clippy::large_enum_variant)]
 enum Outcome {
     Message {
         order: u64,

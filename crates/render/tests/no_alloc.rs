@@ -1,27 +1,12 @@
 //! Rendering allocates nothing once the renderer has rendered a frame.
-#![allow(unsafe_code)] // a counting global allocator is the one way to observe allocations
 
 use photopose_field::design::default_plate;
 use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
 use photopose_render::{RenderOptions, Renderer};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-struct Counting;
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        unsafe { System.dealloc(p, l) }
-    }
-}
+use photopose_testkit::{allocations, CountingAllocator};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 #[test]
 fn rendering_allocates_nothing_once_warm() {
@@ -49,9 +34,9 @@ fn rendering_allocates_nothing_once_warm() {
         Exterior::from_kuka_pose([40.0, -30.0, 800.0, 30.0, 10.0, -5.0]),
     ];
     r.render(&poses[0], &mut img).unwrap();
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = allocations();
     for e in &poses {
         r.render(e, &mut img).unwrap();
     }
-    assert_eq!(ALLOCS.load(Ordering::Relaxed) - before, 0);
+    assert_eq!(allocations() - before, 0);
 }
