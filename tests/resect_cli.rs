@@ -304,3 +304,78 @@ fn simulated_observations_round_trip_through_resect() {
         assert!((p[k] - want[k]).abs() < 0.05, "{p:?}");
     }
 }
+
+/// Renders the default plate from `pose` into `path` (PGM or PNG by extension).
+fn render_to(path: &Path, pose: [f64; 6], seed: u64) {
+    let camera =
+        photopose_formats::parse_camera(include_str!("../config/camera.toml"), "camera").unwrap();
+    let field = photopose_field::design::default_plate();
+    let options = photopose_render::RenderOptions {
+        seed,
+        ..Default::default()
+    };
+    let mut r = photopose_render::Renderer::new(camera, &field, options).unwrap();
+    let mut img = r.new_image();
+    r.render(
+        &photopose_geometry::Exterior::from_kuka_pose(pose),
+        &mut img,
+    )
+    .unwrap();
+    photopose_formats::save_image(path, &img).unwrap();
+}
+
+#[test]
+fn resect_takes_images_and_says_why_one_fails() {
+    let dir = scratch("images");
+    let good = dir.join("good.pgm");
+    let png = dir.join("good.png");
+    render_to(&good, [15.0, -10.0, 950.0, 20.0, 4.0, -3.0], 1);
+    render_to(&png, [-40.0, 30.0, 1100.0, -60.0, -8.0, 5.0], 2);
+    let black = dir.join("black.pgm");
+    std::fs::write(
+        &black,
+        [b"P5\n1300 1030\n255\n".as_slice(), &vec![0u8; 1300 * 1030]].concat(),
+    )
+    .unwrap();
+    let small = dir.join("small.pgm");
+    std::fs::write(
+        &small,
+        [b"P5\n64 48\n255\n".as_slice(), &vec![0u8; 64 * 48]].concat(),
+    )
+    .unwrap();
+    let out = bin()
+        .arg("resect")
+        .args([&good, &black, &small, &png])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = lines(&out);
+    assert_eq!(v.len(), 4);
+    assert_eq!(v[0]["ok"], true, "{}", v[0]);
+    let c: Vec<f64> = v[0]["center"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(
+        (c[0] - 15.0).abs() < 0.1 && (c[1] + 10.0).abs() < 0.1 && (c[2] - 950.0).abs() < 0.1,
+        "{c:?}"
+    );
+    assert!(v[0]["n_points"].as_u64().unwrap() > 200);
+    assert_eq!(v[1]["ok"], false);
+    assert!(
+        v[1]["error"].as_str().unwrap().contains("black.pgm"),
+        "{}",
+        v[1]
+    );
+    assert_eq!(v[2]["ok"], false);
+    let e = v[2]["error"].as_str().unwrap();
+    assert!(e.contains("64×48") && e.contains("1300×1030"), "{e}");
+    assert_eq!(v[3]["ok"], true, "{}", v[3]);
+}

@@ -6,6 +6,7 @@ use anyhow::Result;
 use clap::Parser;
 use photopose_field::Field;
 use photopose_geometry::{Camera, Observation, Resection, ResectionOptions, ResectionReport};
+use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
@@ -23,6 +24,9 @@ pub struct Args {
     /// Observation files, CSV `id,col,row` in pixels.
     #[arg(long, num_args = 1..)]
     pub observations: Vec<PathBuf>,
+    /// Images (PGM or PNG, 8 or 16 bit): targets are detected and
+    /// identified, then the camera resected.
+    pub images: Vec<PathBuf>,
     /// Inlier gate of the hypothesise-and-verify stage, pixels.
     #[arg(long, default_value_t = ResectionOptions::default().ransac_threshold_px)]
     pub gate_px: f64,
@@ -137,8 +141,8 @@ pub fn observations_for(
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
-    if args.observations.is_empty() {
-        anyhow::bail!("no input: give --observations FILE... (images come with target detection)");
+    if args.observations.is_empty() && args.images.is_empty() {
+        anyhow::bail!("no input: give images (PGM, PNG) or --observations FILE...");
     }
     // A camera or field that cannot be used fails every input, each on its
     // own line, so that a batch reader sees why.
@@ -148,7 +152,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         Ok(cf) => cf,
         Err(e) => {
             let error = format!("{e:#}");
-            for path in &args.observations {
+            for path in args.observations.iter().chain(&args.images) {
                 let line = ErrorLine {
                     image: &path.display().to_string(),
                     ok: false,
@@ -165,6 +169,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         ..ResectionOptions::default()
     };
     let mut resection = Resection::new(&camera, options);
+    let mut locator: Option<Locator> = None;
     let mut obs = Vec::new();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
@@ -188,9 +193,63 @@ pub fn run(args: Args) -> Result<ExitCode> {
         };
         writeln!(out, "{line}")?;
     }
+    for path in &args.images {
+        let name = path.display().to_string();
+        let locator = match &mut locator {
+            Some(l) => l,
+            None => locator.insert(Locator::new(
+                camera,
+                field.clone(),
+                LocateOptions {
+                    resection: options,
+                    ..LocateOptions::default()
+                },
+            )?),
+        };
+        let result = locate_image(locator, &camera, path);
+        let line = match result {
+            Ok((report, rejected)) => {
+                serde_json::to_string(&PoseLine::new(&name, &report, &rejected))?
+            }
+            Err(error) => {
+                failed += 1;
+                serde_json::to_string(&ErrorLine {
+                    image: &name,
+                    ok: false,
+                    error,
+                })?
+            }
+        };
+        writeln!(out, "{line}")?;
+    }
     Ok(if failed > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// Detects, identifies and resects one image file.
+fn locate_image(
+    locator: &mut Locator,
+    camera: &Camera,
+    path: &std::path::Path,
+) -> Result<(ResectionReport, Vec<u64>), String> {
+    let name = path.display().to_string();
+    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
+    photopose_formats::check_size(&image, camera, &name).map_err(|e| e.to_string())?;
+    let loc = locator
+        .locate(image.view())
+        .map_err(|e| format!("{name}: {e}"))?;
+    match (loc.status, loc.pose) {
+        (PoseStatus::Ok, Some(p)) => Ok((*p, loc.rejected_ids.to_vec())),
+        (PoseStatus::TooFewTargets { coded }, _) => Err(format!(
+            "{name}: too few targets: {coded} coded targets identified, a first pose needs 4"
+        )),
+        (PoseStatus::Frame(status), _) => {
+            Err(format!("{name}: no targets: the frame is {status:?}"))
+        }
+        (PoseStatus::NoPose(e), _) => Err(format!("{name}: {e}")),
+        (PoseStatus::Ok, None) => Err(format!("{name}: no pose")),
+    }
 }
