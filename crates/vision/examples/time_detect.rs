@@ -1,7 +1,7 @@
 //! Times `Detector::detect` on 1300 × 1030 frames of the default plate
 //! rendered by `photopose-render` (blur σ = 0.6 px, noise σ = 2 DN). Run in
 //! release: `cargo run --release -p photopose-vision --example time_detect
-//! [-- ITERATIONS]` (the benchmark `benches/detect.rs` gives the numbers
+//! [-- ITERATIONS [POSE]]` (POSE 0, 1 or 2 times one frame only; the benchmark `benches/detect.rs` gives the numbers
 //! that count; this is for profilers such as `perf` and callgrind).
 
 use photopose_field::design::default_plate;
@@ -15,6 +15,9 @@ fn main() {
         .nth(1)
         .map(|a| a.parse().expect("iterations"))
         .unwrap_or(200);
+    let only: Option<usize> = std::env::args()
+        .nth(2)
+        .map(|a| a.parse().expect("pose index"));
     let cam = Camera::new(
         Sensor {
             width: 1300,
@@ -38,7 +41,7 @@ fn main() {
     let field = default_plate();
     let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).expect("renderer");
     let mut det = Detector::new(1300, 1030, DetectorOptions::for_field(&field)).expect("detector");
-    for (name, eye, up) in [
+    for (k, (name, eye, up)) in [
         (
             "frontal 1.0 m",
             Vector3::new(0.0, 0.0, 1000.0),
@@ -46,7 +49,13 @@ fn main() {
         ),
         ("45° 1.0 m", Vector3::new(0.0, -707.0, 707.0), Vector3::z()),
         ("frontal 0.6 m", Vector3::new(0.0, 0.0, 600.0), Vector3::y()),
-    ] {
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        if only.is_some_and(|o| o != k) {
+            continue;
+        }
         let ext = Exterior::look_at(eye, Vector3::zeros(), up).expect("pose");
         let mut img = renderer.new_image();
         renderer.render(&ext, &mut img).expect("render");

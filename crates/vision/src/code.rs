@@ -362,6 +362,24 @@ impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
     }
 }
 
+/// Samples the ring's middle at phase angle `j` into `ring[j]`; whether it
+/// is bright, `None` outside the image.
+#[inline(always)]
+fn phase_sample<P: Pixel>(
+    plane: &Sampler<'_, '_, P>,
+    f: &RingFrame,
+    tables: &RingTables,
+    thr: f64,
+    j: usize,
+    ring: &mut [f64; PHASE_SAMPLES],
+) -> Option<bool> {
+    let (x, y) = f.point_cs(2.5, tables.phase[j]);
+    plane.at(x, y).map(|v| {
+        ring[j] = v;
+        v > thr
+    })
+}
+
 fn zone<P: Pixel>(
     plane: &Sampler<'_, '_, P>,
     f: &RingFrame,
@@ -428,14 +446,8 @@ pub fn read<P: Pixel>(
     let mut ring = [0.0f64; PHASE_SAMPLES];
     let mut n_bright = 0;
     let mut outside = false;
-    // Returns whether the sample is bright; `None` outside the image.
-    let sample = |j: usize, ring: &mut [f64; PHASE_SAMPLES]| {
-        let (x, y) = f.point_cs(2.5, tables.phase[j]);
-        plane.at(x, y).map(|v| {
-            ring[j] = v;
-            v > thr
-        })
-    };
+    let sample =
+        |j: usize, ring: &mut [f64; PHASE_SAMPLES]| phase_sample(plane, f, tables, thr, j, ring);
     for j in (0..PHASE_SAMPLES).step_by(3) {
         match sample(j, &mut ring) {
             Some(b) => n_bright += b as usize,

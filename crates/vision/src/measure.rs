@@ -425,7 +425,11 @@ mod tests {
             let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
             for j in 0..5u32 {
                 let want: i64 = (ka..=kb).map(|k| k.pow(j)).sum();
-                assert_eq!(hi[j as usize] - lo[j as usize], want, "j = {j}, {ka}..={kb}");
+                assert_eq!(
+                    hi[j as usize] - lo[j as usize],
+                    want,
+                    "j = {j}, {ka}..={kb}"
+                );
             }
         }
     }

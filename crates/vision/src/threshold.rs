@@ -102,7 +102,12 @@ pub fn histogram<P: Pixel>(
 /// second row and column: four interleaved partial histograms, so that
 /// runs of equal grey values (the background) do not wait on each other's
 /// increments.
-fn histogram_8bit_step2<P: Pixel>(data: &[P], width: usize, height: usize, hist: &mut [u32]) -> u32 {
+fn histogram_8bit_step2<P: Pixel>(
+    data: &[P],
+    width: usize,
+    height: usize,
+    hist: &mut [u32],
+) -> u32 {
     let mut part = [[0u32; 256]; 4];
     let mut n = 0u32;
     let bin = |p: P| p.value() as u8 as usize;
