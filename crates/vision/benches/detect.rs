@@ -51,9 +51,17 @@ fn benches(cr: &mut Criterion) {
         renderer.render(&ext, &mut img).expect("render");
         let visible = renderer.truth().iter().filter(|t| t.visible).count();
         let found = det.detect(img.view()).expect("detect").targets.len();
-        assert!(found >= visible, "{name}: {found} targets, {visible} visible");
+        assert!(
+            found >= visible,
+            "{name}: {found} targets, {visible} visible"
+        );
         group.bench_function(name, |b| {
-            b.iter(|| det.detect(black_box(img.view())).expect("detect").targets.len())
+            b.iter(|| {
+                det.detect(black_box(img.view()))
+                    .expect("detect")
+                    .targets
+                    .len()
+            })
         });
     }
     group.finish();
