@@ -100,6 +100,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let secs = started.elapsed().as_secs_f64();
     let ok = c.poses_ok.load(Ordering::Relaxed);
     let done = ok + c.poses_failed.load(Ordering::Relaxed);
+    let q = |p: f64| c.latency_quantile_us(p).map_or(f64::NAN, |us| us / 1000.0);
+    println!(
+        "latency (frame handed over → pose sent): p50 {:.2} ms, p99 {:.2} ms, p99.9 {:.2} ms",
+        q(0.5),
+        q(0.99),
+        q(0.999)
+    );
     println!(
         "{} frames in, {} dropped, {} poses ({} ok) in {:.1} s ({:.1} poses/s), mean latency {:.2} ms",
         c.frames_in.load(Ordering::Relaxed),

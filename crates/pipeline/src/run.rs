@@ -37,7 +37,7 @@ pub enum PipelineError {
 }
 
 /// Counters of a running pipeline (read them any time).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Counters {
     /// Frames delivered by the source.
     pub frames_in: AtomicU64,
@@ -53,6 +53,63 @@ pub struct Counters {
     pub stale: AtomicU64,
     /// Sum of latencies (frame hand-over → message sent), µs.
     pub latency_us_sum: AtomicU64,
+    /// Histogram of the latencies: bucket `k` counts latencies below
+    /// `LATENCY_BASE_US · 2^(k / 8)` µs (eight buckets per octave).
+    pub latency_histogram: [AtomicU64; LATENCY_BUCKETS],
+}
+
+/// Buckets of the latency histogram (10 µs to about 40 s).
+pub const LATENCY_BUCKETS: usize = 176;
+/// Upper edge of the first latency bucket, µs.
+pub const LATENCY_BASE_US: f64 = 10.0;
+
+impl Counters {
+    fn record_latency(&self, us: f64) {
+        let k = if us <= LATENCY_BASE_US {
+            0
+        } else {
+            ((8.0 * (us / LATENCY_BASE_US).log2()).ceil() as usize).min(LATENCY_BUCKETS - 1)
+        };
+        self.latency_histogram[k].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The latency below which a share `q` (0..=1) of the messages were
+    /// sent, µs (the upper edge of the bucket; within 9 %).
+    pub fn latency_quantile_us(&self, q: f64) -> Option<f64> {
+        let counts: Vec<u64> = self
+            .latency_histogram
+            .iter()
+            .map(|c| c.load(Ordering::Relaxed))
+            .collect();
+        let total: u64 = counts.iter().sum();
+        if total == 0 {
+            return None;
+        }
+        let want = (q.clamp(0.0, 1.0) * total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (k, c) in counts.iter().enumerate() {
+            seen += c;
+            if seen >= want {
+                return Some(LATENCY_BASE_US * 2f64.powf(k as f64 / 8.0));
+            }
+        }
+        None
+    }
+}
+
+impl Default for Counters {
+    fn default() -> Self {
+        Counters {
+            frames_in: AtomicU64::new(0),
+            frames_dropped: AtomicU64::new(0),
+            frames_processed: AtomicU64::new(0),
+            poses_ok: AtomicU64::new(0),
+            poses_failed: AtomicU64::new(0),
+            stale: AtomicU64::new(0),
+            latency_us_sum: AtomicU64::new(0),
+            latency_histogram: std::array::from_fn(|_| AtomicU64::new(0)),
+        }
+    }
 }
 
 /// One worker result, or the notice that an admitted frame was dropped.
@@ -372,6 +429,7 @@ fn output_loop(
                     {
                         let latency = received.elapsed();
                         message.latency_us = latency.as_secs_f64() * 1e6;
+                        counters.record_latency(message.latency_us);
                         counters
                             .latency_us_sum
                             .fetch_add(latency.as_micros() as u64, Ordering::Relaxed);
@@ -418,4 +476,22 @@ fn output_loop(
         dropped = counters.frames_dropped.load(Ordering::Relaxed),
         "pose output stopped"
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latency_quantiles_come_from_the_histogram() {
+        let c = Counters::default();
+        for us in 1..=1000 {
+            c.record_latency(us as f64 * 10.0);
+        }
+        let p50 = c.latency_quantile_us(0.5).unwrap();
+        let p99 = c.latency_quantile_us(0.99).unwrap();
+        assert!((5000.0..=5000.0 * 1.1).contains(&p50), "{p50}");
+        assert!((9900.0..=9900.0 * 1.1).contains(&p99), "{p99}");
+        assert_eq!(Counters::default().latency_quantile_us(0.5), None);
+    }
 }
