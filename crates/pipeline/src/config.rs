@@ -50,6 +50,14 @@ struct File {
     pipeline: PipelineSection,
     #[serde(default)]
     output: OutputSection,
+    #[serde(default)]
+    metrics: MetricsSection,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct MetricsSection {
+    listen: Option<String>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -264,6 +272,8 @@ pub struct Config {
     pub tcp_listen: Option<SocketAddr>,
     /// Lines queued per TCP client.
     pub tcp_client_queue: usize,
+    /// Prometheus endpoint address.
+    pub metrics_listen: Option<SocketAddr>,
 }
 
 impl Config {
@@ -459,6 +469,16 @@ impl Config {
             udp,
             tcp_listen,
             tcp_client_queue: f.output.tcp_client_queue,
+            metrics_listen: match &f.metrics.listen {
+                Some(a) => Some(a.parse::<SocketAddr>().map_err(|_| {
+                    bad(
+                        "metrics.listen",
+                        a.clone(),
+                        "must be an IP:port to listen on",
+                    )
+                })?),
+                None => None,
+            },
         })
     }
 }

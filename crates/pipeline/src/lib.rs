@@ -16,6 +16,7 @@
 //! end of the source shuts them down in order.
 
 pub mod config;
+pub mod metrics;
 pub mod notify;
 pub mod run;
 pub mod source;

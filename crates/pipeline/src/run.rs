@@ -133,6 +133,8 @@ pub struct Pipeline {
     counters: Arc<Counters>,
     threads: Vec<JoinHandle<()>>,
     tcp_addr: Option<SocketAddr>,
+    metrics: Option<crate::metrics::MetricsServer>,
+    metrics_addr: Option<SocketAddr>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -187,6 +189,18 @@ impl Pipeline {
             None => None,
         };
         let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
+        let metrics = match config.metrics_listen {
+            Some(a) => Some(
+                crate::metrics::MetricsServer::start(a, counters.clone(), stop.clone()).map_err(
+                    |source| PipelineError::Thread {
+                        name: format!("metrics on {a}"),
+                        source,
+                    },
+                )?,
+            ),
+            None => None,
+        };
+        let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
         // Workers.
         for k in 0..config.workers {
@@ -301,12 +315,19 @@ impl Pipeline {
             counters,
             threads,
             tcp_addr,
+            metrics,
+            metrics_addr,
         })
     }
 
     /// The TCP stream's address, if one is configured.
     pub fn tcp_addr(&self) -> Option<SocketAddr> {
         self.tcp_addr
+    }
+
+    /// The metrics endpoint's address, if one is configured.
+    pub fn metrics_addr(&self) -> Option<SocketAddr> {
+        self.metrics_addr
     }
 
     /// The counters.
@@ -320,8 +341,8 @@ impl Pipeline {
         self.stop.store(true, Ordering::Release);
     }
 
-    /// Whether every thread has ended (the source ended and everything was
-    /// processed and sent).
+    /// Whether every pipeline thread has ended (the source ended and
+    /// everything was processed and sent).
     pub fn finished(&self) -> bool {
         self.threads.iter().all(|t| t.is_finished())
     }
@@ -336,6 +357,10 @@ impl Pipeline {
     pub fn join(self) -> Arc<Counters> {
         for t in self.threads {
             let _ = t.join();
+        }
+        if let Some(m) = self.metrics {
+            self.stop.store(true, Ordering::Release);
+            m.join();
         }
         self.counters
     }
