@@ -26,7 +26,8 @@ fn run_streams_poses_and_stops_on_sigterm() {
         .replace(
             "tcp_listen = \"127.0.0.1:5006\"",
             "tcp_listen = \"127.0.0.1:0\"",
-        );
+        )
+        .replace("listen = \"127.0.0.1:9464\"", "listen = \"127.0.0.1:0\"");
     let path = dir.join("photopose.toml");
     std::fs::write(&path, config).unwrap();
     let child = bin()
