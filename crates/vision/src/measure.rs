@@ -112,7 +112,10 @@ const EMPTY: (i64, i64) = (1, 0);
 
 impl Conic {
     /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`
-    /// (`s_in ≤ s_out`), as inclusive ranges, unclipped.
+    /// (`s_in ≤ s_out`), as inclusive ranges, unclipped. The ends are the
+    /// ceiling and floor of the roots, taken as the nearest integers to
+    /// `root ± 0.5` (exact but for a root that is exactly an integer, where
+    /// a column on the ellipse itself may be left out).
     #[inline(always)]
     fn spans(&self, dy: f64, s_in: f64, s_out: f64) -> ((i64, i64), (i64, i64)) {
         let b = self.qxy * dy;
@@ -124,14 +127,25 @@ impl Conic {
         }
         let mid = self.bx - b * self.inv_qxx;
         let h_out = disc_out.sqrt() * self.inv_qxx;
-        let out = (ceil_i64(mid - h_out), floor_i64(mid + h_out));
+        let out = (near_i64(mid - h_out + 0.5), near_i64(mid + h_out - 0.5));
         let disc_in = base + self.qxx * s_in;
         if disc_in.is_nan() || disc_in < 0.0 {
             return (EMPTY, out);
         }
         let h_in = disc_in.sqrt() * self.inv_qxx;
-        ((ceil_i64(mid - h_in), floor_i64(mid + h_in)), out)
+        (
+            (near_i64(mid - h_in + 0.5), near_i64(mid + h_in - 0.5)),
+            out,
+        )
     }
+}
+
+/// Nearest integer (ties to even) for `|x| < 2³¹`, with an add and a move:
+/// adding 1.5 · 2⁵² leaves the integer in the low bits of the mantissa.
+#[inline(always)]
+fn near_i64(x: f64) -> i64 {
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    (x + ROUND).to_bits() as u32 as i32 as i64
 }
 
 /// `floor` for values well inside the `i64` range (no libm call on
@@ -437,6 +451,15 @@ mod tests {
                     "j = {j}, {ka}..={kb}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn rounding_helpers() {
+        for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
+            assert_eq!(near_i64(x), x.round_ties_even() as i64, "{x}");
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
         }
     }
 
