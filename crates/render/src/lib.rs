@@ -157,7 +157,16 @@ pub struct TargetTruth {
     pub visible: bool,
     /// Radius of the dot's image, pixels (largest axis).
     pub radius_px: f64,
+    /// Smallest distance of the image of the target's outline (coded: the
+    /// quiet zone's outer circle at 4 r; uncoded: the dark surround at 2 r)
+    /// from the sensor's edge, pixels; negative if it reaches outside,
+    /// `-inf` if part of the target is behind the camera. A detector that
+    /// needs dark background around a target asks for more than 0.
+    pub margin_px: f64,
 }
+
+/// Points on a target's outline projected per frame (visibility, extent).
+const OUTLINE: usize = 32;
 
 /// A target in the plate's own 2-D frame.
 #[derive(Debug, Clone, Copy)]
@@ -168,6 +177,9 @@ struct Flat {
     at: Vector2<f64>,
     radius: f64,
     code: u16,
+    /// Bit `k` set: the sector boundary at `k·30°` separates a bright from
+    /// a dark sector.
+    edges: u16,
 }
 
 /// The renderer with its scratch buffers.
@@ -243,16 +255,21 @@ impl Renderer {
             .iter()
             .map(|t| {
                 let d = t.position - origin;
+                let code = if t.kind == TargetKind::Coded {
+                    codes::value_of(t.id).unwrap_or(0)
+                } else {
+                    0
+                };
+                let edges = (0..12u32)
+                    .filter(|&k| codes::sector_bit(code, k) != codes::sector_bit(code, k + 11))
+                    .fold(0u16, |m, k| m | 1 << k);
                 Flat {
                     id: t.id,
                     kind: t.kind,
                     at: Vector2::new(d.dot(&u), d.dot(&v)),
                     radius: t.radius,
-                    code: if t.kind == TargetKind::Coded {
-                        codes::value_of(t.id).unwrap_or(0)
-                    } else {
-                        0
-                    },
+                    code,
+                    edges,
                 }
             })
             .collect::<Vec<_>>();
@@ -386,10 +403,14 @@ impl Renderer {
             // Image of the centre and of the target's circles.
             let centre_px = exterior.project_pixel(&self.camera, &centre);
             let mut ext: f64 = 0.0;
+            let mut ext_min = f64::INFINITY;
             let mut dot_px: f64 = 0.0;
             let mut all_in_front = centre_px.is_some();
-            for k in 0..16 {
-                let a = k as f64 * std::f64::consts::TAU / 16.0;
+            // Smallest distance of the outline (quiet zone or dark
+            // surround) from the frame's edge, pixels.
+            let mut margins = [f64::INFINITY; OUTLINE];
+            for (k, margin) in margins.iter_mut().enumerate() {
+                let a = k as f64 * std::f64::consts::TAU / OUTLINE as f64;
                 let dir = self.u * a.cos() + self.v * a.sin();
                 let (Some(c), Some(q), Some(qd)) = (
                     centre_px,
@@ -400,22 +421,32 @@ impl Renderer {
                     continue;
                 };
                 ext = ext.max((q - c).norm());
+                ext_min = ext_min.min((q - c).norm());
                 dot_px = dot_px.max((qd - c).norm());
+                *margin = (q.x + 0.5)
+                    .min(q.y + 0.5)
+                    .min(w as f64 - 0.5 - q.x)
+                    .min(h as f64 - 0.5 - q.y);
             }
+            let margin_px = if all_in_front {
+                outline_minimum(&margins)
+            } else {
+                f64::NEG_INFINITY
+            };
             let (col, row) = centre_px
                 .map(|p| (p.x, p.y))
                 .unwrap_or((f64::NAN, f64::NAN));
-            // "Visible": the quiet zone (or dark surround) with 30 % and
-            // 2 px to spare inside the frame — what a detector needs to see
-            // the dark background all round the target.
-            let visible = all_in_front
-                && centre_px.is_some_and(|p| self.camera.contains_pixel(p, 1.3 * ext + 2.0));
+            // "Visible": in front of the camera, and the whole outline of
+            // the quiet zone (or dark surround) on the sensor. The image of
+            // the outline is a convex curve, so the target lies inside too.
+            let visible = all_in_front && margin_px >= 0.0;
             self.truth.push(TargetTruth {
                 id: t.id,
                 kind: t.kind,
                 col,
                 row,
                 visible,
+                margin_px,
                 radius_px: dot_px,
             });
             let Some(p) = centre_px else { continue };
@@ -442,8 +473,11 @@ impl Renderer {
             let off_axis = ray.dot(&axis).clamp(0.0, 1.0);
             let cos_inc = (-ray.dot(&self.n)).clamp(0.0, 1.0);
             let gain = (reference / dist).powi(2) * off_axis.powi(4) * (0.6 + 0.4 * cos_inc);
-            // Footprint of a pixel on the plate, mm (for adaptive sampling).
-            let mm_per_px = (reach / ext.max(1e-9)) * 1.5;
+            // Largest footprint of a pixel on the plate, mm (for adaptive
+            // sampling): the longest plate distance one pixel step covers
+            // (foreshortened direction), from the narrowest axis of the
+            // outline's image.
+            let mm_per_px = reach / ext_min.max(1e-9);
             for row in r0..=r1 {
                 for col in c0..=c1 {
                     let Some(q) = self.hit(exterior, &rt, col as f64, row as f64) else {
@@ -454,7 +488,10 @@ impl Renderer {
                     if rho > reach / t.radius + 0.5 * mm_per_px / t.radius + 1.0 {
                         continue;
                     }
-                    let foot = mm_per_px / t.radius;
+                    // A pixel reaches 0.707 px (half its diagonal) from its
+                    // centre; 0.8 leaves room for the scale's variation
+                    // across the target and between the sampled directions.
+                    let foot = 0.8 * mm_per_px / t.radius;
                     let coverage = if ss > 1 && near_edge(&t, local, rho, foot) {
                         let mut acc = 0.0;
                         for sy in 0..ss {
@@ -489,34 +526,48 @@ impl Renderer {
             return;
         }
         let k = self.kernel.len() / 2;
-        for b in 0..self.boxes.len() {
-            let [c0, r0, c1, r1] = self.boxes[b];
+        let kernel = &self.kernel;
+        let excess = &mut self.excess;
+        let scratch = &mut self.scratch;
+        for b in self.boxes.iter_mut() {
+            let [c0, r0, c1, r1] = *b;
             let (c0, c1) = (c0.saturating_sub(k), (c1 + k).min(w - 1));
             let (r0, r1) = (r0.saturating_sub(k), (r1 + k).min(h - 1));
-            self.boxes[b] = [c0, r0, c1, r1];
+            *b = [c0, r0, c1, r1];
             for row in r0..=r1 {
+                let line = &excess[row * w..(row + 1) * w];
                 for col in c0..=c1 {
-                    let mut s = 0.0f32;
-                    for (j, kv) in self.kernel.iter().enumerate() {
-                        let cc = (col + j).saturating_sub(k).min(w - 1);
-                        s += kv * self.excess[row * w + cc];
-                    }
-                    self.scratch[row * w + col] = s;
+                    let s = if col >= k && col + k < w {
+                        // The whole window on the sensor: a plain dot product.
+                        kernel
+                            .iter()
+                            .zip(&line[col - k..=col + k])
+                            .map(|(kv, v)| kv * v)
+                            .sum()
+                    } else {
+                        let mut s = 0.0f32;
+                        for (j, kv) in kernel.iter().enumerate() {
+                            s += kv * line[(col + j).saturating_sub(k).min(w - 1)];
+                        }
+                        s
+                    };
+                    scratch[row * w + col] = s;
                 }
             }
         }
-        for b in 0..self.boxes.len() {
-            let [c0, r0, c1, r1] = self.boxes[b];
+        // Vertical pass, a row at a time (vectorises along the row). Rows
+        // outside every box hold no excess: the horizontal pass left them
+        // zero in `scratch`.
+        for &[c0, r0, c1, r1] in self.boxes.iter() {
             for row in r0..=r1 {
-                for col in c0..=c1 {
-                    let mut s = 0.0f32;
-                    for (j, kv) in self.kernel.iter().enumerate() {
-                        let rr = (row + j).saturating_sub(k).min(h - 1);
-                        // Rows outside every box hold no excess: the
-                        // horizontal pass left them zero in `scratch`.
-                        s += kv * self.scratch[rr * w + col];
+                let dst = &mut excess[row * w + c0..=row * w + c1];
+                dst.fill(0.0);
+                for (j, kv) in kernel.iter().enumerate() {
+                    let rr = (row + j).saturating_sub(k).min(h - 1);
+                    let src = &scratch[rr * w + c0..=rr * w + c1];
+                    for (d, s) in dst.iter_mut().zip(src) {
+                        *d += kv * s;
                     }
-                    self.excess[row * w + col] = s;
                 }
             }
         }
@@ -531,29 +582,68 @@ impl Renderer {
 
     /// Background, excess, noise → grey values; clears the excess.
     fn quantise(&mut self, w: usize, h: usize, out: &mut Image) {
-        let max = out.max_value() as f32;
-        let bg = self.options.background as f32 * max;
-        let noise = self.options.noise_dn as f32;
-        self.normal.reseed(self.options.seed);
-        let normal = &mut self.normal;
-        let excess = &mut self.excess;
-        let mut value = |i: usize| {
-            let v = bg + excess[i] * max + noise * normal.next();
-            excess[i] = 0.0;
-            v.round().clamp(0.0, max)
+        let n = w * h;
+        let level = Level {
+            max: out.max_value() as f32,
+            bg: self.options.background as f32 * out.max_value() as f32,
+            noise: self.options.noise_dn as f32,
         };
+        self.normal.reseed(self.options.seed);
+        let excess = &self.excess[..n];
         match out.pixels_mut() {
             Pixels::Mono8(data) => {
-                for (i, p) in data.iter_mut().enumerate().take(w * h) {
-                    *p = value(i) as u8;
-                }
+                level.fill(&mut data[..n], excess, &mut self.normal, |v| v as u8)
             }
             Pixels::Mono16(data) => {
-                for (i, p) in data.iter_mut().enumerate().take(w * h) {
-                    *p = value(i) as u16;
-                }
+                level.fill(&mut data[..n], excess, &mut self.normal, |v| v as u16)
             }
         }
+        self.excess[..n].fill(0.0);
+    }
+}
+
+/// Grey levels of a frame: saturation, background, noise σ (all DN).
+struct Level {
+    max: f32,
+    bg: f32,
+    noise: f32,
+}
+
+impl Level {
+    /// Writes `bg + excess·max + noise·N(0,1)`, clamped to `[0, max]` and
+    /// rounded (half up: offset by ½, then `cast` truncates).
+    #[inline(always)]
+    fn fill<T>(&self, out: &mut [T], excess: &[f32], normal: &mut Normal, cast: impl Fn(f32) -> T) {
+        let value = |e: f32, z: f32| {
+            cast((self.bg + e * self.max + self.noise * z).clamp(0.0, self.max) + 0.5)
+        };
+        let mut oc = out.chunks_exact_mut(4);
+        let mut ec = excess.chunks_exact(4);
+        for (o, e) in (&mut oc).zip(&mut ec) {
+            let z = normal.next4();
+            for j in 0..4 {
+                o[j] = value(e[j], z[j]);
+            }
+        }
+        for (o, e) in oc.into_remainder().iter_mut().zip(ec.remainder()) {
+            *o = value(*e, normal.next());
+        }
+    }
+}
+
+/// The smallest value of a smooth periodic function sampled at equal
+/// steps: the least sample refined by the parabola through it and its two
+/// neighbours (never above the least sample).
+fn outline_minimum(m: &[f64; OUTLINE]) -> f64 {
+    let k = (0..OUTLINE)
+        .min_by(|&a, &b| m[a].total_cmp(&m[b]))
+        .unwrap_or(0);
+    let (a, b, c) = (m[(k + OUTLINE - 1) % OUTLINE], m[k], m[(k + 1) % OUTLINE]);
+    let curvature = a - 2.0 * b + c;
+    if curvature > 1e-12 {
+        b - (c - a) * (c - a) / (8.0 * curvature)
+    } else {
+        b
     }
 }
 
@@ -584,14 +674,17 @@ fn near_edge(t: &Flat, local: Vector2<f64>, rho: f64, foot: f64) -> bool {
     if radii.iter().any(|r| (rho - r).abs() <= foot) {
         return true;
     }
-    if t.kind == TargetKind::Coded && rho > 2.0 - foot && rho < 3.0 + foot {
-        // Distance to the nearest sector boundary ray.
-        let a = local
-            .y
-            .atan2(local.x)
-            .rem_euclid(std::f64::consts::PI / 6.0);
-        let da = a.min(std::f64::consts::PI / 6.0 - a);
-        return rho * da.sin() <= foot;
+    if t.kind == TargetKind::Coded && t.edges != 0 && rho > 2.0 - foot && rho < 3.0 + foot {
+        // Distance to the two sector boundaries either side, where they
+        // separate sectors of different bits.
+        let sector = std::f64::consts::PI / 6.0;
+        let a = local.y.atan2(local.x).rem_euclid(std::f64::consts::TAU);
+        let j = ((a / sector) as u32).min(11);
+        let da = a - j as f64 * sector;
+        let near = |boundary: u32, angle: f64| {
+            t.edges & (1 << (boundary % 12)) != 0 && rho * angle.min(sector).sin() <= foot
+        };
+        return near(j, da) || near(j + 1, sector - da);
     }
     false
 }
