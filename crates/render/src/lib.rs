@@ -25,12 +25,15 @@
 //! rendered one frame of a given size.
 
 mod noise;
+pub mod plate;
+pub mod svg;
 
 use nalgebra::{Vector2, Vector3};
 use noise::Normal;
 use photopose_field::{codes, Field, TargetKind};
 use photopose_frame::{Image, Pixels};
 use photopose_geometry::{Camera, Exterior};
+pub use plate::Plate;
 use thiserror::Error;
 
 /// Why a frame cannot be rendered.
@@ -207,49 +210,7 @@ impl Renderer {
     /// A renderer of `field` seen by `camera`.
     pub fn new(camera: Camera, field: &Field, options: RenderOptions) -> Result<Self, RenderError> {
         options.check()?;
-        if field.is_empty() {
-            return Err(RenderError::EmptyField);
-        }
-        // The plate's plane: centroid and the normal of least spread.
-        let pts: Vec<Vector3<f64>> = field.targets().iter().map(|t| t.position).collect();
-        let origin = pts.iter().fold(Vector3::zeros(), |a, p| a + p) / pts.len() as f64;
-        let mut cov = nalgebra::Matrix3::zeros();
-        for p in &pts {
-            let d = p - origin;
-            cov += d * d.transpose();
-        }
-        let eig = nalgebra::SymmetricEigen::new(cov);
-        let mut k = 0;
-        for i in 1..3 {
-            if eig.eigenvalues[i] < eig.eigenvalues[k] {
-                k = i;
-            }
-        }
-        let mut n = eig.eigenvectors.column(k).into_owned();
-        if pts.len() < 3 || eig.eigenvalues.iter().filter(|l| **l > 1e-9).count() < 2 {
-            n = Vector3::z();
-        }
-        // Targets face +Z.
-        if n.z < 0.0 {
-            n = -n;
-        }
-        for (t, p) in field.targets().iter().zip(&pts) {
-            let d = (p - origin).dot(&n).abs();
-            if d > 0.01 {
-                return Err(RenderError::NotPlanar {
-                    id: t.id,
-                    distance: d,
-                });
-            }
-        }
-        // In-plane axes: u along +X projected into the plane (or +Y).
-        let seed_axis = if n.x.abs() < 0.9 {
-            Vector3::x()
-        } else {
-            Vector3::y()
-        };
-        let u = (seed_axis - n * n.dot(&seed_axis)).normalize();
-        let v = n.cross(&u);
+        let Plate { origin, u, v, n } = Plate::fit(field)?;
         let targets = field
             .targets()
             .iter()
