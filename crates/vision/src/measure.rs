@@ -292,7 +292,9 @@ pub fn measure<P: Pixel>(
     let cc = round_i64(bx);
     let d0 = cc as f64 - bx;
     for row in r0..=r1 {
-        let dy = row as f64 - by;
+        // (Through i64: one instruction on x86-64, unlike usize → f64.)
+        let row_f = row as i64 as f64;
+        let dy = row_f - by;
         let ((ia, ib), (oa, ob)) = q.spans(dy, s_in, s_out);
         let (oa, ob) = (oa.max(c0), ob.min(c1));
         if oa > ob {
@@ -300,7 +302,7 @@ pub fn measure<P: Pixel>(
         }
         let line = &plane.data[row * plane.width..(row + 1) * plane.width];
         // Background: the outer span minus the window's span inside the box.
-        let in_rows = (row as f64) >= wr0 && (row as f64) <= wr1;
+        let in_rows = row_f >= wr0 && row_f <= wr1;
         let (xa, xb) = if in_rows {
             (ia.max(bc0).max(oa), ib.min(bc1).min(ob))
         } else {
