@@ -28,6 +28,10 @@ enum Command {
     Bench(cmd::bench::Args),
     /// Predicted precision of a configuration without images (and a Monte Carlo check).
     Simulate(cmd::simulate::Args),
+    /// A synthetic frame of the test field from a camera pose, with its truth.
+    Render(cmd::render::Args),
+    /// Test-field tools: a printable SVG of a plate, a new plate design.
+    Field(cmd::field::Args),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +44,8 @@ fn main() -> ExitCode {
         Command::CheckConfig(args) => cmd::run::check(args),
         Command::Bench(args) => cmd::bench::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
+        Command::Render(args) => cmd::render::run(args),
+        Command::Field(args) => cmd::field::run(args),
     };
     match result {
         Ok(code) => code,

@@ -2,8 +2,10 @@
 
 pub mod bench;
 pub mod defaults;
+pub mod field;
 pub mod pose_arg;
 pub mod record;
+pub mod render;
 pub mod resect;
 pub mod run;
 pub mod simulate;
