@@ -25,7 +25,9 @@ use photopose_geometry::{
     Camera, GeometryError, Matrix2, Matrix3, Observation, Resection, ResectionOptions,
     ResectionReport, Vector2, Vector3,
 };
-use photopose_vision::{Detections, Detector, DetectorOptions, FrameStatus, VisionError};
+use photopose_vision::{
+    DetectStage, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
+};
 use thiserror::Error;
 
 /// Why a frame could not be processed at all (as opposed to a frame that
@@ -77,7 +79,10 @@ impl Default for LocateOptions {
 /// The stages of [`Locator::locate_probed`], in order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stage {
-    /// Threshold, labelling, centroids, code reading.
+    /// A stage inside the detector ended (threshold, labelling, a blob's
+    /// measurement or code reading, the final suppression).
+    Detector(DetectStage),
+    /// Threshold, labelling, centroids, code reading: all of detection.
     Detect,
     /// Coded targets taken and the first resection done.
     FirstPose,
@@ -253,7 +258,8 @@ impl Locator {
         self.rejected.clear();
         self.coarse = None;
         self.pose = None;
-        self.detector.detect(image)?;
+        self.detector
+            .detect_probed(image, &mut |s| probe(Stage::Detector(s)))?;
         probe(Stage::Detect);
         self.status = self.run(probe);
         Ok(Location {

@@ -293,6 +293,21 @@ struct Candidate {
     suppressed: bool,
 }
 
+/// The stages of [`Detector::detect_probed`]; each is reported when it ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DetectStage {
+    /// Histogram and Otsu threshold.
+    Threshold,
+    /// Connected components with their statistics.
+    Label,
+    /// Blob tests and centroid/moment measurement (of one blob).
+    Measure,
+    /// Code-ring reading (of one blob).
+    Decode,
+    /// Ring-part suppression and output.
+    Finish,
+}
+
 /// The target detector with all its buffers.
 #[derive(Debug)]
 pub struct Detector {
@@ -348,6 +363,17 @@ impl Detector {
 
     /// Detects the targets of a frame. Allocates nothing.
     pub fn detect(&mut self, image: ImageView<'_>) -> Result<&Detections, VisionError> {
+        self.detect_probed(image, &mut |_| {})
+    }
+
+    /// [`Detector::detect`], calling `probe` each time a [`DetectStage`]
+    /// ends (per blob for measuring and decoding). The caller may read a
+    /// clock there; this crate reads none.
+    pub fn detect_probed(
+        &mut self,
+        image: ImageView<'_>,
+        probe: &mut dyn FnMut(DetectStage),
+    ) -> Result<&Detections, VisionError> {
         let (w, h) = (image.width(), image.height());
         if (w, h) != (self.width, self.height) {
             return Err(VisionError::Size {
@@ -367,7 +393,7 @@ impl Detector {
                         got: data.len(),
                     });
                 }
-                self.run(&data[..need], max_value.min(255));
+                self.run(&data[..need], max_value.min(255), probe);
             }
             ImageView::Mono16 { data, .. } => {
                 if data.len() < need {
@@ -376,13 +402,14 @@ impl Detector {
                         got: data.len(),
                     });
                 }
-                self.run(&data[..need], max_value);
+                self.run(&data[..need], max_value, probe);
             }
         }
+        probe(DetectStage::Finish);
         Ok(&self.out)
     }
 
-    fn run<P: Pixel>(&mut self, data: &[P], max_value: u32) {
+    fn run<P: Pixel>(&mut self, data: &[P], max_value: u32, probe: &mut dyn FnMut(DetectStage)) {
         let o = self.options;
         let (w, h) = (self.width as usize, self.height as usize);
         let plane = Plane {
@@ -414,6 +441,7 @@ impl Detector {
         let t = threshold::threshold(&self.hist, n, shift, max_value, &tp);
         self.out.threshold = t;
         self.out.status = t.status;
+        probe(DetectStage::Threshold);
         if t.status != FrameStatus::Normal {
             return;
         }
@@ -428,6 +456,7 @@ impl Detector {
         }
         let blobs = self.labeller.blobs();
         self.out.n_blobs = blobs.len();
+        probe(DetectStage::Label);
         if blobs.is_empty() {
             self.out.status = FrameStatus::Empty;
             return;
@@ -492,6 +521,7 @@ impl Detector {
                 self.out.n_dropped += 1;
                 continue;
             }
+            probe(DetectStage::Measure);
             // 5. Code ring, sampled on the dot's ellipse with the blur removed.
             let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
             for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
@@ -511,6 +541,7 @@ impl Detector {
                     dark: 0.0,
                 },
             };
+            probe(DetectStage::Decode);
             if reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage)
                 && !reading.ring_present
             {
@@ -543,6 +574,7 @@ impl Detector {
                 ) {
                     m = m2;
                 }
+                probe(DetectStage::Measure);
             }
             self.candidates.push(Candidate {
                 blob: i as u32,
