@@ -40,7 +40,8 @@ pub struct Args {
     /// Seed of the noise (same seed, same bytes).
     #[arg(long, default_value_t = RenderOptions::default().seed)]
     pub seed: u64,
-    /// Samples per pixel side at pattern edges (1..=16).
+    /// Samples per pixel side at corners of the pattern (1..=16; 1: point
+    /// sampling, no anti-aliasing).
     #[arg(long, default_value_t = RenderOptions::default().supersample)]
     pub supersample: u32,
     /// Bits per pixel of the output: 8 or 16 (saturation 255 or 65535).
