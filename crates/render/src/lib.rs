@@ -344,8 +344,14 @@ impl Renderer {
     }
 
     /// Renders the field seen from `exterior` into `out` (8- or 16-bit,
-    /// the camera's size). The truth is available from [`Renderer::truth`].
-    pub fn render(&mut self, exterior: &Exterior, out: &mut Image) -> Result<(), RenderError> {
+    /// the camera's size) and returns the truth of the frame (also
+    /// available afterwards from [`Renderer::truth`]), kept in the
+    /// renderer's own preallocated storage.
+    pub fn render(
+        &mut self,
+        exterior: &Exterior,
+        out: &mut Image,
+    ) -> Result<&[TargetTruth], RenderError> {
         let (w, h) = (self.camera.sensor.width, self.camera.sensor.height);
         if (out.width(), out.height()) != (w, h) {
             return Err(RenderError::Size {
@@ -499,7 +505,7 @@ impl Renderer {
         }
         self.blur(w, h);
         self.quantise(w, h, out);
-        Ok(())
+        Ok(&self.truth)
     }
 
     /// Jacobian of the target-local plate coordinates (dot radii) with

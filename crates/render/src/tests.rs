@@ -177,7 +177,8 @@ fn truth_is_the_projection_of_the_centres() {
     let e = Exterior::from_kuka_pose([-30.0, 20.0, 900.0, 30.0, 10.0, 5.0]);
     let mut r = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
     let mut img = r.new_image();
-    r.render(&e, &mut img).unwrap();
+    let returned = r.render(&e, &mut img).unwrap().to_vec();
+    assert_eq!(returned, r.truth());
     assert_eq!(r.truth().len(), field.len());
     for (t, f) in r.truth().iter().zip(field.targets()) {
         assert_eq!(t.id, f.id);
