@@ -630,6 +630,31 @@ mod tests {
     }
 
     #[test]
+    fn low_bit_grey_png_expands_and_grey_alpha_is_refused() {
+        let mut bytes = Vec::new();
+        let mut enc = png::Encoder::new(&mut bytes, 8, 1);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::One);
+        let mut w = enc.write_header().unwrap();
+        w.write_image_data(&[0b1010_0001]).unwrap();
+        w.finish().unwrap();
+        let img = decode_image(&bytes, "bits.png").unwrap();
+        assert_eq!(img.max_value(), 255);
+        let row: Vec<u16> = (0..8).map(|c| img.get(c, 0)).collect();
+        assert_eq!(row, [255, 0, 255, 0, 0, 0, 0, 255]);
+
+        let mut bytes = Vec::new();
+        let mut enc = png::Encoder::new(&mut bytes, 1, 1);
+        enc.set_color(png::ColorType::GrayscaleAlpha);
+        enc.set_depth(png::BitDepth::Sixteen);
+        let mut w = enc.write_header().unwrap();
+        w.write_image_data(&[0, 1, 0, 2]).unwrap();
+        w.finish().unwrap();
+        let e = decode_image(&bytes, "ga.png").unwrap_err().to_string();
+        assert!(e.contains("GrayscaleAlpha"), "{e}");
+    }
+
+    #[test]
     fn files_missing_extension_and_size_check() {
         let dir =
             std::env::temp_dir().join(format!("photopose-formats-image-{}", std::process::id()));
