@@ -40,6 +40,15 @@ pub struct Target {
 }
 
 impl Target {
+    /// Radius of the outermost bright part of the target (code ring or
+    /// dot), mm.
+    pub fn bright_radius(&self) -> f64 {
+        match self.kind {
+            TargetKind::Coded => 3.0 * self.radius,
+            TargetKind::Uncoded => self.radius,
+        }
+    }
+
     /// Radius of the dark quiet zone around the target, mm.
     pub fn quiet_radius(&self) -> f64 {
         match self.kind {
@@ -248,13 +257,15 @@ impl Field {
             .filter(|t| t.kind == TargetKind::Uncoded)
     }
 
-    /// Checks that no target reaches into another's quiet zone (targets
-    /// assumed in one plane; distances are measured in 3-D).
+    /// Checks that no bright part of a target (dot or code ring) reaches
+    /// into another's quiet zone (targets assumed in one plane; distances
+    /// are measured in 3-D).
     pub fn check_quiet_zones(&self) -> Result<(), FieldError> {
         for (i, a) in self.targets.iter().enumerate() {
             for b in &self.targets[i + 1..] {
                 let d = (a.position - b.position).norm();
-                let need = (a.quiet_radius() + b.radius).max(b.quiet_radius() + a.radius);
+                let need = (a.quiet_radius() + b.bright_radius())
+                    .max(b.quiet_radius() + a.bright_radius());
                 if d < need {
                     return Err(FieldError::Overlap {
                         a: a.id,
@@ -304,6 +315,26 @@ mod tests {
         assert_eq!(f.get(17).unwrap().kind, TargetKind::Coded);
         let again = Field::parse_csv(&f.to_csv(), "again").unwrap();
         assert_eq!(f, again);
+    }
+
+    #[test]
+    fn a_code_ring_in_a_quiet_zone_is_an_overlap() {
+        // Coded r = 3 (ring to 9 mm, quiet zone 12), uncoded r = 5 (quiet
+        // zone 10): 18 mm apart the dots keep clear of each other's quiet
+        // zones (12 + 5, 10 + 3), but the ring reaches into the uncoded
+        // target's quiet zone (10 + 9 = 19 > 18).
+        let text = "id,x,y,z,kind,radius\n2,0,0,0,coded,3\n1001,18,0,0,uncoded,5\n";
+        let f = Field::parse_csv(text, "p.csv").unwrap();
+        assert!(matches!(
+            f.check_quiet_zones(),
+            Err(FieldError::Overlap { .. })
+        ));
+        let ok = Field::parse_csv(
+            "id,x,y,z,kind,radius\n2,0,0,0,coded,3\n1001,19,0,0,uncoded,5\n",
+            "p.csv",
+        )
+        .unwrap();
+        ok.check_quiet_zones().unwrap();
     }
 
     #[test]
