@@ -43,6 +43,8 @@ pub struct Linearised {
     pts: Vec<[f64; 8]>,
     /// Interleaved `[A | v]` rows of each point.
     rows: Vec<[f64; 14]>,
+    /// Whether every weight is the identity (whitening skipped).
+    unit_weights: bool,
 }
 
 /// Accumulates the rows `I` and `I + 1` of `[A | v]ᵀ [A | v]` (upper part)
@@ -80,6 +82,7 @@ impl Linearised {
     pub fn load_from(&mut self, other: &Linearised) {
         self.idx.clone_from(&other.idx);
         self.pts.clone_from(&other.pts);
+        self.unit_weights = other.unit_weights;
         self.rows.resize(self.idx.len(), [0.0; 14]);
     }
 
@@ -87,6 +90,7 @@ impl Linearised {
     pub fn load(&mut self, obs: &[Observation], status: &[Status]) {
         self.idx.clear();
         self.pts.clear();
+        self.unit_weights = true;
         for (k, (o, s)) in obs.iter().zip(status).enumerate() {
             if *s != Status::Used {
                 continue;
@@ -96,6 +100,7 @@ impl Linearised {
             let u00 = w[(0, 0)].sqrt();
             let u01 = w[(0, 1)] / u00;
             let u11 = (w[(1, 1)] - u01 * u01).max(0.0).sqrt();
+            self.unit_weights &= (u00, u01, u11) == (1.0, 0.0, 1.0);
             self.pts.push([
                 o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u00, u01, u11,
             ]);
@@ -124,6 +129,7 @@ impl Linearised {
             [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
         ];
         let mut behind = 0usize;
+        let unit = self.unit_weights;
         for (p, row) in self.pts.iter().zip(&mut self.rows) {
             let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
             let zx = rr[0][0] * ux + rr[0][1] * uy + rr[0][2] * uz;
@@ -149,6 +155,9 @@ impl Linearised {
             row[12] = p[3] + c * gx;
             row[13] = p[4] + c * gy;
             // Whitening by the weight's Cholesky factor: (x, y) ← U (x, y).
+            if unit {
+                continue;
+            }
             let (u00, u01, u11) = (p[5], p[6], p[7]);
             for k in 0..7 {
                 let (x, y) = (row[2 * k], row[2 * k + 1]);
