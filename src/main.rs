@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Exterior orientation from observations (or images): one JSON line per input.
     Resect(cmd::resect::Args),
+    /// Targets of images, identified: one JSON line per image.
+    Detect(cmd::detect::Args),
     /// Records the frames of the configured source into an MCAP file.
     Record(cmd::record::Args),
     /// The daemon: frames → poses → streams (default: synthetic camera).
@@ -39,6 +41,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Resect(args) => cmd::resect::run(args),
+        Command::Detect(args) => cmd::detect::run(args),
         Command::Record(args) => cmd::record::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::CheckConfig(args) => cmd::run::check(args),

@@ -379,3 +379,67 @@ fn resect_takes_images_and_says_why_one_fails() {
     assert!(e.contains("64×48") && e.contains("1300×1030"), "{e}");
     assert_eq!(v[3]["ok"], true, "{}", v[3]);
 }
+
+#[test]
+fn detect_lists_every_target_with_true_ids() {
+    let dir = scratch("detect");
+    let frame = dir.join("frame.pgm");
+    let out = bin()
+        .args(["render", "--pose", "10,-20,1000,30,5,-5", "--out"])
+        .arg(&frame)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let truth: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("frame.truth.json")).unwrap())
+            .unwrap();
+    let bad = dir.join("truncated.pgm");
+    std::fs::write(&bad, b"P5\n1300 1030\n255\n\x01\x02").unwrap();
+    let out = bin()
+        .arg("detect")
+        .arg(&frame)
+        .arg(&bad)
+        .arg(&frame)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let v = lines(&out);
+    assert_eq!(v.len(), 3);
+    assert_eq!(v[1]["ok"], false);
+    assert!(
+        v[1]["error"].as_str().unwrap().contains("truncated.pgm"),
+        "{}",
+        v[1]
+    );
+    assert_eq!(v[0]["targets"], v[2]["targets"], "same image, same answer");
+    let targets = v[0]["targets"].as_array().unwrap();
+    let truth_targets = truth["targets"].as_array().unwrap();
+    let visible = truth_targets
+        .iter()
+        .filter(|t| t["visible"] == true)
+        .count();
+    let mut identified = 0;
+    for t in targets {
+        for key in ["id", "kind", "col", "row"] {
+            assert!(t.get(key).is_some(), "{key} in {t}");
+        }
+        let Some(id) = t["id"].as_u64() else { continue };
+        let tr = truth_targets
+            .iter()
+            .find(|x| x["id"].as_u64() == Some(id))
+            .unwrap();
+        let d = (t["col"].as_f64().unwrap() - tr["col"].as_f64().unwrap())
+            .hypot(t["row"].as_f64().unwrap() - tr["row"].as_f64().unwrap());
+        assert!(d < 0.1, "id {id} is {d} px from its truth: a wrong id");
+        assert_eq!(t["kind"], tr["kind"]);
+        identified += 1;
+    }
+    assert!(
+        identified as f64 >= 0.95 * visible as f64,
+        "{identified} of {visible} visible targets identified"
+    );
+}

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod defaults;
+pub mod detect;
 pub mod field;
 pub mod pose_arg;
 pub mod record;

@@ -1,0 +1,148 @@
+//! `photopose detect IMAGE...`: every target of each image, identified where
+//! it can be (coded targets by their rings, uncoded ones by projection with
+//! the first pose), one JSON object per image per line, in input order.
+
+use crate::cmd::defaults;
+use anyhow::Result;
+use clap::Parser;
+use photopose_field::TargetKind;
+use photopose_locate::{LocateOptions, Locator, PoseStatus};
+use serde::Serialize;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Arguments of `photopose detect`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// Camera file (TOML); default: the built-in camera.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// Test field (CSV); default: the built-in plate.
+    #[arg(long)]
+    pub field: Option<PathBuf>,
+    /// Images (PGM or PNG, 8 or 16 bit, the camera's size).
+    #[arg(required = true)]
+    pub images: Vec<PathBuf>,
+}
+
+/// One target of the output (keys `id`, `kind`, `col`, `row` are fixed).
+#[derive(Serialize)]
+struct TargetLine {
+    /// Field id, or null when not identified.
+    id: Option<u64>,
+    /// "coded" (a ring was seen) or "uncoded".
+    kind: &'static str,
+    /// Image of the target's centre, pixels (eccentricity-corrected when
+    /// identified; the blob centre otherwise).
+    col: f64,
+    /// Image of the target's centre, pixels.
+    row: f64,
+    /// Centre of the bright blob as measured, pixels.
+    blob_col: f64,
+    /// Centre of the bright blob as measured, pixels.
+    blob_row: f64,
+    /// Semi-axes of the dot's ellipse, pixels, and angle (radians, from +col towards +row).
+    semi_major: f64,
+    semi_minor: f64,
+    angle: f64,
+    /// Used in the final pose.
+    used: bool,
+    /// Outcome of reading the code ring.
+    code: String,
+}
+
+#[derive(Serialize)]
+struct ImageLine<'a> {
+    image: &'a str,
+    ok: bool,
+    /// What came of the frame: ok, too_few_targets, empty, saturated, cluttered, no_pose.
+    status: String,
+    targets: Vec<TargetLine>,
+    n_targets: usize,
+    n_identified: usize,
+}
+
+#[derive(Serialize)]
+struct ErrorLine<'a> {
+    image: &'a str,
+    ok: bool,
+    error: String,
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<ExitCode> {
+    let camera = defaults::camera(args.camera.as_deref())?;
+    let field = defaults::field(args.field.as_deref())?;
+    let mut locator = Locator::new(camera, field, LocateOptions::default())?;
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut failed = 0;
+    for path in &args.images {
+        let name = path.display().to_string();
+        let line = match detect_one(&mut locator, &camera, path, &name) {
+            Ok(l) => serde_json::to_string(&l)?,
+            Err(error) => {
+                failed += 1;
+                serde_json::to_string(&ErrorLine {
+                    image: &name,
+                    ok: false,
+                    error,
+                })?
+            }
+        };
+        writeln!(out, "{line}")?;
+    }
+    Ok(if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn detect_one<'a>(
+    locator: &mut Locator,
+    camera: &photopose_geometry::Camera,
+    path: &std::path::Path,
+    name: &'a str,
+) -> Result<ImageLine<'a>, String> {
+    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
+    photopose_formats::check_size(&image, camera, name).map_err(|e| e.to_string())?;
+    let loc = locator
+        .locate(image.view())
+        .map_err(|e| format!("{name}: {e}"))?;
+    let status = match loc.status {
+        PoseStatus::Ok => "ok".to_string(),
+        PoseStatus::TooFewTargets { .. } => "too_few_targets".to_string(),
+        PoseStatus::Frame(s) => format!("{s:?}").to_lowercase(),
+        PoseStatus::NoPose(_) => "no_pose".to_string(),
+    };
+    let mut targets = Vec::with_capacity(loc.detections.targets.len());
+    for (k, d) in loc.detections.targets.iter().enumerate() {
+        let ident = loc.targets.iter().find(|t| t.detection == k);
+        targets.push(TargetLine {
+            id: ident.map(|t| t.id),
+            kind: match ident.map_or(d.kind, |t| t.kind) {
+                TargetKind::Coded => "coded",
+                TargetKind::Uncoded => "uncoded",
+            },
+            col: ident.map_or(d.col, |t| t.col),
+            row: ident.map_or(d.row, |t| t.row),
+            blob_col: d.col,
+            blob_row: d.row,
+            semi_major: d.semi_major,
+            semi_minor: d.semi_minor,
+            angle: d.angle,
+            used: ident.is_some_and(|t| t.used),
+            code: format!("{:?}", d.code),
+        });
+    }
+    Ok(ImageLine {
+        image: name,
+        ok: true,
+        status,
+        n_targets: targets.len(),
+        n_identified: targets.iter().filter(|t| t.id.is_some()).count(),
+        targets,
+    })
+}
