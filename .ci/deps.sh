@@ -5,7 +5,7 @@
 # source, systemd for the unit checks).
 set -euo pipefail
 
-PACKAGES=(pkg-config systemd)
+PACKAGES=(pkg-config systemd libaravis-dev libusb-1.0-0-dev libglib2.0-dev aravis-tools aravis-tools-cli)
 
 command -v cargo >/dev/null || { echo "deps: cargo is missing: install the Rust toolchain first" >&2; exit 1; }
 
