@@ -43,6 +43,8 @@ pub struct Linearised {
     pts: Vec<[f64; 8]>,
     /// Interleaved `[A | v]` rows of each point.
     rows: Vec<[f64; 14]>,
+    /// The rows of a candidate being tried ([`Linearised::evaluate_trial`]).
+    trial: Vec<[f64; 14]>,
     /// Whether every weight is the identity (whitening skipped).
     unit_weights: bool,
 }
@@ -77,15 +79,79 @@ fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
     }
 }
 
-impl Linearised {
-    /// Copies the loaded points of `other` (same observations, same status).
-    pub fn load_from(&mut self, other: &Linearised) {
-        self.idx.clone_from(&other.idx);
-        self.pts.clone_from(&other.pts);
-        self.unit_weights = other.unit_weights;
-        self.rows.resize(self.idx.len(), [0.0; 14]);
+/// Fills `rows` with the whitened Jacobian rows and residuals of `pts` at `e`.
+fn linearise_into(
+    pts: &[[f64; 8]],
+    unit: bool,
+    rows: &mut [[f64; 14]],
+    c: f64,
+    e: &Exterior,
+) -> Result<(), GeometryError> {
+    let r = &e.rotation;
+    let (cx, cy, cz) = (e.center.x, e.center.y, e.center.z);
+    let rr = [
+        [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
+        [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
+        [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
+    ];
+    let mut behind = 0usize;
+    for (p, row) in pts.iter().zip(rows.iter_mut()) {
+        let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
+        let zx = rr[0][0] * ux + rr[0][1] * uy + rr[0][2] * uz;
+        let zy = rr[1][0] * ux + rr[1][1] * uy + rr[1][2] * uz;
+        let zz = rr[2][0] * ux + rr[2][1] * uy + rr[2][2] * uz;
+        behind += (zz >= 0.0) as usize;
+        let inv = 1.0 / zz;
+        let gx = zx * inv;
+        let gy = zy * inv;
+        let f = -c * inv;
+        for k in 0..3 {
+            let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
+            // Centre: dZ/dC_k = -R e_k.
+            row[2 * k] = f * (gx * r2 - r0);
+            row[2 * k + 1] = f * (gy * r2 - r1);
+            // Rotation increment k: dZ = 2 (R e_k) × Z.
+            let dzx = 2.0 * (r1 * zz - r2 * zy);
+            let dzy = 2.0 * (r2 * zx - r0 * zz);
+            let dzz = 2.0 * (r0 * zy - r1 * zx);
+            row[6 + 2 * k] = f * (dzx - gx * dzz);
+            row[7 + 2 * k] = f * (dzy - gy * dzz);
+        }
+        row[12] = p[3] + c * gx;
+        row[13] = p[4] + c * gy;
+        // Whitening by the weight's Cholesky factor: (x, y) ← U (x, y).
+        if unit {
+            continue;
+        }
+        let (u00, u01, u11) = (p[5], p[6], p[7]);
+        for k in 0..7 {
+            let (x, y) = (row[2 * k], row[2 * k + 1]);
+            row[2 * k] = u00 * x + u01 * y;
+            row[2 * k + 1] = u11 * y;
+        }
     }
+    if behind > 0 {
+        return Err(GeometryError::BehindCamera { count: behind });
+    }
+    Ok(())
+}
 
+/// The normal equations of the current Jacobian and residuals. No allocation.
+fn normals_of(rows: &[[f64; 14]]) -> Normals {
+    let mut p = [[0.0f64; 7]; 7];
+    sweep::<0>(&rows, &mut p);
+    sweep::<2>(&rows, &mut p);
+    sweep::<4>(&rows, &mut p);
+    sweep::<6>(&rows, &mut p);
+    Normals {
+        n: Matrix6::from_fn(|i, j| p[i][j]),
+        g: Vector6::from_fn(|i, _| p[i][6]),
+        cost: p[6][6],
+        count: rows.len(),
+    }
+}
+
+impl Linearised {
     /// Loads the used observations.
     pub fn load(&mut self, obs: &[Observation], status: &[Status]) {
         self.idx.clear();
@@ -97,16 +163,21 @@ impl Linearised {
             }
             self.idx.push(k);
             let w = &o.weight;
-            let u00 = w[(0, 0)].sqrt();
-            let u01 = w[(0, 1)] / u00;
-            let u11 = (w[(1, 1)] - u01 * u01).max(0.0).sqrt();
-            self.unit_weights &= (u00, u01, u11) == (1.0, 0.0, 1.0);
+            let (u00, u01, u11) = if *w == nalgebra::Matrix2::identity() {
+                (1.0, 0.0, 1.0)
+            } else {
+                self.unit_weights = false;
+                let u00 = w[(0, 0)].sqrt();
+                let u01 = w[(0, 1)] / u00;
+                (u00, u01, (w[(1, 1)] - u01 * u01).max(0.0).sqrt())
+            };
             self.pts.push([
                 o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u00, u01, u11,
             ]);
         }
         // `evaluate` overwrites every row: only grow or shrink.
         self.rows.resize(self.idx.len(), [0.0; 14]);
+        self.trial.resize(self.idx.len(), [0.0; 14]);
     }
 
     /// Number of points loaded.
@@ -121,69 +192,20 @@ impl Linearised {
 
     /// Linearises at `e` (principal distance `c`) and forms the normal equations.
     pub fn evaluate(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
-        let r = &e.rotation;
-        let (cx, cy, cz) = (e.center.x, e.center.y, e.center.z);
-        let rr = [
-            [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
-            [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
-            [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
-        ];
-        let mut behind = 0usize;
-        let unit = self.unit_weights;
-        for (p, row) in self.pts.iter().zip(&mut self.rows) {
-            let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
-            let zx = rr[0][0] * ux + rr[0][1] * uy + rr[0][2] * uz;
-            let zy = rr[1][0] * ux + rr[1][1] * uy + rr[1][2] * uz;
-            let zz = rr[2][0] * ux + rr[2][1] * uy + rr[2][2] * uz;
-            behind += (zz >= 0.0) as usize;
-            let inv = 1.0 / zz;
-            let gx = zx * inv;
-            let gy = zy * inv;
-            let f = -c * inv;
-            for k in 0..3 {
-                let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
-                // Centre: dZ/dC_k = -R e_k.
-                row[2 * k] = f * (gx * r2 - r0);
-                row[2 * k + 1] = f * (gy * r2 - r1);
-                // Rotation increment k: dZ = 2 (R e_k) × Z.
-                let dzx = 2.0 * (r1 * zz - r2 * zy);
-                let dzy = 2.0 * (r2 * zx - r0 * zz);
-                let dzz = 2.0 * (r0 * zy - r1 * zx);
-                row[6 + 2 * k] = f * (dzx - gx * dzz);
-                row[7 + 2 * k] = f * (dzy - gy * dzz);
-            }
-            row[12] = p[3] + c * gx;
-            row[13] = p[4] + c * gy;
-            // Whitening by the weight's Cholesky factor: (x, y) ← U (x, y).
-            if unit {
-                continue;
-            }
-            let (u00, u01, u11) = (p[5], p[6], p[7]);
-            for k in 0..7 {
-                let (x, y) = (row[2 * k], row[2 * k + 1]);
-                row[2 * k] = u00 * x + u01 * y;
-                row[2 * k + 1] = u11 * y;
-            }
-        }
-        if behind > 0 {
-            return Err(GeometryError::BehindCamera { count: behind });
-        }
-        Ok(self.normals())
+        linearise_into(&self.pts, self.unit_weights, &mut self.rows, c, e)?;
+        Ok(normals_of(&self.rows))
     }
 
-    /// The normal equations of the current Jacobian and residuals. No allocation.
-    fn normals(&self) -> Normals {
-        let mut p = [[0.0f64; 7]; 7];
-        sweep::<0>(&self.rows, &mut p);
-        sweep::<2>(&self.rows, &mut p);
-        sweep::<4>(&self.rows, &mut p);
-        sweep::<6>(&self.rows, &mut p);
-        Normals {
-            n: Matrix6::from_fn(|i, j| p[i][j]),
-            g: Vector6::from_fn(|i, _| p[i][6]),
-            cost: p[6][6],
-            count: self.len(),
-        }
+    /// Like [`Linearised::evaluate`] for a candidate, into separate rows that
+    /// [`Linearised::accept_trial`] makes current.
+    pub fn evaluate_trial(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
+        linearise_into(&self.pts, self.unit_weights, &mut self.trial, c, e)?;
+        Ok(normals_of(&self.trial))
+    }
+
+    /// Makes the rows of the last trial the current ones.
+    pub fn accept_trial(&mut self) {
+        std::mem::swap(&mut self.rows, &mut self.trial);
     }
 
     /// Moves the residuals by a small parameter step `delta` (linear

@@ -145,7 +145,6 @@ pub struct Resection {
     status: Vec<Status>,
     rejected: Vec<u64>,
     lin: Linearised,
-    trial: Linearised,
 }
 
 /// Unit-weight normal matrix of the six unknowns at `e` over `points` seen
@@ -193,7 +192,6 @@ impl Resection {
             status: Vec::new(),
             rejected: Vec::new(),
             lin: Linearised::default(),
-            trial: Linearised::default(),
         }
     }
 
@@ -390,7 +388,6 @@ impl Resection {
                 need: 4,
             });
         }
-        self.trial.load_from(&self.lin);
         let mut current = self.lin.evaluate(c, e)?;
         while it < self.options.max_iterations {
             it += 1;
@@ -424,10 +421,10 @@ impl Resection {
             }
             // The normal equations at the candidate carry its cost: one pass
             // serves both the acceptance test and the next step.
-            match self.trial.evaluate(c, &candidate) {
+            match self.lin.evaluate_trial(c, &candidate) {
                 Ok(next) if next.cost <= current.cost * (1.0 + 1e-12) => {
                     *e = candidate;
-                    std::mem::swap(&mut self.lin, &mut self.trial);
+                    self.lin.accept_trial();
                     let small_gain = current.cost - next.cost <= 1e-10 * current.cost;
                     lambda = (lambda * 0.1).max(1e-12);
                     current = next;
@@ -521,12 +518,14 @@ fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
         });
     }
     for (index, o) in obs.iter().enumerate() {
-        let finite = o.object.iter().chain(o.image.iter()).all(|v| v.is_finite());
+        // A NaN or infinity anywhere makes the sum non-finite.
+        let finite = (o.object.x + o.object.y + o.object.z + o.image.x + o.image.y).is_finite();
         let w = &o.weight;
-        let weighted = w.iter().all(|v| v.is_finite())
-            && (w[(0, 1)] - w[(1, 0)]).abs() <= 1e-12 * w.abs().max()
-            && w[(0, 0)] > 0.0
-            && w.determinant() > 0.0;
+        let weighted = *w == Matrix2::identity()
+            || (w.iter().all(|v| v.is_finite())
+                && (w[(0, 1)] - w[(1, 0)]).abs() <= 1e-12 * w.abs().max()
+                && w[(0, 0)] > 0.0
+                && w.determinant() > 0.0);
         if !(finite && weighted) {
             return Err(GeometryError::NonFinite { index });
         }
