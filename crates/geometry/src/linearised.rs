@@ -139,10 +139,10 @@ fn linearise_into(
 /// The normal equations of the current Jacobian and residuals. No allocation.
 fn normals_of(rows: &[[f64; 14]]) -> Normals {
     let mut p = [[0.0f64; 7]; 7];
-    sweep::<0>(&rows, &mut p);
-    sweep::<2>(&rows, &mut p);
-    sweep::<4>(&rows, &mut p);
-    sweep::<6>(&rows, &mut p);
+    sweep::<0>(rows, &mut p);
+    sweep::<2>(rows, &mut p);
+    sweep::<4>(rows, &mut p);
+    sweep::<6>(rows, &mut p);
     Normals {
         n: Matrix6::from_fn(|i, j| p[i][j]),
         g: Vector6::from_fn(|i, _| p[i][6]),
