@@ -6,6 +6,9 @@
 //! saturation level (255 for 8-bit, 4095 for a 12-bit camera in a 16-bit
 //! container, 65535 for full 16-bit).
 
+mod meta;
+
+pub use meta::FrameMeta;
 use thiserror::Error;
 
 /// Pixel storage.

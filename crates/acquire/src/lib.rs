@@ -1,0 +1,27 @@
+//! photopose-acquire: the acquisition layer of the daemon.
+//!
+//! - [`ring`]: a pool of preallocated frame slots and the bounded,
+//!   lock-free single-producer / multi-consumer hand-over between a grabber
+//!   and detection workers, with an explicit overflow policy;
+//! - [`source`]: the [`FrameSource`](source::FrameSource) seam and its error;
+//! - [`gige`]: the GigE Vision source over aravis, reconnecting with back-off;
+//! - [`grabber`]: the grabber thread that runs a source into a ring;
+//! - [`fake`]: an in-process GigE Vision fake camera serving given images
+//!   (test support).
+//!
+//! Invariants: no allocation per frame once the ring is built; the camera
+//! is never touched on the frame path once lost; the only `unsafe` code is
+//! in the private `ffi` module. This is the only crate that links aravis.
+
+pub mod fake;
+#[allow(unsafe_code)]
+mod ffi;
+pub mod gige;
+pub mod grabber;
+pub mod ring;
+pub mod source;
+
+pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
+pub use grabber::{spawn_grabber, Grabber, GrabberExit};
+pub use ring::{Consumer, FrameHandle, Overflow, Producer, Ring, Slot};
+pub use source::{FrameSource, SourceError, SourceStats};
