@@ -83,8 +83,14 @@ impl FakeGigeCamera {
         let fake = camera.fake_camera().ok_or_else(|| FakeError::NotRunning {
             serial: serial.into(),
         })?;
-        fake.write_register(aravis_sys::ARV_FAKE_CAMERA_REGISTER_WIDTH as u32, image.width());
-        fake.write_register(aravis_sys::ARV_FAKE_CAMERA_REGISTER_HEIGHT as u32, image.height());
+        fake.write_register(
+            aravis_sys::ARV_FAKE_CAMERA_REGISTER_WIDTH as u32,
+            image.width(),
+        );
+        fake.write_register(
+            aravis_sys::ARV_FAKE_CAMERA_REGISTER_HEIGHT as u32,
+            image.height(),
+        );
         let fill = ffi::set_fill(&fake, Arc::clone(&bytes));
         let mut me = FakeGigeCamera {
             camera: Some(camera),

@@ -146,7 +146,9 @@ impl GigeConfig {
             }
         }
         if let Some(r) = self.roi {
-            if r.width == 0 || r.height == 0 || r.x.max(r.y).max(r.width).max(r.height) > i32::MAX as u32
+            if r.width == 0
+                || r.height == 0
+                || r.x.max(r.y).max(r.width).max(r.height) > i32::MAX as u32
             {
                 return bad("roi", format!("{r:?} is empty or too large"));
             }
@@ -200,20 +202,35 @@ fn setting(what: &str) -> impl Fn(glib::Error) -> OpenError + '_ {
     }
 }
 
-fn open(config: &GigeConfig) -> Result<Opened, OpenError> {
+fn open(config: &GigeConfig, resolved: &mut Option<String>) -> Result<Opened, OpenError> {
     let t0 = Instant::now();
     let guard = OPEN_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
-    let camera = match Camera::new(config.camera.as_deref()) {
-        Ok(c) => c,
-        Err(first) => match config.camera.as_deref() {
-            Some(want) => match ffi::device_id_of_serial(want) {
-                Some(id) => Camera::new(Some(&id))
-                    .map_err(|e| OpenError::Absent(format!("opening {id}: {e}")))?,
-                None => return Err(OpenError::Absent(format!("opening {want}: {first}"))),
-            },
-            None => return Err(OpenError::Absent(format!("no camera: {first}"))),
-        },
+    // A serial number is resolved to its device id by one discovery (about
+    // 1 s); the id found is kept, so reopening the same camera is fast.
+    let t_find = Instant::now();
+    let name = match (resolved.clone(), config.camera.as_deref()) {
+        (Some(id), _) => Some(id),
+        (None, Some(want)) => {
+            Some(ffi::device_id_of_serial(want).unwrap_or_else(|| want.to_string()))
+        }
+        (None, None) => None,
     };
+    let find_ms = t_find.elapsed().as_millis() as u64;
+    let camera = Camera::new(name.as_deref()).map_err(|e| {
+        OpenError::Absent(format!(
+            "opening {}: {e}",
+            name.as_deref().unwrap_or("the first camera")
+        ))
+    })?;
+    if config.camera.is_some() {
+        resolved.clone_from(&name);
+    }
+    tracing::debug!(
+        ?name,
+        find_ms,
+        open_ms = t0.elapsed().as_millis() as u64,
+        "camera found"
+    );
     drop(guard);
     let id = camera
         .device_id()
@@ -224,7 +241,9 @@ fn open(config: &GigeConfig) -> Result<Opened, OpenError> {
         PixelDepth::Mono8 => PixelFormat::MONO_8,
         PixelDepth::Mono16 => PixelFormat::MONO_16,
     };
-    camera.set_pixel_format(format).map_err(setting("pixel format"))?;
+    camera
+        .set_pixel_format(format)
+        .map_err(setting("pixel format"))?;
     if let Some(r) = config.roi {
         camera
             .set_region(r.x as i32, r.y as i32, r.width as i32, r.height as i32)
@@ -359,8 +378,9 @@ impl GigeSource {
         let opener = std::thread::Builder::new()
             .name(format!("{name}-open"))
             .spawn(move || {
+                let mut resolved = None;
                 for () in open_rx {
-                    if opened_tx.send(open(&cfg)).is_err() {
+                    if opened_tx.send(open(&cfg, &mut resolved)).is_err() {
                         break;
                     }
                 }
@@ -620,9 +640,8 @@ impl FrameSource for GigeSource {
                     let left = deadline.saturating_duration_since(Instant::now());
                     self.grab(slot, left.max(Duration::from_millis(1)))
                 }
-                Err(RecvTimeoutError::Timeout) => Err(SourceError::Unavailable {
-                    reason: "opening".into(),
-                }),
+                // The opener is at work: alive, no frame yet.
+                Err(RecvTimeoutError::Timeout) => Err(SourceError::Timeout(timeout)),
                 Err(RecvTimeoutError::Disconnected) => Err(SourceError::Config {
                     what: "opener thread".into(),
                     reason: "gone".into(),

@@ -181,16 +181,14 @@ mod tests {
         let g = spawn_grabber("grab-test", src, p, stop).unwrap();
         let mut seen = 0u64;
         let mut last = None;
-        loop {
-            match c.recv_timeout(Duration::from_secs(5)) {
-                Ok(h) => {
-                    assert_eq!(CountingSource::<SystemClock>::seq_of(&h.image), Some(h.meta.seq));
-                    assert!(last.is_none_or(|l| h.meta.seq > l));
-                    last = Some(h.meta.seq);
-                    seen += 1;
-                }
-                Err(_) => break,
-            }
+        while let Ok(h) = c.recv_timeout(Duration::from_secs(5)) {
+            assert_eq!(
+                CountingSource::<SystemClock>::seq_of(&h.image),
+                Some(h.meta.seq)
+            );
+            assert!(last.is_none_or(|l| h.meta.seq > l));
+            last = Some(h.meta.seq);
+            seen += 1;
         }
         let (_src, exit) = g.join();
         assert!(matches!(exit, GrabberExit::Ended));

@@ -3,7 +3,7 @@
 //! - [`ring`]: a pool of preallocated frame slots and the bounded,
 //!   lock-free single-producer / multi-consumer hand-over between a grabber
 //!   and detection workers, with an explicit overflow policy;
-//! - [`source`]: the [`FrameSource`](source::FrameSource) seam and its error;
+//! - [`source`]: the [`FrameSource`] seam and its error;
 //! - [`gige`]: the GigE Vision source over aravis, reconnecting with back-off;
 //! - [`grabber`]: the grabber thread that runs a source into a ring;
 //! - [`fake`]: an in-process GigE Vision fake camera serving given images

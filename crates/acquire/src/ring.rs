@@ -274,7 +274,10 @@ pub enum RecvError {
 
 impl Consumer {
     fn handle(&self, slot: Box<Slot>) -> FrameHandle {
-        self.shared.counters.delivered.fetch_add(1, Ordering::AcqRel);
+        self.shared
+            .counters
+            .delivered
+            .fetch_add(1, Ordering::AcqRel);
         FrameHandle {
             slot: Some(slot),
             shared: Arc::clone(&self.shared),
@@ -447,7 +450,10 @@ mod tests {
         let (mut p, c) = ring(2, Overflow::DropNewest);
         publish_seq(&mut p, 7);
         drop(p);
-        assert_eq!(c.recv_timeout(Duration::from_millis(10)).unwrap().meta.seq, 7);
+        assert_eq!(
+            c.recv_timeout(Duration::from_millis(10)).unwrap().meta.seq,
+            7
+        );
         assert_eq!(
             c.recv_timeout(Duration::from_millis(10)).unwrap_err(),
             RecvError::Disconnected

@@ -1,0 +1,324 @@
+//! The GigE source against real GigE Vision peers on loopback: aravis'
+//! `arv-fake-gv-camera-0.8` as a child process (streaming, loss and
+//! reconnection), and the in-process fake camera serving a given image.
+//!
+//! Every peer answers on 127.0.0.1's GigE Vision port, so the scenarios run
+//! one after the other inside a single test function, never concurrently.
+//! A missing `arv-fake-gv-camera-0.8` fails the test (run `.ci/deps.sh`).
+
+use photopose_acquire::fake::FakeGigeCamera;
+use photopose_acquire::grabber::{spawn_grabber, GrabberExit};
+use photopose_acquire::ring::{Overflow, Ring};
+use photopose_acquire::source::FrameSource;
+use photopose_acquire::{GigeConfig, GigeSource, Roi, Slot};
+use photopose_frame::{Image, Pixels};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const FAKE: &str = "arv-fake-gv-camera-0.8";
+const TOOL: &str = "arv-tool-0.8";
+/// The device id `arv-fake-gv-camera-0.8` serves.
+const FAKE_ID: &str = "Aravis-Fake-GV01";
+/// Its serial number.
+const FAKE_SERIAL: &str = "GV01";
+
+/// An `arv-fake-gv-camera-0.8 -i 127.0.0.1` child, killed on drop.
+struct FakeProcess {
+    child: Child,
+}
+
+fn missing_tool(bin: &str, e: &std::io::Error) -> ! {
+    panic!(
+        "cannot run `{bin}` ({e}): the GigE Vision tests need Debian's aravis-tools \
+         and aravis-tools-cli; run .ci/deps.sh"
+    )
+}
+
+impl FakeProcess {
+    /// Starts the fake camera and waits until it answers GigE Vision
+    /// control requests.
+    fn start() -> Self {
+        let child = Command::new(FAKE)
+            .args(["-i", "127.0.0.1"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| missing_tool(FAKE, &e));
+        let mut me = FakeProcess { child };
+        let t0 = Instant::now();
+        loop {
+            if let Ok(Some(status)) = me.child.try_wait() {
+                panic!(
+                    "{FAKE} exited at once ({status}): is another GigE Vision peer on 127.0.0.1?"
+                );
+            }
+            let out = Command::new(TOOL)
+                .args(["-a", "127.0.0.1", "control", "Width"])
+                .stdin(Stdio::null())
+                .output()
+                .unwrap_or_else(|e| missing_tool(TOOL, &e));
+            if out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Width") {
+                return me;
+            }
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "{FAKE} did not answer within 10 s"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for FakeProcess {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn init_tracing() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "photopose_acquire=info".into()),
+        )
+        .with_test_writer()
+        .try_init();
+}
+
+fn wait_for(what: &str, limit: Duration, mut done: impl FnMut() -> bool) -> Duration {
+    let t0 = Instant::now();
+    while !done() {
+        assert!(t0.elapsed() < limit, "{what}: not within {limit:?}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    t0.elapsed()
+}
+
+#[test]
+fn gige_source_against_fake_cameras() {
+    init_tracing();
+    streams_without_loss();
+    survives_losing_the_camera();
+    serves_given_images_in_process();
+}
+
+/// Several seconds at 20 frames/s through the grabber into the ring, opened
+/// by serial number: every frame after the first arrives.
+fn streams_without_loss() {
+    let _fake = FakeProcess::start();
+    let rate = 20.0;
+    let config = GigeConfig {
+        camera: Some(FAKE_SERIAL.into()),
+        frame_rate: Some(rate),
+        roi: Some(Roi {
+            x: 0,
+            y: 0,
+            width: 512,
+            height: 512,
+        }),
+        exposure_us: Some(2000.0),
+        gain: Some(1.0),
+        ..GigeConfig::default()
+    };
+    let source = GigeSource::new("gv-stream", config).unwrap();
+    let counters = source.counters();
+    let (producer, consumer) = Ring::build(4, Overflow::DropOldest, || Image::new_mono8(512, 512));
+    let stop = Arc::new(AtomicBool::new(false));
+    let grabber = spawn_grabber("grab-stream", source, producer, Arc::clone(&stop)).unwrap();
+
+    let worker = {
+        let consumer = consumer.clone();
+        let stop = Arc::clone(&stop);
+        std::thread::Builder::new()
+            .name("worker".into())
+            .spawn(move || {
+                let mut seqs = Vec::new();
+                let mut stamps = Vec::new();
+                while !stop.load(Ordering::Acquire) {
+                    if let Ok(f) = consumer.recv_timeout(Duration::from_millis(100)) {
+                        assert_eq!((f.image.width(), f.image.height()), (512, 512));
+                        seqs.push(f.meta.seq);
+                        stamps.push(f.meta.camera_time_ns);
+                    }
+                }
+                (seqs, stamps)
+            })
+            .unwrap()
+    };
+    wait_for("first frame", Duration::from_secs(10), || {
+        counters.snapshot().frames > 0
+    });
+    let t0 = Instant::now();
+    let f0 = counters.snapshot().frames;
+    std::thread::sleep(Duration::from_secs(5));
+    let f1 = counters.snapshot().frames;
+    let secs = t0.elapsed().as_secs_f64();
+    stop.store(true, Ordering::Release);
+    let (_source, exit) = grabber.join();
+    assert!(matches!(exit, GrabberExit::Stopped), "{exit:?}");
+    let (seqs, stamps) = worker.join().unwrap();
+
+    let stats = counters.snapshot();
+    let ring = consumer.counters().snapshot();
+    let measured = (f1 - f0) as f64 / secs;
+    eprintln!(
+        "stream: {measured:.1} frames/s asked {rate}; source {stats:?}; ring {ring:?}; \
+         worker saw {} frames",
+        seqs.len()
+    );
+    assert!(
+        measured > 0.85 * rate && measured < 1.15 * rate,
+        "rate {measured:.1} frames/s, asked {rate}"
+    );
+    assert_eq!(stats.missing, 0, "frames missed after the first: {stats:?}");
+    assert_eq!(stats.opens, 1);
+    assert_eq!(stats.losses, 0);
+    assert_eq!(ring.dropped, 0, "a worker keeps up with 20 frames/s");
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "gap in {seqs:?}");
+    assert!(
+        stamps.windows(2).all(|w| w[1] > w[0]),
+        "camera timestamps increase"
+    );
+    assert_eq!(consumer.free_slots(), 4, "every slot back in the pool");
+}
+
+/// Kills the camera mid-stream: the loss is reported, a new camera is
+/// started, and frames flow again through the same source object.
+fn survives_losing_the_camera() {
+    let mut fake = FakeProcess::start();
+    let config = GigeConfig {
+        camera: Some(FAKE_ID.into()),
+        frame_rate: Some(25.0),
+        lost_after: Duration::from_secs(1),
+        backoff_initial: Duration::from_millis(100),
+        backoff_max: Duration::from_millis(800),
+        ..GigeConfig::default()
+    };
+    let source = GigeSource::new("gv-lose", config).unwrap();
+    let counters = source.counters();
+    let (producer, consumer) = Ring::build(4, Overflow::DropOldest, || Image::new_mono8(512, 512));
+    let stop = Arc::new(AtomicBool::new(false));
+    let grabber = spawn_grabber("grab-lose", source, producer, Arc::clone(&stop)).unwrap();
+    // Drain the ring like a worker would.
+    let drain = {
+        let consumer = consumer.clone();
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            let mut last = None;
+            while !stop.load(Ordering::Acquire) {
+                if let Ok(f) = consumer.recv_timeout(Duration::from_millis(50)) {
+                    assert!(last.is_none_or(|l| f.meta.seq > l), "seq goes back");
+                    last = Some(f.meta.seq);
+                }
+            }
+        })
+    };
+
+    wait_for("frames before the loss", Duration::from_secs(10), || {
+        counters.snapshot().frames >= 20
+    });
+    let before = counters.snapshot();
+    fake.kill();
+    let killed = Instant::now();
+    let detect = wait_for("loss reported", Duration::from_secs(10), || {
+        grabber.counters().losses.load(Ordering::Relaxed) >= 1
+    });
+    assert!(!counters.snapshot().connected);
+    // Absent for a while: the source keeps trying, the grabber keeps running.
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(!grabber.is_finished());
+    let absent = counters.snapshot();
+    assert_eq!(absent.frames, before.frames.max(absent.frames));
+
+    let _fake2 = FakeProcess::start();
+    let restarted = Instant::now();
+    let frames_at_restart = counters.snapshot().frames;
+    let resume = wait_for("frames after the restart", Duration::from_secs(15), || {
+        counters.snapshot().frames > frames_at_restart + 10
+    });
+    let after = counters.snapshot();
+    eprintln!(
+        "loss: detected {:.2} s after the kill; frames again {:.2} s after the new camera \
+         answered (10 frames at 25/s included); {:.1} s kill to recovery; before {before:?}, after {after:?}",
+        detect.as_secs_f64(),
+        resume.as_secs_f64(),
+        killed.elapsed().as_secs_f64() - restarted.elapsed().as_secs_f64() + resume.as_secs_f64(),
+    );
+    assert_eq!(after.losses, 1);
+    assert!(after.opens >= 2);
+    assert!(after.connected);
+    stop.store(true, Ordering::Release);
+    let t = Instant::now();
+    let (_source, exit) = grabber.join();
+    drain.join().unwrap();
+    assert!(matches!(exit, GrabberExit::Stopped), "{exit:?}");
+    eprintln!("loss: grabber joined in {:.2} s", t.elapsed().as_secs_f64());
+    let ring = consumer.counters().snapshot();
+    assert_eq!(
+        ring.frames_in,
+        ring.delivered + ring.dropped + ring.queued()
+    );
+}
+
+/// The in-process fake camera puts a given image on the real GigE stream.
+fn serves_given_images_in_process() {
+    let (w, h) = (320u32, 240u32);
+    let pattern = |k: u32| {
+        let px = (0..w * h).map(|i| ((i * 7 + k * 13) % 251) as u8).collect();
+        Image::from_pixels(w, h, 255, Pixels::Mono8(px)).unwrap()
+    };
+    let first = pattern(1);
+    let camera = FakeGigeCamera::start("PPTEST01", &first).unwrap();
+    let config = GigeConfig {
+        camera: Some(camera.serial().into()),
+        frame_rate: Some(30.0),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-inproc", config).unwrap();
+    let mut slot = Slot::new(Image::new_mono8(w, h));
+    source.start().unwrap();
+
+    let next = |source: &mut GigeSource, slot: &mut Slot| {
+        let t0 = Instant::now();
+        loop {
+            match source.next_frame(slot, Duration::from_millis(200)) {
+                Ok(()) => return,
+                Err(e) if !e.is_fatal() && t0.elapsed() < Duration::from_secs(10) => {}
+                Err(e) => panic!("no frame from the in-process camera: {e}"),
+            }
+        }
+    };
+    for _ in 0..10 {
+        next(&mut source, &mut slot);
+        assert_eq!(slot.image, first, "frame carries the given image");
+    }
+    let second = pattern(2);
+    camera.set_image(&second).unwrap();
+    let mut switched = false;
+    for _ in 0..30 {
+        next(&mut source, &mut slot);
+        if slot.image == second {
+            switched = true;
+            break;
+        }
+        assert_eq!(slot.image, first);
+    }
+    assert!(switched, "the new image reaches the stream");
+    for _ in 0..5 {
+        next(&mut source, &mut slot);
+        assert_eq!(slot.image, second);
+    }
+    source.stop();
+    let stats = source.stats();
+    assert_eq!(stats.missing, 0, "{stats:?}");
+    drop(source);
+    drop(camera);
+}
