@@ -10,7 +10,7 @@ use photopose_acquire::fake::FakeGigeCamera;
 use photopose_acquire::grabber::{spawn_grabber, GrabberExit};
 use photopose_acquire::ring::{Overflow, Ring};
 use photopose_acquire::source::FrameSource;
-use photopose_acquire::{GigeConfig, GigeSource, Roi, Slot};
+use photopose_acquire::{GigeConfig, GigeSource, PixelDepth, Roi, Slot};
 use photopose_frame::{Image, Pixels};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -106,6 +106,8 @@ fn wait_for(what: &str, limit: Duration, mut done: impl FnMut() -> bool) -> Dura
 fn gige_source_against_fake_cameras() {
     init_tracing();
     streams_without_loss();
+    streams_mono16();
+    waits_for_an_absent_camera();
     survives_losing_the_camera();
     serves_given_images_in_process();
 }
@@ -190,6 +192,93 @@ fn streams_without_loss() {
     assert_eq!(consumer.free_slots(), 4, "every slot back in the pool");
 }
 
+/// Mono16 on request: 16-bit frames, none missed.
+fn streams_mono16() {
+    let _fake = FakeProcess::start();
+    let config = GigeConfig {
+        camera: Some(FAKE_ID.into()),
+        pixel: PixelDepth::Mono16,
+        frame_rate: Some(20.0),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-mono16", config).unwrap();
+    // A slot of the right size and depth: no reallocation.
+    let mut slot = Slot::new(Image::new_mono16(512, 512, u16::MAX));
+    let before = slot_ptr(&slot);
+    source.start().unwrap();
+    let mut got = 0;
+    let t0 = Instant::now();
+    while got < 20 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "{:?}",
+            source.stats()
+        );
+        match source.next_frame(&mut slot, Duration::from_millis(200)) {
+            Ok(()) => {
+                got += 1;
+                assert!(matches!(slot.image.pixels(), Pixels::Mono16(_)));
+                assert_eq!((slot.image.width(), slot.image.height()), (512, 512));
+            }
+            Err(e) => assert!(!e.is_fatal(), "{e}"),
+        }
+    }
+    assert_eq!(
+        slot_ptr(&slot),
+        before,
+        "frames copied into the caller's slot"
+    );
+    source.stop();
+    let stats = source.stats();
+    eprintln!("mono16: {stats:?}");
+    assert_eq!(stats.missing, 0);
+}
+
+fn slot_ptr(slot: &Slot) -> usize {
+    match slot.image.pixels() {
+        Pixels::Mono8(v) => v.as_ptr() as usize,
+        Pixels::Mono16(v) => v.as_ptr() as usize,
+    }
+}
+
+/// No camera at start: the grabber runs and reports it unavailable; the
+/// camera appears; frames flow.
+fn waits_for_an_absent_camera() {
+    let config = GigeConfig {
+        camera: Some(FAKE_ID.into()),
+        frame_rate: Some(25.0),
+        backoff_max: Duration::from_millis(500),
+        ..GigeConfig::default()
+    };
+    let source = GigeSource::new("gv-absent", config).unwrap();
+    let counters = source.counters();
+    let (producer, consumer) = Ring::build(4, Overflow::DropNewest, || Image::new_mono8(512, 512));
+    let stop = Arc::new(AtomicBool::new(false));
+    let grabber = spawn_grabber("grab-absent", source, producer, Arc::clone(&stop)).unwrap();
+    wait_for(
+        "camera reported unavailable",
+        Duration::from_secs(10),
+        || grabber.counters().unavailable.load(Ordering::Relaxed) > 0,
+    );
+    std::thread::sleep(Duration::from_secs(1));
+    assert_eq!(counters.snapshot().frames, 0);
+    assert!(!grabber.is_finished());
+    let _fake = FakeProcess::start();
+    let first = wait_for(
+        "frames once the camera is there",
+        Duration::from_secs(10),
+        || consumer.try_recv().is_some(),
+    );
+    eprintln!(
+        "absent at start: first frame {:.2} s after the camera answered; {:?}",
+        first.as_secs_f64(),
+        counters.snapshot()
+    );
+    stop.store(true, Ordering::Release);
+    let (_source, exit) = grabber.join();
+    assert!(matches!(exit, GrabberExit::Stopped), "{exit:?}");
+}
+
 /// Kills the camera mid-stream: the loss is reported, a new camera is
 /// started, and frames flow again through the same source object.
 fn survives_losing_the_camera() {
@@ -261,6 +350,12 @@ fn survives_losing_the_camera() {
     drain.join().unwrap();
     assert!(matches!(exit, GrabberExit::Stopped), "{exit:?}");
     eprintln!("loss: grabber joined in {:.2} s", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    drop(_source);
+    eprintln!(
+        "loss: source dropped in {:.2} s (waits for the dead camera's close)",
+        t.elapsed().as_secs_f64()
+    );
     let ring = consumer.counters().snapshot();
     assert_eq!(
         ring.frames_in,
