@@ -12,8 +12,7 @@ use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::{Camera, Exterior, Observation, Resection, ResectionOptions};
 
 fn setup() -> (Camera, Vec<Observation>) {
-    let camera =
-        photopose_formats::parse_camera(include_str!("../config/camera.toml"), "camera").unwrap();
+    let camera = photopose_formats::default_camera();
     let truth = Exterior::from_kuka_pose([10.0, -10.0, 1000.0, 12.0, 2.0, -2.0]);
     let mut rng = SplitMix64::new(9);
     let mut obs = Vec::new();

@@ -307,8 +307,7 @@ fn simulated_observations_round_trip_through_resect() {
 
 /// Renders the default plate from `pose` into `path` (PGM or PNG by extension).
 fn render_to(path: &Path, pose: [f64; 6], seed: u64) {
-    let camera =
-        photopose_formats::parse_camera(include_str!("../config/camera.toml"), "camera").unwrap();
+    let camera = photopose_formats::default_camera();
     let field = photopose_field::design::default_plate();
     let options = photopose_render::RenderOptions {
         seed,

@@ -6,8 +6,6 @@ use photopose_field::Field;
 use photopose_geometry::Camera;
 use std::path::Path;
 
-/// The default camera file's text (`config/camera.toml`).
-pub const CAMERA_TOML: &str = include_str!("../../config/camera.toml");
 /// The default plate's text (`config/plate.csv`).
 pub const PLATE_CSV: &str = include_str!("../../config/plate.csv");
 
@@ -15,8 +13,7 @@ pub const PLATE_CSV: &str = include_str!("../../config/plate.csv");
 pub fn camera(path: Option<&Path>) -> Result<Camera> {
     match path {
         Some(p) => Ok(photopose_formats::load_camera(p)?),
-        None => photopose_formats::parse_camera(CAMERA_TOML, "<built-in config/camera.toml>")
-            .context("built-in camera"),
+        None => Ok(photopose_formats::default_camera()),
     }
 }
 

@@ -2,6 +2,7 @@
 //! it can be (coded targets by their rings, uncoded ones by projection with
 //! the first pose), one JSON object per image per line, in input order.
 
+use crate::cmd::batch::{exit_status, load_frame, ErrorLine};
 use crate::cmd::defaults;
 use anyhow::Result;
 use clap::Parser;
@@ -63,13 +64,6 @@ struct ImageLine<'a> {
     n_identified: usize,
 }
 
-#[derive(Serialize)]
-struct ErrorLine<'a> {
-    image: &'a str,
-    ok: bool,
-    error: String,
-}
-
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
     let camera = defaults::camera(args.camera.as_deref())?;
@@ -84,20 +78,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
             Ok(l) => serde_json::to_string(&l)?,
             Err(error) => {
                 failed += 1;
-                serde_json::to_string(&ErrorLine {
-                    image: &name,
-                    ok: false,
-                    error,
-                })?
+                serde_json::to_string(&ErrorLine::new(&name, error))?
             }
         };
         writeln!(out, "{line}")?;
     }
-    Ok(if failed > 0 {
-        ExitCode::from(1)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(exit_status(failed))
 }
 
 fn detect_one<'a>(
@@ -106,8 +92,7 @@ fn detect_one<'a>(
     path: &std::path::Path,
     name: &'a str,
 ) -> Result<ImageLine<'a>, String> {
-    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
-    photopose_formats::check_size(&image, camera, name).map_err(|e| e.to_string())?;
+    let image = load_frame(path, camera)?;
     let loc = locator
         .locate(image.view())
         .map_err(|e| format!("{name}: {e}"))?;

@@ -1,5 +1,6 @@
 //! The subcommands of the `photopose` binary, one module each.
 
+pub mod batch;
 pub mod bench;
 pub mod defaults;
 pub mod detect;

@@ -1,6 +1,7 @@
 //! `photopose resect`: exterior orientation with precision from observation
 //! files (`id,col,row`), one JSON object per input per line, in input order.
 
+use crate::cmd::batch::{exit_status, load_frame, ErrorLine};
 use crate::cmd::defaults;
 use anyhow::Result;
 use clap::Parser;
@@ -68,17 +69,6 @@ pub struct PoseLine<'a> {
     pub iterations: usize,
     /// Closed-form hypotheses tried.
     pub hypotheses: usize,
-}
-
-/// The output line of a failed input.
-#[derive(Serialize)]
-pub struct ErrorLine<'a> {
-    /// The input path.
-    pub image: &'a str,
-    /// Always false.
-    pub ok: bool,
-    /// What and why.
-    pub error: String,
 }
 
 impl<'a> PoseLine<'a> {
@@ -153,14 +143,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         Err(e) => {
             let error = format!("{e:#}");
             for path in args.observations.iter().chain(&args.images) {
-                let line = ErrorLine {
-                    image: &path.display().to_string(),
-                    ok: false,
-                    error: error.clone(),
-                };
+                let name = path.display().to_string();
+                let line = ErrorLine::new(&name, error.clone());
                 println!("{}", serde_json::to_string(&line)?);
             }
-            return Ok(ExitCode::from(1));
+            return Ok(exit_status(args.observations.len() + args.images.len()));
         }
     };
     let options = ResectionOptions {
@@ -184,11 +171,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             }
             Err(error) => {
                 failed += 1;
-                serde_json::to_string(&ErrorLine {
-                    image: &name,
-                    ok: false,
-                    error,
-                })?
+                serde_json::to_string(&ErrorLine::new(&name, error))?
             }
         };
         writeln!(out, "{line}")?;
@@ -213,20 +196,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
             }
             Err(error) => {
                 failed += 1;
-                serde_json::to_string(&ErrorLine {
-                    image: &name,
-                    ok: false,
-                    error,
-                })?
+                serde_json::to_string(&ErrorLine::new(&name, error))?
             }
         };
         writeln!(out, "{line}")?;
     }
-    Ok(if failed > 0 {
-        ExitCode::from(1)
-    } else {
-        ExitCode::SUCCESS
-    })
+    Ok(exit_status(failed))
 }
 
 /// Detects, identifies and resects one image file.
@@ -236,8 +211,7 @@ fn locate_image(
     path: &std::path::Path,
 ) -> Result<(ResectionReport, Vec<u64>), String> {
     let name = path.display().to_string();
-    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
-    photopose_formats::check_size(&image, camera, &name).map_err(|e| e.to_string())?;
+    let image = load_frame(path, camera)?;
     let loc = locator
         .locate(image.view())
         .map_err(|e| format!("{name}: {e}"))?;

@@ -91,6 +91,15 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
     .map_err(|e| err(e.to_string()))
 }
 
+/// The text of the project's default camera (`config/camera.toml`).
+pub const DEFAULT_CAMERA_TOML: &str = include_str!("../../../config/camera.toml");
+
+/// The project's default camera (`config/camera.toml`), built in.
+pub fn default_camera() -> Camera {
+    parse_camera(DEFAULT_CAMERA_TOML, "<built-in config/camera.toml>")
+        .expect("the shipped config/camera.toml is valid (checked by a test)")
+}
+
 /// Loads a camera file.
 pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
     let text = crate::read_text(path)?;
@@ -125,6 +134,12 @@ mod tests {
     use super::*;
 
     const GOOD: &str = "[sensor]\nwidth = 1300\nheight = 1030\npixel_size = 0.0067\n[interior]\nc = 12.0\nx0 = 0.0\ny0 = 0.0\n";
+
+    #[test]
+    fn the_shipped_default_camera_is_valid() {
+        let cam = default_camera();
+        assert_eq!((cam.sensor.width, cam.sensor.height), (1300, 1030));
+    }
 
     #[test]
     fn missing_distortion_means_zero_and_round_trips() {

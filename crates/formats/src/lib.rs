@@ -8,7 +8,7 @@ pub mod camera;
 pub mod image;
 pub mod observations;
 
-pub use camera::{camera_to_toml, load_camera, parse_camera};
+pub use camera::{camera_to_toml, default_camera, load_camera, parse_camera};
 pub use image::{
     check_size, decode_image, decode_pgm, decode_png, encode_pgm, encode_png, load_image,
     save_image, ImageFormat,

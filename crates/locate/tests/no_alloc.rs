@@ -12,9 +12,7 @@ static GLOBAL: CountingAllocator = CountingAllocator;
 
 #[test]
 fn locating_allocates_nothing_once_warm() {
-    let camera =
-        photopose_formats::parse_camera(include_str!("../../../config/camera.toml"), "camera")
-            .unwrap();
+    let camera = photopose_formats::default_camera();
     let field = default_plate();
     let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
     let poses = [

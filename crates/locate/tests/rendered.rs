@@ -16,11 +16,7 @@ use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
 
 fn camera() -> Camera {
-    photopose_formats::parse_camera(
-        include_str!("../../../config/camera.toml"),
-        "config/camera.toml",
-    )
-    .unwrap()
+    photopose_formats::default_camera()
 }
 
 /// A camera pose looking at the plate from `distance` mm with the given

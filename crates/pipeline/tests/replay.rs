@@ -11,7 +11,7 @@ use std::net::UdpSocket;
 use std::time::Duration;
 
 fn camera() -> photopose_geometry::Camera {
-    photopose_formats::parse_camera(include_str!("../../../config/camera.toml"), "camera").unwrap()
+    photopose_formats::default_camera()
 }
 
 fn replay_config(path: &std::path::Path, udp: &str) -> Config {

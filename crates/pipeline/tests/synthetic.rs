@@ -54,9 +54,7 @@ fn poses_stream_in_order_and_agree_with_the_truth() {
     let Source::Synthetic(syn) = cfg.source.clone() else {
         panic!("synthetic source expected")
     };
-    let camera =
-        photopose_formats::parse_camera(include_str!("../../../config/camera.toml"), "camera")
-            .unwrap();
+    let camera = photopose_formats::default_camera();
     let field = default_plate();
     let source = SyntheticSource::new(camera, &field, syn.clone()).unwrap();
     let pipeline = Pipeline::start(&cfg, camera, field, Box::new(source)).unwrap();
@@ -149,9 +147,7 @@ fn a_stopped_pipeline_ends_cleanly_and_drop_newest_counts_what_it_drops() {
     let Source::Synthetic(syn) = cfg.source.clone() else {
         panic!("synthetic source expected")
     };
-    let camera =
-        photopose_formats::parse_camera(include_str!("../../../config/camera.toml"), "camera")
-            .unwrap();
+    let camera = photopose_formats::default_camera();
     let field = default_plate();
     let source = SyntheticSource::new(camera, &field, syn).unwrap();
     let pipeline = Pipeline::start(&cfg, camera, field, Box::new(source)).unwrap();

@@ -1,0 +1,49 @@
+//! What the batch commands (`resect`, `detect`) share: the error line of a
+//! failed input, loading a frame checked against the camera, and the exit
+//! status of a batch (conventions.md: non-zero if any input failed).
+
+use photopose_frame::Image;
+use photopose_geometry::Camera;
+use serde::Serialize;
+use std::path::Path;
+use std::process::ExitCode;
+
+/// The output line of a failed input.
+#[derive(Serialize)]
+pub struct ErrorLine<'a> {
+    /// The input path.
+    pub image: &'a str,
+    /// Always false.
+    pub ok: bool,
+    /// What and why.
+    pub error: String,
+}
+
+impl<'a> ErrorLine<'a> {
+    /// The line for `image` failing with `error`.
+    pub fn new(image: &'a str, error: String) -> Self {
+        ErrorLine {
+            image,
+            ok: false,
+            error,
+        }
+    }
+}
+
+/// Loads an image file and checks its size against the camera; the error
+/// names the file.
+pub fn load_frame(path: &Path, camera: &Camera) -> Result<Image, String> {
+    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
+    photopose_formats::check_size(&image, camera, &path.display().to_string())
+        .map_err(|e| e.to_string())?;
+    Ok(image)
+}
+
+/// The exit status of a batch with `failed` failed inputs.
+pub fn exit_status(failed: usize) -> ExitCode {
+    if failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
