@@ -6,7 +6,7 @@ use crate::cmd::{defaults, run};
 use anyhow::{Context, Result};
 use clap::Parser;
 use photopose_pipeline::config::Source;
-use photopose_pipeline::source::{Frame, SourceEvent};
+use photopose_pipeline::{Slot, SourceError};
 use photopose_record::{FrameMeta, Recorder};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -42,23 +42,36 @@ pub fn run(args: Args) -> Result<ExitCode> {
         signal_hook::flag::register(sig, stop.clone()).context("cannot install signal handlers")?;
     }
     let mut recorder = Recorder::create(&args.out)?;
-    let mut frame = Frame::new(camera.sensor.width, camera.sensor.height);
+    let mut slot = Slot::new(photopose_frame::Image::new_mono8(
+        camera.sensor.width,
+        camera.sensor.height,
+    ));
+    source.start().context("cannot start the source")?;
     let mut n = 0u64;
     while !stop.load(Ordering::Acquire) && args.frames.is_none_or(|max| n < max) {
-        match source.next_frame(&mut frame, Duration::from_millis(200))? {
-            SourceEvent::Frame => {
+        match source.next_frame(&mut slot, Duration::from_millis(200)) {
+            Ok(()) => {
                 let meta = FrameMeta {
-                    seq: frame.seq,
-                    camera_time_ns: frame.camera_time_ns,
-                    host_time_ns: frame.host_time_ns,
+                    seq: slot.meta.seq,
+                    camera_time_ns: slot.meta.camera_time_ns,
+                    host_time_ns: slot.meta.host_time_ns,
                 };
-                recorder.write(meta, &frame.image)?;
+                recorder.write(meta, &slot.image)?;
                 n += 1;
             }
-            SourceEvent::Timeout => {}
-            SourceEvent::End => break,
+            Err(SourceError::Ended) => break,
+            Err(e) if e.is_fatal() => {
+                source.stop();
+                recorder.finish()?;
+                return Err(e).context("the source failed");
+            }
+            Err(e @ (SourceError::Lost { .. } | SourceError::Frame { .. })) => {
+                tracing::warn!(error = %e, "recording goes on")
+            }
+            Err(_) => {}
         }
     }
+    source.stop();
     // Finished even after a signal: the file stays readable.
     recorder.finish()?;
     println!("{}: {n} frames recorded", args.out.display());

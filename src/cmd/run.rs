@@ -50,6 +50,10 @@ pub fn open_source(
             Box::new(SyntheticSource::new(*camera, field, s.clone()).context("synthetic source")?)
         }
         Source::Replay(r) => Box::new(ReplaySource::open(camera, r)?),
+        Source::Gige(g) => Box::new(
+            photopose_acquire::GigeSource::new("gige", g.clone())
+                .context("GigE source: [source.gige]")?,
+        ),
     })
 }
 

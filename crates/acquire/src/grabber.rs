@@ -8,7 +8,7 @@ use crate::source::{FrameSource, SourceError};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// How long one `next_frame` call may wait, so that the stop flag is seen
 /// within about this delay.
@@ -25,6 +25,8 @@ pub struct GrabberCounters {
     pub losses: AtomicU64,
     /// `next_frame` calls answered "unavailable".
     pub unavailable: AtomicU64,
+    /// Frames the source could not deliver (skipped).
+    pub bad_frames: AtomicU64,
 }
 
 /// Why a grabber thread ended.
@@ -85,9 +87,23 @@ enum State {
 /// good; the source is stopped before the thread ends.
 pub fn spawn_grabber<S: FrameSource + 'static>(
     name: &str,
+    source: S,
+    producer: Producer,
+    stop: Arc<AtomicBool>,
+) -> std::io::Result<Grabber<S>> {
+    spawn_grabber_with(name, source, producer, stop, |_| {})
+}
+
+/// [`spawn_grabber`] with an observer told what became of every published
+/// frame (on the grabber thread, right after publishing: keep it short and
+/// non-blocking). A downstream stage that restores frame order learns of
+/// queued frames dropped by `drop-oldest` this way.
+pub fn spawn_grabber_with<S: FrameSource + 'static>(
+    name: &str,
     mut source: S,
     mut producer: Producer,
     stop: Arc<AtomicBool>,
+    mut observer: impl FnMut(Published) + Send + 'static,
 ) -> std::io::Result<Grabber<S>> {
     let counters = Arc::new(GrabberCounters::default());
     let c = Arc::clone(&counters);
@@ -96,7 +112,14 @@ pub fn spawn_grabber<S: FrameSource + 'static>(
     let handle = std::thread::Builder::new()
         .name(name.to_string())
         .spawn(move || {
-            let exit = run(&thread_name, &mut source, &mut producer, &flag, &c);
+            let exit = run(
+                &thread_name,
+                &mut source,
+                &mut producer,
+                &flag,
+                &c,
+                &mut observer,
+            );
             source.stop();
             tracing::info!(grabber = %thread_name, exit = ?exit, stats = ?source.stats(), "grabber stopped");
             (source, exit)
@@ -114,6 +137,7 @@ fn run<S: FrameSource>(
     producer: &mut Producer,
     stop: &AtomicBool,
     c: &GrabberCounters,
+    observer: &mut impl FnMut(Published),
 ) -> GrabberExit {
     if let Err(e) = source.start() {
         tracing::error!(grabber = %name, error = %e, "source did not start");
@@ -129,7 +153,10 @@ fn run<S: FrameSource>(
                     tracing::info!(grabber = %name, seq = producer.slot().meta.seq, "frames arriving");
                     state = State::Streaming;
                 }
-                if producer.publish() != Published::Queued {
+                producer.slot_mut().received = Instant::now();
+                let published = producer.publish();
+                observer(published);
+                if published != Published::Queued {
                     // Log the first drop and then every power of two.
                     let dropped = producer.counters().snapshot().dropped;
                     if dropped >= drops_logged.saturating_mul(2).max(1) {
@@ -154,6 +181,13 @@ fn run<S: FrameSource>(
                 }
                 if state != State::Down {
                     state = State::Waiting;
+                }
+            }
+            Err(SourceError::Frame { reason }) => {
+                // One bad frame: skipped, counted, logged; the next may be fine.
+                let n = c.bad_frames.fetch_add(1, Ordering::Relaxed) + 1;
+                if n.is_power_of_two() {
+                    tracing::warn!(grabber = %name, %reason, bad_frames = n, "frame skipped");
                 }
             }
             Err(SourceError::Ended) => return GrabberExit::Ended,

@@ -22,6 +22,6 @@ pub mod ring;
 pub mod source;
 
 pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
-pub use grabber::{spawn_grabber, Grabber, GrabberExit};
-pub use ring::{Consumer, FrameHandle, Overflow, Producer, Ring, Slot};
+pub use grabber::{spawn_grabber, spawn_grabber_with, Grabber, GrabberExit};
+pub use ring::{Consumer, FrameHandle, Overflow, Producer, Published, Ring, Slot};
 pub use source::{FrameSource, SourceError, SourceStats};

@@ -24,12 +24,23 @@
 //! # Overflow
 //!
 //! When [`Producer::publish`] finds no free slot (all are queued or held by
-//! consumers) it never waits: with [`Overflow::DropNewest`] the frame just
-//! filled is discarded (the producer keeps its slot and overwrites it next
-//! time); with [`Overflow::DropOldest`] the producer takes the oldest queued
-//! frame back, discards it, and queues the new one (if consumers hold every
-//! slot, nothing is queued and the newest is dropped instead). Every frame
-//! is counted once: `frames_in == delivered + dropped + queued`.
+//! consumers) it never waits under the dropping policies: with
+//! [`Overflow::DropNewest`] the frame just filled is discarded (the producer
+//! keeps its slot and overwrites it next time); with [`Overflow::DropOldest`]
+//! the producer takes the oldest queued frame back, discards it, and queues
+//! the new one (if consumers hold every slot, nothing is queued and the
+//! newest is dropped instead). [`Overflow::Block`] is for sources that can
+//! wait (replays, renderers): the producer waits for a consumer to free a
+//! slot and never drops while a consumer exists. Every frame is counted
+//! once: `frames_in == delivered + dropped + queued`.
+//!
+//! # Admission order
+//!
+//! Each queued frame gets the next admission number in [`Slot::order`]
+//! (0, 1, 2, … without gaps over the frames queued); a frame dropped by
+//! `drop-oldest` after it was queued is reported by
+//! [`Published::QueuedDroppedOldest`] with its number, so a stage that
+//! restores order downstream knows not to wait for it.
 //!
 //! Consumers each see strictly increasing sequence numbers, since the filled
 //! queue is FIFO and the producer publishes in order.
@@ -40,7 +51,7 @@ use photopose_frame::{FrameMeta, Image};
 use std::ops::{Deref, DerefMut};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// One frame buffer: the pixels and what the source knows about them.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -49,6 +60,12 @@ pub struct Slot {
     pub image: Image,
     /// Sequence number, camera timestamp, host time.
     pub meta: FrameMeta,
+    /// Admission number, set by [`Producer::publish`] when the frame is
+    /// queued (see the module documentation).
+    pub order: u64,
+    /// Monotonic instant the source handed the frame over (set by the
+    /// grabber just before publishing; the start of latency measurements).
+    pub received: Instant,
 }
 
 impl Slot {
@@ -57,6 +74,8 @@ impl Slot {
         Slot {
             image,
             meta: FrameMeta::default(),
+            order: 0,
+            received: Instant::now(),
         }
     }
 }
@@ -68,6 +87,9 @@ pub enum Overflow {
     DropNewest,
     /// Discard the oldest frame still queued and queue the new one.
     DropOldest,
+    /// Wait for a free slot (for sources that can wait: replays, renderers);
+    /// drops only when no consumer is left.
+    Block,
 }
 
 /// Counters of a ring (all monotonic, relaxed: read them for metrics).
@@ -150,6 +172,7 @@ impl Ring {
         });
         let (tx, rx) = crossbeam_channel::bounded(slots);
         let producer = Producer {
+            next_order: 0,
             hand: Box::new(Slot::new(make_image())),
             tx,
             steal: rx.clone(),
@@ -161,8 +184,9 @@ impl Ring {
 }
 
 /// The single producer (the grabber): fills its slot in hand, then
-/// publishes it. Never blocks.
+/// publishes it. Never blocks unless the policy is [`Overflow::Block`].
 pub struct Producer {
+    next_order: u64,
     hand: Box<Slot>,
     tx: Sender<Box<Slot>>,
     steal: Receiver<Box<Slot>>,
@@ -176,7 +200,10 @@ pub enum Published {
     /// Queued for the consumers.
     Queued,
     /// Queued, and the oldest queued frame was dropped to make room.
-    QueuedDroppedOldest,
+    QueuedDroppedOldest {
+        /// The dropped frame's admission number ([`Slot::order`]).
+        dropped_order: u64,
+    },
     /// No room: this frame was dropped.
     DroppedNewest,
 }
@@ -193,8 +220,8 @@ impl Producer {
     }
 
     /// Hands the filled slot to the consumers and takes a fresh one, or
-    /// applies the overflow policy when none is free. Never blocks, never
-    /// allocates.
+    /// applies the overflow policy when none is free. Never allocates; never
+    /// blocks unless the policy is [`Overflow::Block`].
     pub fn publish(&mut self) -> Published {
         let c = &self.shared.counters;
         c.frames_in.fetch_add(1, Ordering::AcqRel);
@@ -208,17 +235,23 @@ impl Producer {
                     .ok()
                     .map(|old| {
                         c.dropped.fetch_add(1, Ordering::AcqRel);
-                        (old, Published::QueuedDroppedOldest)
+                        let dropped_order = old.order;
+                        (old, Published::QueuedDroppedOldest { dropped_order })
                     })
                     // A consumer may have freed a slot meanwhile.
                     .or_else(|| self.shared.free.pop().map(|s| (s, Published::Queued))),
+                Overflow::Block => self.wait_for_free().map(|s| (s, Published::Queued)),
             },
         };
         match next {
             Some((slot, outcome)) => {
+                self.hand.order = self.next_order;
                 let full = std::mem::replace(&mut self.hand, slot);
                 match self.tx.try_send(full) {
-                    Ok(()) => outcome,
+                    Ok(()) => {
+                        self.next_order += 1;
+                        outcome
+                    }
                     // Cannot happen: the channel holds every slot there is.
                     // Keep the frame's slot rather than lose it.
                     Err(TrySendError::Full(s)) | Err(TrySendError::Disconnected(s)) => {
@@ -233,6 +266,28 @@ impl Producer {
                 c.dropped.fetch_add(1, Ordering::AcqRel);
                 Published::DroppedNewest
             }
+        }
+    }
+
+    /// Waits for a consumer to free a slot: spins briefly, then yields,
+    /// then sleeps in short steps. `None` once no consumer or frame handle
+    /// is left (nobody could ever free one).
+    fn wait_for_free(&self) -> Option<Box<Slot>> {
+        let mut round = 0u32;
+        loop {
+            if let Some(s) = self.shared.free.pop() {
+                return Some(s);
+            }
+            // The producer's own reference is the only one left.
+            if Arc::strong_count(&self.shared) == 1 {
+                return None;
+            }
+            match round {
+                0..=63 => std::hint::spin_loop(),
+                64..=127 => std::thread::yield_now(),
+                _ => std::thread::sleep(Duration::from_micros(50)),
+            }
+            round = round.saturating_add(1);
         }
     }
 
@@ -443,6 +498,54 @@ mod tests {
         assert_eq!(c.try_recv().unwrap().meta.seq, 3);
         let st = c.counters().snapshot();
         assert_eq!((st.frames_in, st.delivered, st.dropped), (4, 3, 1));
+    }
+
+    #[test]
+    fn admission_numbers_have_no_gaps_and_evictions_name_theirs() {
+        let (mut p, c) = ring(2, Overflow::DropOldest);
+        assert_eq!(publish_seq(&mut p, 10), Published::Queued);
+        assert_eq!(publish_seq(&mut p, 11), Published::Queued);
+        assert_eq!(
+            publish_seq(&mut p, 12),
+            Published::QueuedDroppedOldest { dropped_order: 0 }
+        );
+        let (a, b) = (c.try_recv().unwrap(), c.try_recv().unwrap());
+        assert_eq!((a.meta.seq, a.order), (11, 1));
+        assert_eq!((b.meta.seq, b.order), (12, 2));
+        // Dropped newest frames take no number.
+        assert_eq!(publish_seq(&mut p, 13), Published::DroppedNewest);
+        drop(a);
+        assert_eq!(publish_seq(&mut p, 14), Published::Queued);
+        assert_eq!(c.try_recv().unwrap().order, 3);
+    }
+
+    #[test]
+    fn block_waits_for_a_consumer_and_never_drops() {
+        let (mut p, c) = ring(2, Overflow::Block);
+        let worker = std::thread::spawn(move || {
+            let mut seqs = Vec::new();
+            while let Ok(h) = c.recv_timeout(Duration::from_secs(5)) {
+                std::thread::sleep(Duration::from_micros(200));
+                seqs.push((h.meta.seq, h.order));
+            }
+            (seqs, c.counters().snapshot())
+        });
+        for s in 0..200 {
+            assert_eq!(publish_seq(&mut p, s), Published::Queued);
+        }
+        drop(p);
+        let (seqs, st) = worker.join().unwrap();
+        assert_eq!(seqs, (0..200).map(|s| (s, s)).collect::<Vec<_>>());
+        assert_eq!((st.frames_in, st.delivered, st.dropped), (200, 200, 0));
+    }
+
+    #[test]
+    fn block_without_consumers_drops_instead_of_hanging() {
+        let (mut p, c) = ring(1, Overflow::Block);
+        assert_eq!(publish_seq(&mut p, 0), Published::Queued);
+        drop(c);
+        // The queued frame still holds no reference: nobody can free a slot.
+        assert_eq!(publish_seq(&mut p, 1), Published::DroppedNewest);
     }
 
     #[test]

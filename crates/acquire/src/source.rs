@@ -31,6 +31,14 @@ pub enum SourceError {
         /// Why the last attempt failed.
         reason: String,
     },
+    /// This one frame could not be delivered (a corrupt record in a
+    /// recording, a renderer refusing a pose); the source goes on: call
+    /// again.
+    #[error("frame skipped: {reason}")]
+    Frame {
+        /// What was wrong with the frame.
+        reason: String,
+    },
     /// The source has no more frames (a recording ran out).
     #[error("source ended")]
     Ended,

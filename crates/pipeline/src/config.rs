@@ -73,6 +73,70 @@ struct SourceSection {
     kind: SourceKind,
     synthetic: Option<SyntheticSection>,
     replay: Option<ReplaySection>,
+    gige: Option<GigeSection>,
+}
+
+#[derive(Debug, Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+struct GigeSection {
+    camera: Option<String>,
+    #[serde(default)]
+    pixel_format: PixelFormatToml,
+    exposure_us: Option<f64>,
+    gain: Option<f64>,
+    frame_rate: Option<f64>,
+    roi: Option<[u32; 4]>,
+    packet_size: Option<u32>,
+    #[serde(default)]
+    packet_socket: bool,
+    #[serde(default = "default_buffers")]
+    buffers: u32,
+    #[serde(default = "default_lost_after")]
+    lost_after_ms: f64,
+    #[serde(default = "default_backoff_initial")]
+    backoff_initial_ms: f64,
+    #[serde(default = "default_backoff_max")]
+    backoff_max_ms: f64,
+}
+
+#[derive(Debug, Deserialize, Clone, Copy, Default, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+enum PixelFormatToml {
+    #[default]
+    Mono8,
+    Mono16,
+}
+
+impl Default for GigeSection {
+    fn default() -> Self {
+        GigeSection {
+            camera: None,
+            pixel_format: PixelFormatToml::Mono8,
+            exposure_us: None,
+            gain: None,
+            frame_rate: None,
+            roi: None,
+            packet_size: None,
+            packet_socket: false,
+            buffers: default_buffers(),
+            lost_after_ms: default_lost_after(),
+            backoff_initial_ms: default_backoff_initial(),
+            backoff_max_ms: default_backoff_max(),
+        }
+    }
+}
+
+fn default_buffers() -> u32 {
+    8
+}
+fn default_lost_after() -> f64 {
+    2000.0
+}
+fn default_backoff_initial() -> f64 {
+    100.0
+}
+fn default_backoff_max() -> f64 {
+    5000.0
 }
 
 #[derive(Debug, Deserialize, Clone)]
@@ -117,6 +181,7 @@ pub struct Replay {
 enum SourceKind {
     Synthetic,
     Replay,
+    Gige,
 }
 
 #[derive(Debug, Deserialize, Clone)]
@@ -247,6 +312,8 @@ pub enum Source {
     Synthetic(Synthetic),
     /// Recorded frames.
     Replay(Replay),
+    /// A GigE Vision camera (aravis).
+    Gige(photopose_acquire::GigeConfig),
 }
 
 /// The validated configuration.
@@ -374,6 +441,9 @@ impl Config {
                     seed: s.seed,
                 }
             }),
+            (SourceKind::Gige, _) => {
+                Source::Gige(gige(f.source.gige.clone().unwrap_or_default(), &bad)?)
+            }
             (SourceKind::Replay, None) => {
                 return Err(bad(
                     "source.replay.path",
@@ -483,6 +553,100 @@ impl Config {
     }
 }
 
+/// Validates `[source.gige]` into the acquisition crate's settings.
+fn gige(
+    g: GigeSection,
+    bad: &dyn Fn(&'static str, String, &'static str) -> ConfigError,
+) -> Result<photopose_acquire::GigeConfig, ConfigError> {
+    use photopose_acquire::{GigeConfig, PixelDepth, Roi};
+    let positive = |key: &'static str, v: Option<f64>| match v {
+        Some(x) if !(x.is_finite() && x > 0.0) => Err(bad(key, x.to_string(), "must be > 0")),
+        _ => Ok(v),
+    };
+    let ms = |key: &'static str, v: f64, max: f64| {
+        if v.is_finite() && v > 0.0 && v <= max {
+            Ok(std::time::Duration::from_secs_f64(v / 1000.0))
+        } else {
+            Err(bad(key, v.to_string(), "must be in (0, 600000] ms"))
+        }
+    };
+    if g.camera.as_deref().is_some_and(|c| c.trim().is_empty()) {
+        return Err(bad(
+            "source.gige.camera",
+            "\"\"".into(),
+            "must name a device id, address or serial (omit it for the first camera found)",
+        ));
+    }
+    if let Some(gain) = g.gain {
+        if !gain.is_finite() {
+            return Err(bad("source.gige.gain", gain.to_string(), "must be finite"));
+        }
+    }
+    let roi = match g.roi {
+        Some([x, y, width, height]) => {
+            if width == 0 || height == 0 || x.max(y).max(width).max(height) > 65_535 {
+                return Err(bad(
+                    "source.gige.roi",
+                    format!("{:?}", [x, y, width, height]),
+                    "must be [x, y, width, height] with a non-empty size below 65536",
+                ));
+            }
+            Some(Roi {
+                x,
+                y,
+                width,
+                height,
+            })
+        }
+        None => None,
+    };
+    if let Some(p) = g.packet_size {
+        if !(576..=16_384).contains(&p) {
+            return Err(bad(
+                "source.gige.packet_size",
+                p.to_string(),
+                "must be 576..=16384 bytes",
+            ));
+        }
+    }
+    if !(2..=256).contains(&g.buffers) {
+        return Err(bad(
+            "source.gige.buffers",
+            g.buffers.to_string(),
+            "must be 2..=256",
+        ));
+    }
+    let config = GigeConfig {
+        camera: g.camera,
+        pixel: match g.pixel_format {
+            PixelFormatToml::Mono8 => PixelDepth::Mono8,
+            PixelFormatToml::Mono16 => PixelDepth::Mono16,
+        },
+        exposure_us: positive("source.gige.exposure_us", g.exposure_us)?,
+        gain: g.gain,
+        frame_rate: positive("source.gige.frame_rate", g.frame_rate)?,
+        roi,
+        packet_size: g.packet_size,
+        packet_socket: g.packet_socket,
+        buffers: g.buffers as usize,
+        lost_after: ms("source.gige.lost_after_ms", g.lost_after_ms, 600_000.0)?,
+        backoff_initial: ms(
+            "source.gige.backoff_initial_ms",
+            g.backoff_initial_ms,
+            600_000.0,
+        )?,
+        backoff_max: ms("source.gige.backoff_max_ms", g.backoff_max_ms, 600_000.0)?,
+    };
+    if config.backoff_max < config.backoff_initial {
+        return Err(bad(
+            "source.gige.backoff_max_ms",
+            g.backoff_max_ms.to_string(),
+            "must be ≥ backoff_initial_ms",
+        ));
+    }
+    Ok(config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -509,6 +673,31 @@ mod tests {
         assert!(
             matches!(r.source, Source::Replay(Replay { speed: Speed::Factor(f), .. }) if f == 2.5)
         );
+    }
+
+    #[test]
+    fn gige_section_maps_onto_the_acquisition_settings() {
+        let c = Config::parse(
+            "[source]\nkind = \"gige\"\n[source.gige]\ncamera = \"GV01\"\nframe_rate = 100.0\n\
+             roi = [8, 4, 640, 480]\npacket_socket = false\nbuffers = 6\npixel_format = \"mono16\"\n",
+            "x",
+        )
+        .unwrap();
+        let Source::Gige(g) = c.source else {
+            panic!("not gige")
+        };
+        assert_eq!(g.camera.as_deref(), Some("GV01"));
+        assert_eq!(g.frame_rate, Some(100.0));
+        assert_eq!(
+            g.roi.map(|r| (r.x, r.y, r.width, r.height)),
+            Some((8, 4, 640, 480))
+        );
+        assert_eq!(g.buffers, 6);
+        assert_eq!(g.pixel, photopose_acquire::PixelDepth::Mono16);
+        assert_eq!(g.lost_after, std::time::Duration::from_secs(2));
+        // No section: the first camera found, with the defaults.
+        let d = Config::parse("[source]\nkind = \"gige\"\n", "x").unwrap();
+        assert!(matches!(d.source, Source::Gige(ref g) if g.camera.is_none() && g.buffers == 8));
     }
 
     #[test]
@@ -543,6 +732,11 @@ mod tests {
             ),
             ("[source]\n".to_string(), "kind"),
             ("[source]\nkind = \"replay\"\n".to_string(), "source.replay.path"),
+            ("[source]\nkind = \"gige\"\n[source.gige]\nbuffers = 1\n".to_string(), "source.gige.buffers"),
+            ("[source]\nkind = \"gige\"\n[source.gige]\nroi = [0, 0, 0, 10]\n".to_string(), "source.gige.roi"),
+            ("[source]\nkind = \"gige\"\n[source.gige]\nframe_rate = -5.0\n".to_string(), "source.gige.frame_rate"),
+            ("[source]\nkind = \"gige\"\n[source.gige]\nexposure = 5.0\n".to_string(), "exposure"),
+            ("[source]\nkind = \"gige\"\n[source.gige]\npixel_format = \"rgb8\"\n".to_string(), "rgb8"),
             ("[source]\nkind = \"replay\"\n[source.replay]\npath = \"r.mcap\"\nspeed = \"fast\"\n".to_string(), "source.replay.speed"),
         ];
         for (text, want) in cases {

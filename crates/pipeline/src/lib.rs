@@ -9,10 +9,12 @@
 //!                                  number, encodes, UDP + TCP, watchdog
 //! ```
 //!
-//! Frames move between threads as boxed slots through bounded channels: the
-//! ring is the set of slots allocated at start; a slot goes back to the
-//! free queue when a worker is done with it. Nothing is allocated per frame
-//! once warm. Each stage runs on a named thread; [`Pipeline::stop`] or the
+//! Frames move between threads in the ring of `photopose-acquire`: slots
+//! allocated at start, a lock-free hand-over from the grabber to the
+//! workers, the overflow policy applied by the grabber; a slot goes back to
+//! the free pool when a worker is done with it. Sources (GigE camera,
+//! replay, synthetic) all implement acquire's `FrameSource`. Nothing is
+//! allocated per frame once warm. Each stage runs on a named thread; [`Pipeline::stop`] or the
 //! end of the source shuts them down in order.
 
 pub mod config;
@@ -23,4 +25,4 @@ pub mod source;
 
 pub use config::{Config, ConfigError};
 pub use run::{Counters, Pipeline};
-pub use source::{Frame, FrameSource, SourceError, SourceEvent};
+pub use source::{FrameSource, Slot, SourceError};

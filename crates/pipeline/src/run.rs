@@ -3,8 +3,10 @@
 
 use crate::config::{Config, Overflow};
 use crate::notify::Notifier;
-use crate::source::{host_time_ns, Frame, FrameSource, SourceEvent};
-use crossbeam_channel::{bounded, Receiver, RecvTimeoutError};
+use crate::source::host_time_ns;
+use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
+use photopose_acquire::ring::RecvError;
+use photopose_acquire::{spawn_grabber_with, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
 use photopose_geometry::rotation::quaternion_from_matrix;
 use photopose_geometry::Camera;
@@ -129,6 +131,7 @@ enum Outcome {
 
 /// A running pipeline.
 pub struct Pipeline {
+    grabber: Option<photopose_acquire::Grabber<Box<dyn FrameSource>>>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
     threads: Vec<JoinHandle<()>>,
@@ -162,20 +165,21 @@ impl Pipeline {
         config: &Config,
         camera: Camera,
         field: Field,
-        mut source: Box<dyn FrameSource>,
+        source: Box<dyn FrameSource>,
     ) -> Result<Self, PipelineError> {
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(Counters::default());
         let slots = config.slots;
-        let (free_tx, free_rx) = bounded::<Box<Frame>>(slots);
-        let (work_tx, work_rx) = bounded::<Box<Frame>>(slots);
-        let (out_tx, out_rx) = bounded::<Outcome>(slots * 2);
-        for _ in 0..slots {
-            let _ = free_tx.send(Box::new(Frame::new(
-                camera.sensor.width,
-                camera.sensor.height,
-            )));
-        }
+        let (producer, consumer) = Ring::build(
+            slots,
+            match config.overflow {
+                Overflow::DropNewest => photopose_acquire::Overflow::DropNewest,
+                Overflow::DropOldest => photopose_acquire::Overflow::DropOldest,
+                Overflow::Block => photopose_acquire::Overflow::Block,
+            },
+            || photopose_frame::Image::new_mono8(camera.sensor.width, camera.sensor.height),
+        );
+        let (out_tx, out_rx) = bounded::<Outcome>(slots * 2 + config.workers);
         let udp = if config.udp.is_empty() {
             None
         } else {
@@ -202,104 +206,48 @@ impl Pipeline {
         };
         let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
-        // Workers.
+        // Workers: take frames from the ring, hand each result to the output
+        // stage; dropping the frame handle returns its slot to the ring.
         for k in 0..config.workers {
             let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
-            let (work_rx, free_tx, out_tx) = (work_rx.clone(), free_tx.clone(), out_tx.clone());
+            let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();
-            threads.push(spawn(&format!("detect-{k}"), move || {
-                for frame in work_rx.iter() {
-                    let message = locate(&mut locator, &frame);
-                    counters.frames_processed.fetch_add(1, Ordering::Relaxed);
-                    let outcome = Outcome::Message {
-                        order: frame.order,
-                        message,
-                        received: frame.received,
-                    };
-                    let _ = free_tx.send(frame);
-                    if out_tx.send(outcome).is_err() {
-                        return;
-                    }
+            threads.push(spawn(&format!("detect-{k}"), move || loop {
+                let frame = match consumer.recv_timeout(Duration::from_millis(100)) {
+                    Ok(f) => f,
+                    Err(RecvError::Timeout) => continue,
+                    Err(RecvError::Disconnected) => return,
+                };
+                let message = locate(&mut locator, &frame);
+                counters.frames_processed.fetch_add(1, Ordering::Relaxed);
+                let outcome = Outcome::Message {
+                    order: frame.order,
+                    message,
+                    received: frame.received,
+                };
+                drop(frame);
+                if out_tx.send(outcome).is_err() {
+                    return;
                 }
             })?);
         }
-        // Grabber.
-        {
-            let (stop, counters, overflow) = (stop.clone(), counters.clone(), config.overflow);
-            let (steal_rx, out_tx) = (work_rx.clone(), out_tx.clone());
-            let describe = source.describe();
-            // The slot that receives frames dropped by `drop-newest`.
-            let mut scratch = (overflow == Overflow::DropNewest)
-                .then(|| Box::new(Frame::new(camera.sensor.width, camera.sensor.height)));
-            threads.push(spawn("grabber", move || {
-                tracing::info!(source = %describe, "acquisition started");
-                let mut order = 0u64;
-                let poll = Duration::from_millis(100);
-                while !stop.load(Ordering::Acquire) {
-                    // A slot by the overflow policy; `true`: the frame is dropped.
-                    let (mut slot, drop_it) = match overflow {
-                        Overflow::Block => match free_rx.recv_timeout(poll) {
-                            Ok(s) => (s, false),
-                            Err(RecvTimeoutError::Timeout) => continue,
-                            Err(RecvTimeoutError::Disconnected) => break,
-                        },
-                        Overflow::DropNewest => match free_rx.try_recv() {
-                            Ok(s) => (s, false),
-                            Err(_) => match scratch.take() {
-                                Some(s) => (s, true),
-                                None => break,
-                            },
-                        },
-                        Overflow::DropOldest => match free_rx.try_recv() {
-                            Ok(s) => (s, false),
-                            Err(_) => match steal_rx.try_recv() {
-                                Ok(old) => {
-                                    counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
-                                    let _ = out_tx.send(Outcome::Skipped { order: old.order });
-                                    (old, false)
-                                }
-                                Err(_) => match free_rx.recv_timeout(poll) {
-                                    Ok(s) => (s, false),
-                                    Err(_) => continue,
-                                },
-                            },
-                        },
-                    };
-                    match source.next_frame(&mut slot, poll) {
-                        Ok(SourceEvent::Frame) => {
-                            counters.frames_in.fetch_add(1, Ordering::Relaxed);
-                            if drop_it {
-                                counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
-                                scratch = Some(slot);
-                                continue;
-                            }
-                            slot.order = order;
-                            order += 1;
-                            if work_tx.send(slot).is_err() {
-                                break;
-                            }
-                        }
-                        Ok(SourceEvent::Timeout) => {
-                            if drop_it {
-                                scratch = Some(slot);
-                            } else {
-                                let _ = free_tx.send(slot);
-                            }
-                        }
-                        Ok(SourceEvent::End) => {
-                            tracing::info!(frames = order, "source ended");
-                            break;
-                        }
-                        Err(e) => {
-                            tracing::error!(error = %e, "frame source failed; stopping acquisition");
-                            break;
-                        }
-                    }
-                }
-                // Dropping the work sender lets the workers finish the queue.
-            })?);
-        }
-        drop(work_rx);
+        drop(consumer);
+        // Grabber: the source into the ring (photopose-acquire's thread; it
+        // logs connection changes and applies the overflow policy).
+        let grabber = {
+            let (counters, out_tx) = (counters.clone(), out_tx.clone());
+            spawn_grabber_with(
+                "grabber",
+                source,
+                producer,
+                stop.clone(),
+                move |published| observe(published, &counters, &out_tx),
+            )
+            .map_err(|source| PipelineError::Thread {
+                name: "grabber".into(),
+                source,
+            })?
+        };
         drop(out_tx);
         // Output.
         {
@@ -311,6 +259,7 @@ impl Pipeline {
             })?);
         }
         Ok(Pipeline {
+            grabber: Some(grabber),
             stop,
             counters,
             threads,
@@ -344,7 +293,8 @@ impl Pipeline {
     /// Whether every pipeline thread has ended (the source ended and
     /// everything was processed and sent).
     pub fn finished(&self) -> bool {
-        self.threads.iter().all(|t| t.is_finished())
+        self.grabber.as_ref().is_none_or(|g| g.is_finished())
+            && self.threads.iter().all(|t| t.is_finished())
     }
 
     /// A flag that stops the pipeline when set (for signal handlers).
@@ -354,7 +304,13 @@ impl Pipeline {
 
     /// Waits for every thread to end (after [`Pipeline::stop`] or the end of
     /// the source).
-    pub fn join(self) -> Arc<Counters> {
+    pub fn join(mut self) -> Arc<Counters> {
+        if let Some(g) = self.grabber.take() {
+            // Ending the grabber drops the ring's producer: the workers
+            // finish the queued frames, then the output drains.
+            let (_source, exit) = g.join();
+            tracing::debug!(?exit, "grabber joined");
+        }
         for t in self.threads {
             let _ = t.join();
         }
@@ -366,12 +322,30 @@ impl Pipeline {
     }
 }
 
+/// Counts what became of a published frame; a queued frame evicted by
+/// `drop-oldest` is announced to the output stage so it does not wait for it.
+fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) {
+    counters.frames_in.fetch_add(1, Ordering::Relaxed);
+    match published {
+        Published::Queued => {}
+        Published::DroppedNewest => {
+            counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        Published::QueuedDroppedOldest { dropped_order } => {
+            counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            let _ = out_tx.send(Outcome::Skipped {
+                order: dropped_order,
+            });
+        }
+    }
+}
+
 /// Locates one frame into a message.
-fn locate(locator: &mut Locator, frame: &Frame) -> PoseMessage {
+fn locate(locator: &mut Locator, frame: &Slot) -> PoseMessage {
     let mut m = PoseMessage::without_pose(
-        frame.seq,
-        frame.camera_time_ns,
-        frame.host_time_ns,
+        frame.meta.seq,
+        frame.meta.camera_time_ns,
+        frame.meta.host_time_ns,
         PoseStatus::Error,
     );
     let Ok(loc) = locator.locate(frame.image.view()) else {

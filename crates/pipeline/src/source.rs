@@ -1,79 +1,41 @@
-//! Frame sources: the [`FrameSource`] seam, the synthetic source, which
-//! renders the plate along a configured camera path in real time (the
-//! default of `photopose run`, so the whole chain runs without hardware),
-//! and the replay of recordings.
+//! The daemon's frame sources behind `photopose-acquire`'s [`FrameSource`]
+//! seam (the GigE camera lives there): the synthetic source, which renders
+//! the plate along a configured camera path in real time (the default of
+//! `photopose run`, so the whole chain runs without hardware), and the
+//! replay of recordings.
 
 use crate::config::Synthetic;
+pub use photopose_acquire::{FrameSource, Slot, SourceError};
 use photopose_field::Field;
-use photopose_frame::Image;
+use photopose_frame::{Image, Pixels};
 use photopose_geometry::{Camera, Exterior};
 use photopose_render::{RenderError, RenderOptions, Renderer};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use thiserror::Error;
 
-/// One frame slot of the ring: the image and its metadata.
-#[derive(Debug)]
-pub struct Frame {
-    /// Sequence number given by the source.
-    pub seq: u64,
-    /// The source's timestamp of the exposure, ns (camera clock).
-    pub camera_time_ns: u64,
-    /// Host time of reception, ns since the Unix epoch.
-    pub host_time_ns: u64,
-    /// Monotonic instant of hand-over to the pipeline (for latency).
-    pub received: Instant,
-    /// Order of admission into the ring (set by the pipeline).
-    pub(crate) order: u64,
-    /// The pixels.
-    pub image: Image,
-}
-
-impl Frame {
-    /// A slot with a black 8-bit image of the given size.
-    pub fn new(width: u32, height: u32) -> Self {
-        Frame {
-            seq: 0,
-            camera_time_ns: 0,
-            host_time_ns: 0,
-            received: Instant::now(),
-            order: 0,
-            image: Image::new_mono8(width, height),
-        }
+/// Makes `slot`'s image an 8-bit `width`×`height` one (allocates only if
+/// it was not: slots are built at the camera's size).
+fn ensure_mono8(slot: &mut Slot, width: u32, height: u32) {
+    if slot.image.width() != width
+        || slot.image.height() != height
+        || !matches!(slot.image.pixels(), Pixels::Mono8(_))
+    {
+        slot.image = Image::new_mono8(width, height);
     }
 }
 
-/// What a source did when asked for a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SourceEvent {
-    /// The slot holds a new frame.
-    Frame,
-    /// No frame within the timeout (the source is alive).
-    Timeout,
-    /// The source has no more frames.
-    End,
-}
-
-/// A source that cannot deliver.
-#[derive(Debug, Error)]
-pub enum SourceError {
-    /// The renderer refused (synthetic source).
-    #[error("synthetic source: {0}")]
-    Render(#[from] RenderError),
-    /// A recorded frame could not be read (replay).
-    #[error("replay: {0}")]
-    Record(photopose_record::RecordError),
-}
-
-/// A source of frames: GigE camera, recording or renderer.
-pub trait FrameSource: Send {
-    /// Fills `frame` with the next frame, waiting at most `timeout`.
-    fn next_frame(
-        &mut self,
-        frame: &mut Frame,
-        timeout: Duration,
-    ) -> Result<SourceEvent, SourceError>;
-    /// A one-line description for logs.
-    fn describe(&self) -> String;
+/// Sleeps until `due`, or for `timeout` if that is sooner; `false` if the
+/// frame is not due yet after the wait.
+fn wait_until(due: Instant, timeout: Duration) -> bool {
+    let now = Instant::now();
+    if due > now {
+        if due - now > timeout {
+            std::thread::sleep(timeout);
+            return false;
+        }
+        std::thread::sleep(due - now);
+    }
+    true
 }
 
 /// Host time now, ns since the Unix epoch.
@@ -96,7 +58,7 @@ pub struct SyntheticSource {
 
 impl SyntheticSource {
     /// A synthetic source for `camera` over `field`.
-    pub fn new(camera: Camera, field: &Field, config: Synthetic) -> Result<Self, SourceError> {
+    pub fn new(camera: Camera, field: &Field, config: Synthetic) -> Result<Self, RenderError> {
         let renderer = Renderer::new(
             camera,
             field,
@@ -132,38 +94,45 @@ impl SyntheticSource {
 }
 
 impl FrameSource for SyntheticSource {
-    fn next_frame(
-        &mut self,
-        frame: &mut Frame,
-        timeout: Duration,
-    ) -> Result<SourceEvent, SourceError> {
+    fn start(&mut self) -> Result<(), SourceError> {
+        Ok(())
+    }
+
+    fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
         if self.config.frames > 0 && self.next >= self.config.frames {
-            return Ok(SourceEvent::End);
+            return Err(SourceError::Ended);
         }
         let start = *self.start.get_or_insert_with(Instant::now);
         let due = start + Duration::from_secs_f64(self.next as f64 / self.config.rate_hz);
-        let now = Instant::now();
-        if due > now {
-            if due - now > timeout {
-                std::thread::sleep(timeout);
-                return Ok(SourceEvent::Timeout);
-            }
-            std::thread::sleep(due - now);
+        if !wait_until(due, timeout) {
+            return Err(SourceError::Timeout(timeout));
         }
         let seq = self.next;
-        self.renderer.set_options(RenderOptions {
+        self.next += 1;
+        let sensor = self.renderer.camera().sensor;
+        ensure_mono8(slot, sensor.width, sensor.height);
+        let options = RenderOptions {
             seed: self.config.seed.wrapping_mul(1_000_003).wrapping_add(seq),
             ..*self.renderer.options()
-        })?;
-        self.renderer
-            .render(&Self::pose_at(&self.config, seq), &mut frame.image)?;
-        frame.seq = seq;
-        frame.camera_time_ns = (seq as f64 / self.config.rate_hz * 1e9) as u64;
-        frame.host_time_ns = host_time_ns();
-        frame.received = Instant::now();
-        self.next += 1;
-        Ok(SourceEvent::Frame)
+        };
+        let pose = Self::pose_at(&self.config, seq);
+        let rendered = self
+            .renderer
+            .set_options(options)
+            .and_then(|()| self.renderer.render(&pose, &mut slot.image).map(|_| ()));
+        if let Err(e) = rendered {
+            return Err(SourceError::Frame {
+                reason: format!("synthetic frame {seq}: {e}"),
+            });
+        }
+        slot.meta.seq = seq;
+        slot.meta.camera_frame_id = seq;
+        slot.meta.camera_time_ns = (seq as f64 / self.config.rate_hz * 1e9) as u64;
+        slot.meta.host_time_ns = host_time_ns();
+        Ok(())
     }
+
+    fn stop(&mut self) {}
 
     fn describe(&self) -> String {
         format!(
@@ -239,13 +208,13 @@ impl ReplaySource {
 }
 
 impl FrameSource for ReplaySource {
-    fn next_frame(
-        &mut self,
-        frame: &mut Frame,
-        timeout: Duration,
-    ) -> Result<SourceEvent, SourceError> {
+    fn start(&mut self) -> Result<(), SourceError> {
+        Ok(())
+    }
+
+    fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
         if self.next >= self.recording.len() {
-            return Ok(SourceEvent::End);
+            return Err(SourceError::Ended);
         }
         let (meta, _, _) = self.recording.meta(self.next);
         if let crate::config::Speed::Factor(f) = self.speed {
@@ -253,27 +222,26 @@ impl FrameSource for ReplaySource {
                 .start
                 .get_or_insert((Instant::now(), meta.camera_time_ns));
             let offset = meta.camera_time_ns.saturating_sub(c0) as f64 / 1e9 / f;
-            let due = t0 + Duration::from_secs_f64(offset);
-            let now = Instant::now();
-            if due > now {
-                if due - now > timeout {
-                    std::thread::sleep(timeout);
-                    return Ok(SourceEvent::Timeout);
-                }
-                std::thread::sleep(due - now);
+            if !wait_until(t0 + Duration::from_secs_f64(offset), timeout) {
+                return Err(SourceError::Timeout(timeout));
             }
         }
+        let index = self.next;
+        self.next += 1;
         let meta = self
             .recording
-            .copy_into(self.next, &mut frame.image)
-            .map_err(SourceError::Record)?;
-        frame.seq = meta.seq;
-        frame.camera_time_ns = meta.camera_time_ns;
-        frame.host_time_ns = host_time_ns();
-        frame.received = Instant::now();
-        self.next += 1;
-        Ok(SourceEvent::Frame)
+            .copy_into(index, &mut slot.image)
+            .map_err(|e| SourceError::Frame {
+                reason: e.to_string(),
+            })?;
+        slot.meta.seq = meta.seq;
+        slot.meta.camera_frame_id = meta.seq;
+        slot.meta.camera_time_ns = meta.camera_time_ns;
+        slot.meta.host_time_ns = host_time_ns();
+        Ok(())
     }
+
+    fn stop(&mut self) {}
 
     fn describe(&self) -> String {
         format!(

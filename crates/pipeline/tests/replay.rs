@@ -4,7 +4,7 @@
 
 use photopose_field::design::default_plate;
 use photopose_pipeline::config::Source;
-use photopose_pipeline::source::{Frame, FrameSource, ReplaySource, SourceEvent, SyntheticSource};
+use photopose_pipeline::source::{FrameSource, ReplaySource, Slot, SourceError, SyntheticSource};
 use photopose_pipeline::{Config, Pipeline};
 use photopose_record::{FrameMeta, Recorder};
 use std::net::UdpSocket;
@@ -65,12 +65,17 @@ fn two_replays_give_identical_poses() {
     };
     let mut src = SyntheticSource::new(camera(), &default_plate(), syn.clone()).unwrap();
     let mut rec = Recorder::create(&path).unwrap();
-    let mut frame = Frame::new(1300, 1030);
-    while src.next_frame(&mut frame, Duration::from_secs(1)).unwrap() == SourceEvent::Frame {
+    let mut frame = Slot::new(photopose_frame::Image::new_mono8(1300, 1030));
+    loop {
+        match src.next_frame(&mut frame, Duration::from_secs(1)) {
+            Ok(()) => {}
+            Err(SourceError::Ended) => break,
+            Err(e) => panic!("synthetic source: {e}"),
+        }
         let meta = FrameMeta {
-            seq: frame.seq,
-            camera_time_ns: frame.camera_time_ns,
-            host_time_ns: frame.host_time_ns,
+            seq: frame.meta.seq,
+            camera_time_ns: frame.meta.camera_time_ns,
+            host_time_ns: frame.meta.host_time_ns,
         };
         rec.write(meta, &frame.image).unwrap();
     }
