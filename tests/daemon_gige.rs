@@ -29,13 +29,16 @@ struct FakeCamera(Child);
 
 impl FakeCamera {
     fn start() -> Self {
-        let child = Command::new(FAKE)
-            .args(["-i", "127.0.0.1"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot run {FAKE} ({e}): run .ci/deps.sh"));
+        // Wrapped at once: dropping it kills and reaps the child on any path.
+        let me = FakeCamera(
+            Command::new(FAKE)
+                .args(["-i", "127.0.0.1"])
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot run {FAKE} ({e}): run .ci/deps.sh")),
+        );
         let t0 = Instant::now();
         loop {
             let out = Command::new(TOOL)
@@ -44,7 +47,7 @@ impl FakeCamera {
                 .output()
                 .unwrap_or_else(|e| panic!("cannot run {TOOL} ({e}): run .ci/deps.sh"));
             if out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Width") {
-                return FakeCamera(child);
+                return me;
             }
             assert!(t0.elapsed() < Duration::from_secs(10), "{FAKE} silent");
             std::thread::sleep(Duration::from_millis(50));
@@ -137,10 +140,8 @@ fn daemon_acquires_from_a_gige_camera_and_survives_losing_it() {
         "20 frames/s for 4 s: {} frames",
         seqs.len()
     );
-    let mut expect = first + 1;
-    for s in &seqs {
+    for (expect, s) in (first + 1..).zip(&seqs) {
         assert_eq!(*s, expect, "a frame went missing: {seqs:?}");
-        expect += 1;
     }
     // Loss: the daemon keeps serving its outputs (stale messages).
     drop(fake.take());
