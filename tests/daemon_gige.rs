@@ -1,6 +1,7 @@
 //! The daemon on a real GigE Vision peer: `photopose run` with
-//! `source.kind = "gige"` acquires from `arv-fake-gv-camera-0.8 -i
-//! 127.0.0.1` (a child of this test) through aravis for several seconds
+//! `source.kind = "gige"`, started while its camera is absent, waits for it
+//! (logged), then acquires from `arv-fake-gv-camera-0.8 -i 127.0.0.1` (a
+//! child of this test) through aravis for several seconds
 //! without a missing frame; killing the camera is logged as a loss while the
 //! daemon keeps streaming stale messages, and a restarted camera is
 //! reopened and streams again without restarting the daemon; SIGTERM then
@@ -119,7 +120,7 @@ fn daemon_acquires_from_a_gige_camera_and_survives_losing_it() {
         ),
     )
     .unwrap();
-    let mut fake = Some(FakeCamera::start());
+    // Started before its camera: it waits for it, running.
     let mut daemon = bin()
         .args(["run", "--config"])
         .arg(&config)
@@ -127,6 +128,12 @@ fn daemon_acquires_from_a_gige_camera_and_survives_losing_it() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        daemon.try_wait().unwrap().is_none(),
+        "the daemon waits for an absent camera"
+    );
+    let mut fake = Some(FakeCamera::start());
     // Streaming: the first frame arrives, then 4 s without a gap.
     let first = loop {
         let v = next(&rx, Duration::from_secs(20)).expect("a first frame within 20 s");
@@ -190,6 +197,10 @@ fn daemon_acquires_from_a_gige_camera_and_survives_losing_it() {
     let status = daemon.wait().unwrap();
     drop(fake);
     assert!(status.success(), "exit status {status:?}\n{log}");
+    assert!(
+        log.contains("camera unavailable"),
+        "the absent camera is logged:\n{log}"
+    );
     assert!(log.contains("camera lost"), "the loss is logged:\n{log}");
     assert!(
         log.matches("frames arriving").count() >= 2,

@@ -708,6 +708,10 @@ impl FrameSource for GigeSource {
     fn stats(&self) -> SourceStats {
         self.counters.snapshot()
     }
+
+    fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
+        Some(self.counters())
+    }
 }
 
 impl Drop for GigeSource {

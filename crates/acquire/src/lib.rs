@@ -24,4 +24,4 @@ pub mod source;
 pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
 pub use grabber::{spawn_grabber, spawn_grabber_with, Grabber, GrabberExit};
 pub use ring::{Consumer, FrameHandle, Overflow, Producer, Published, Ring, Slot};
-pub use source::{FrameSource, SourceError, SourceStats};
+pub use source::{FrameSource, SourceCounters, SourceError, SourceStats};

@@ -8,6 +8,7 @@
 use crate::ring::Slot;
 use photopose_frame::Image;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use thiserror::Error;
 
@@ -86,6 +87,12 @@ pub trait FrameSource: Send {
     fn stats(&self) -> SourceStats {
         SourceStats::default()
     }
+
+    /// The live counters behind [`stats`](FrameSource::stats), shareable
+    /// with a metrics thread, if the source keeps them in atomics.
+    fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
+        None
+    }
 }
 
 impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
@@ -103,6 +110,9 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
     }
     fn stats(&self) -> SourceStats {
         (**self).stats()
+    }
+    fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
+        (**self).shared_counters()
     }
 }
 

@@ -145,6 +145,12 @@ struct ReplaySection {
     path: PathBuf,
     #[serde(default = "default_speed")]
     speed: SpeedToml,
+    #[serde(default = "default_passes")]
+    passes: u64,
+}
+
+fn default_passes() -> u64 {
+    1
 }
 
 #[derive(Debug, Deserialize, Clone)]
@@ -174,6 +180,9 @@ pub struct Replay {
     pub path: PathBuf,
     /// Pace.
     pub speed: Speed,
+    /// Times the recording is played, 0 for endless (soak tests); later
+    /// passes continue the sequence numbers and camera times.
+    pub passes: u64,
 }
 
 #[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
@@ -476,6 +485,7 @@ impl Config {
                 Source::Replay(Replay {
                     path: r.path.clone(),
                     speed,
+                    passes: r.passes,
                 })
             }
         };
@@ -658,6 +668,46 @@ mod tests {
         let c = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
         assert!(matches!(c.source, Source::Synthetic(_)));
         assert!(c.tcp_listen.is_some());
+    }
+
+    /// The example with one commented-out source section switched on.
+    fn example_with(section: &str, kind: &str) -> String {
+        let mut on = false;
+        let mut out = String::new();
+        for line in EXAMPLE.lines() {
+            if line.starts_with(&format!("# [source.{section}]")) {
+                on = true;
+            } else if line.trim().is_empty() {
+                on = false;
+            }
+            let line = match line.strip_prefix("# ") {
+                Some(rest) if on => rest,
+                _ => line,
+            };
+            out.push_str(&line.replace("kind = \"synthetic\"", &format!("kind = \"{kind}\"")));
+            out.push('\n');
+        }
+        out
+    }
+
+    #[test]
+    fn the_examples_commented_sections_are_valid_too() {
+        let g = Config::parse(&example_with("gige", "gige"), "gige example").unwrap();
+        let Source::Gige(g) = g.source else {
+            panic!("gige expected")
+        };
+        assert_eq!(g.camera.as_deref(), Some("Aravis-Fake-GV01"));
+        assert_eq!(g.roi.map(|r| (r.width, r.height)), Some((1300, 1030)));
+        assert_eq!(g.packet_size, Some(1500));
+        let r = Config::parse(&example_with("replay", "replay"), "replay example").unwrap();
+        assert!(matches!(
+            r.source,
+            Source::Replay(Replay {
+                speed: Speed::Factor(f),
+                passes: 1,
+                ..
+            }) if f == 1.0
+        ));
     }
 
     #[test]

@@ -52,6 +52,61 @@ pub fn render(c: &Counters) -> String {
             v.load(Ordering::Relaxed)
         );
     }
+    if let Some(src) = &c.source {
+        let st = src.snapshot();
+        for (name, help, v) in [
+            (
+                "photopose_source_missing_frames_total",
+                "Frames the camera sent that never arrived (gaps in its frame ids).",
+                st.missing,
+            ),
+            (
+                "photopose_source_incomplete_frames_total",
+                "Frames that arrived incomplete or damaged (not processed).",
+                st.incomplete,
+            ),
+            (
+                "photopose_source_losses_total",
+                "Times the camera was lost.",
+                st.losses,
+            ),
+            (
+                "photopose_source_opens_total",
+                "Times the camera was (re)opened.",
+                st.opens,
+            ),
+        ] {
+            let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}");
+        }
+        let name = "photopose_source_connected";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Whether the camera is connected and streaming.\n# TYPE {name} gauge\n{name} {}",
+            u8::from(st.connected)
+        );
+    }
+    if let Some(tcp) = &c.tcp {
+        for (name, help, kind, v) in [
+            (
+                "photopose_stream_clients",
+                "TCP pose stream clients connected now.",
+                "gauge",
+                &tcp.connected,
+            ),
+            (
+                "photopose_stream_clients_dropped_total",
+                "TCP clients dropped for a full queue or a write error.",
+                "counter",
+                &tcp.dropped,
+            ),
+        ] {
+            let _ = writeln!(
+                s,
+                "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {}",
+                v.load(Ordering::Relaxed)
+            );
+        }
+    }
     let name = "photopose_latency_seconds";
     let _ = writeln!(
         s,
@@ -159,7 +214,36 @@ mod tests {
         assert!(body.starts_with("HTTP/1.1 200 OK"), "{body}");
         assert!(body.contains("photopose_frames_in_total 42"), "{body}");
         assert!(body.contains("photopose_latency_seconds_count 0"), "{body}");
+        assert!(
+            !body.contains("photopose_source_"),
+            "no source counters: {body}"
+        );
         stop.store(true, Ordering::Release);
         server.join();
+    }
+
+    #[test]
+    fn source_and_stream_counters_appear_when_present() {
+        let src = Arc::new(photopose_acquire::SourceCounters::default());
+        src.missing.store(3, Ordering::Relaxed);
+        src.losses.store(1, Ordering::Relaxed);
+        src.connected.store(true, Ordering::Relaxed);
+        let tcp = Arc::new(photopose_stream::TcpStats::default());
+        tcp.connected.store(2, Ordering::Relaxed);
+        let c = Counters {
+            source: Some(src),
+            tcp: Some(tcp),
+            ..Counters::default()
+        };
+        let body = render(&c);
+        for line in [
+            "photopose_source_missing_frames_total 3",
+            "photopose_source_losses_total 1",
+            "photopose_source_connected 1",
+            "photopose_stream_clients 2",
+            "photopose_stream_clients_dropped_total 0",
+        ] {
+            assert!(body.lines().any(|l| l == line), "{line} missing:\n{body}");
+        }
     }
 }

@@ -58,6 +58,11 @@ pub struct Counters {
     /// Histogram of the latencies: bucket `k` counts latencies below
     /// `LATENCY_BASE_US · 2^(k / 8)` µs (eight buckets per octave).
     pub latency_histogram: [AtomicU64; LATENCY_BUCKETS],
+    /// The source's own counters (GigE: missing and incomplete frames,
+    /// losses, openings, connection), when it keeps them.
+    pub source: Option<Arc<photopose_acquire::SourceCounters>>,
+    /// The TCP pose stream's counters (clients), when one is configured.
+    pub tcp: Option<Arc<photopose_stream::TcpStats>>,
 }
 
 /// Buckets of the latency histogram (10 µs to about 40 s).
@@ -110,6 +115,8 @@ impl Default for Counters {
             stale: AtomicU64::new(0),
             latency_us_sum: AtomicU64::new(0),
             latency_histogram: std::array::from_fn(|_| AtomicU64::new(0)),
+            source: None,
+            tcp: None,
         }
     }
 }
@@ -168,7 +175,6 @@ impl Pipeline {
         source: Box<dyn FrameSource>,
     ) -> Result<Self, PipelineError> {
         let stop = Arc::new(AtomicBool::new(false));
-        let counters = Arc::new(Counters::default());
         let slots = config.slots;
         let (producer, consumer) = Ring::build(
             slots,
@@ -193,6 +199,11 @@ impl Pipeline {
             None => None,
         };
         let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
+        let counters = Arc::new(Counters {
+            source: source.shared_counters(),
+            tcp: tcp.as_ref().map(|t| t.shared_stats()),
+            ..Counters::default()
+        });
         let metrics = match config.metrics_listen {
             Some(a) => Some(
                 crate::metrics::MetricsServer::start(a, counters.clone(), stop.clone()).map_err(

@@ -148,6 +148,10 @@ impl FrameSource for SyntheticSource {
 pub struct ReplaySource {
     recording: photopose_record::Recording,
     speed: crate::config::Speed,
+    passes: u64,
+    pass: u64,
+    /// Added per pass to sequence numbers and camera times.
+    span: (u64, u64),
     next: usize,
     start: Option<(Instant, u64)>,
 }
@@ -188,9 +192,22 @@ impl ReplaySource {
                 cam_height: camera.sensor.height,
             });
         }
+        let (first, _, _) = recording.meta(0);
+        let (last, _, _) = recording.meta(recording.len() - 1);
+        let frames = recording.len() as u64;
+        // One mean frame period beyond the last frame.
+        let duration = last.camera_time_ns.saturating_sub(first.camera_time_ns);
+        let period = duration / frames.saturating_sub(1).max(1);
+        let span = (
+            last.seq.saturating_sub(first.seq) + 1,
+            duration.saturating_add(period),
+        );
         Ok(ReplaySource {
             recording,
             speed: config.speed,
+            passes: config.passes,
+            pass: 0,
+            span,
             next: 0,
             start: None,
         })
@@ -214,9 +231,15 @@ impl FrameSource for ReplaySource {
 
     fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
         if self.next >= self.recording.len() {
-            return Err(SourceError::Ended);
+            if self.passes != 0 && self.pass + 1 >= self.passes {
+                return Err(SourceError::Ended);
+            }
+            self.pass += 1;
+            self.next = 0;
         }
-        let (meta, _, _) = self.recording.meta(self.next);
+        let (seq_offset, time_offset) = (self.span.0 * self.pass, self.span.1 * self.pass);
+        let (mut meta, _, _) = self.recording.meta(self.next);
+        meta.camera_time_ns += time_offset;
         if let crate::config::Speed::Factor(f) = self.speed {
             let (t0, c0) = *self
                 .start
@@ -234,9 +257,9 @@ impl FrameSource for ReplaySource {
             .map_err(|e| SourceError::Frame {
                 reason: e.to_string(),
             })?;
-        slot.meta.seq = meta.seq;
+        slot.meta.seq = meta.seq + seq_offset;
         slot.meta.camera_frame_id = meta.seq;
-        slot.meta.camera_time_ns = meta.camera_time_ns;
+        slot.meta.camera_time_ns = meta.camera_time_ns + time_offset;
         slot.meta.host_time_ns = host_time_ns();
         Ok(())
     }
@@ -245,10 +268,14 @@ impl FrameSource for ReplaySource {
 
     fn describe(&self) -> String {
         format!(
-            "replay of {} ({} frames, {:?})",
+            "replay of {} ({} frames, {:?}, {})",
             self.recording.path(),
             self.recording.len(),
-            self.speed
+            self.speed,
+            match self.passes {
+                0 => "endless".to_string(),
+                n => format!("{n} passes"),
+            }
         )
     }
 }

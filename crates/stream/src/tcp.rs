@@ -115,6 +115,11 @@ impl TcpServer {
         &self.stats
     }
 
+    /// The counters, shareable with a metrics thread.
+    pub fn shared_stats(&self) -> Arc<TcpStats> {
+        Arc::clone(&self.stats)
+    }
+
     /// Queues `line` for every client; never blocks. A client with a full
     /// queue, or whose writer has failed, is dropped.
     pub fn publish(&mut self, line: &[u8]) {
