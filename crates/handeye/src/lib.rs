@@ -8,7 +8,7 @@
 //! `X = T_tcp←camera` (camera on the flange) and `Z = T_base←plate` (plate
 //! in the robot base); every station gives `A_i · X = Z · B_i`.
 //!
-//! [`solve`] does it in three steps:
+//! [`solve()`] does it in three steps:
 //! 1. **degenerate-motion check and closed form** ([`closed_form`]):
 //!    Park–Martin on the relative motions of all station pairs
 //!    (`A_j⁻¹A_i · X = X · B_j⁻¹B_i`), `Z` then from the mean of `A_i X B_i⁻¹`;

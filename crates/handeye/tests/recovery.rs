@@ -246,6 +246,9 @@ fn a_station_with_a_gross_error_is_named_and_the_rest_still_fit() {
         (1u64, 4usize, 1.0, 0.0f64),
         (2, 9, 0.0, 0.05),
         (3, 0, 0.5, 0.0),
+        // A station far off (a wrong frame or a robot pose typed wrongly):
+        // the closed form is pulled away, the refinement and test recover.
+        (4, 7, 25.0, 5.0),
     ] {
         let mut rng = SplitMix64::new(seed);
         let views: Vec<_> = (0..12).map(|_| sim.view(&mut rng, 25.0, 90.0)).collect();
@@ -270,6 +273,40 @@ fn a_station_with_a_gross_error_is_named_and_the_rest_still_fit() {
         assert!(e.iter().all(|z| z.abs() < 4.0), "seed {seed}: {e:?}");
         assert!(he.sigma0 < 1.5, "σ0 {}", he.sigma0);
     }
+}
+
+#[test]
+fn two_stations_with_gross_errors_are_both_rejected() {
+    let sim = Sim::new();
+    let mut rng = SplitMix64::new(21);
+    let views: Vec<_> = (0..14).map(|_| sim.view(&mut rng, 25.0, 90.0)).collect();
+    let mut st = stations(&sim, &views, &mut rng, 1.0);
+    st[2].robot = perturbed(
+        &st[2].robot,
+        &Vector3::new(0.0, 0.0, 2.0),
+        &Vector3::zeros(),
+    );
+    st[11].camera.pose = perturbed(
+        &st[11].camera.pose,
+        &Vector3::zeros(),
+        &Vector3::new(0.2f64.to_radians(), 0.0, 0.0),
+    );
+    let he = solve(&st, &HandEyeOptions::default()).unwrap();
+    let mut rejected = he.rejected.clone();
+    rejected.sort();
+    assert_eq!(rejected, vec!["s03".to_string(), "s12".to_string()]);
+    assert!(normalised_errors(&he).iter().all(|z| z.abs() < 4.0));
+    // With rejection switched off the errors stay in and σ0 shows them.
+    let keep = HandEyeOptions {
+        max_rejected_share: 0.0,
+        ..HandEyeOptions::default()
+    };
+    let he = solve(&st, &keep).unwrap();
+    assert!(
+        he.rejected.is_empty() && he.sigma0 > 3.0,
+        "σ0 {}",
+        he.sigma0
+    );
 }
 
 #[test]
