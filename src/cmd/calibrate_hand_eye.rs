@@ -9,7 +9,6 @@ use crate::cmd::defaults;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_formats::hand_eye::{save_hand_eye, Fit, HandEyeFile, Transform};
-use photopose_handeye::kuka::isometry;
 use photopose_handeye::stations::CameraSource;
 use photopose_handeye::{
     parse_stations, solve, CameraPose, HandEye, HandEyeOptions, Station, StationResidual,
@@ -248,10 +247,7 @@ fn locate(
         .locate(image.view())
         .map_err(|e| format!("{name}: {e}"))?;
     match (loc.status, loc.pose) {
-        (PoseStatus::Ok, Some(p)) => Ok(CameraPose {
-            pose: isometry(&p.exterior.rotation.transpose(), &p.exterior.center),
-            covariance: p.covariance,
-        }),
+        (PoseStatus::Ok, Some(p)) => Ok(CameraPose::from_resection(p)),
         (PoseStatus::TooFewTargets { coded }, _) => Err(format!(
             "{name}: too few targets: {coded} coded targets identified, a pose needs 4"
         )),

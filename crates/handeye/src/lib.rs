@@ -52,6 +52,16 @@ pub struct CameraPose {
 }
 
 impl CameraPose {
+    /// The camera pose of a resection (a frame located by photopose):
+    /// `(Rᵀ, centre)` with the resection's a-posteriori covariance.
+    pub fn from_resection(report: &photopose_geometry::ResectionReport) -> Self {
+        let e = &report.exterior;
+        CameraPose {
+            pose: kuka::isometry(&e.rotation.transpose(), &e.center),
+            covariance: report.covariance,
+        }
+    }
+
     /// A camera pose with independent standard deviations of the centre
     /// (mm) and of the rotations about the plate's axes (degrees).
     pub fn with_stds(pose: Isometry3<f64>, std_center_mm: [f64; 3], std_rot_deg: [f64; 3]) -> Self {
