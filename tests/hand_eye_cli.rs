@@ -181,6 +181,35 @@ fn pose_columns_give_both_transforms_within_their_sigma() {
         report.contains("s12") && report.contains("camera in TCP"),
         "{report}"
     );
+
+    // Without the cam_std_* columns the command's a-priori values are used:
+    // the same noise against a larger a-priori σ gives a smaller σ0.
+    let no_std: Vec<_> = rows
+        .iter()
+        .map(|r| {
+            let mut r = r.clone();
+            if let CameraSource::Pose { std, .. } = &mut r.camera {
+                *std = None;
+            }
+            r
+        })
+        .collect();
+    let st2 = dir.join("no-std.csv");
+    write_rows(&st2, &no_std);
+    let v2 = json(&calibrate(
+        &st2,
+        &dir.join("no-std.toml"),
+        &[
+            "--json",
+            "--camera-std-mm",
+            "0.08",
+            "--camera-std-deg",
+            "0.008",
+        ],
+    ));
+    let sigma0_2 = v2["sigma0"].as_f64().unwrap();
+    assert!(sigma0_2 < 0.8 * sigma0, "σ0 {sigma0_2} vs {sigma0}");
+    check_recovered(&dir.join("no-std.toml"), 3.0);
 }
 
 #[test]
