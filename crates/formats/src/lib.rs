@@ -5,6 +5,7 @@
 //! (file name) for error messages; `load_*` functions read the file first.
 
 pub mod camera;
+pub mod hand_eye;
 pub mod image;
 pub mod observations;
 
@@ -107,6 +108,14 @@ pub enum FormatError {
     /// The test field is not valid.
     #[error(transparent)]
     Field(#[from] photopose_field::FieldError),
+    /// The hand-eye file is not valid.
+    #[error("{origin}: {what}")]
+    HandEye {
+        /// File name.
+        origin: String,
+        /// What is wrong, with the key.
+        what: String,
+    },
     /// An observation file is not valid.
     #[error("{origin}:{line}: {what}")]
     Observations {
