@@ -2,6 +2,7 @@
 
 pub mod batch;
 pub mod bench;
+pub mod circle_test;
 pub mod defaults;
 pub mod detect;
 pub mod field;

@@ -136,8 +136,9 @@ pub struct RobotError {
 }
 
 impl Default for RobotError {
-    /// A pattern of a size a real robot shows: F ≈ 0.05 mm from orders 2, 3
-    /// and 4, a wobble of up to ≈ 0.01° about each axis, no jitter.
+    /// A pattern of a size a real robot shows on such a circle: F ≈ 0.18 mm
+    /// from orders 2, 3 and 4, a wobble of up to ≈ 0.014° about each axis,
+    /// no jitter.
     fn default() -> Self {
         let h = |order, amplitude, phase_deg| Harmonic {
             order,
@@ -145,7 +146,7 @@ impl Default for RobotError {
             phase_deg,
         };
         RobotError {
-            radial_mm: vec![h(2, 0.015, 30.0), h(3, 0.008, -50.0), h(4, 0.004, 10.0)],
+            radial_mm: vec![h(2, 0.060, 30.0), h(3, 0.030, -50.0), h(4, 0.015, 10.0)],
             wobble_deg: [
                 vec![h(1, 0.010, 0.0), h(2, 0.004, 40.0)],
                 vec![h(1, 0.008, 90.0), h(3, 0.003, 0.0)],

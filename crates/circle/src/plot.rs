@@ -147,8 +147,13 @@ pub fn path_svg(test: &CircleTest, title: &str, magnify: f64) -> String {
         text(&mut s, x + dx, y + dy, 11.0, anchor, &format!("{deg}°"));
     }
     // Deviation rings, the reference circle dashed.
+    // Every ring if they are far enough apart, else the outermost two.
     let n_rings = (reach / step).ceil().max(1.0) as i64;
+    let dense = magnify * step * scale < 12.0;
     for k in -n_rings..=n_rings {
+        if dense && k != 0 && k.abs() != n_rings {
+            continue;
+        }
         let rho = (r + magnify * k as f64 * step) * scale;
         if rho <= 0.0 {
             continue;
@@ -156,25 +161,30 @@ pub fn path_svg(test: &CircleTest, title: &str, magnify: f64) -> String {
         let style = if k == 0 {
             "stroke=\"#555555\" stroke-width=\"1\" stroke-dasharray=\"6 4\""
         } else {
-            "stroke=\"#dddddd\" stroke-width=\"0.8\""
+            "stroke=\"#cccccc\" stroke-width=\"0.8\""
         };
         let _ = writeln!(
             s,
             "<circle cx=\"{cx}\" cy=\"{cy}\" r=\"{rho:.2}\" fill=\"none\" {style}/>"
         );
-        let label = format!("{:+}", fmt_num(k as f64 * step * 1e3, decimals(step * 1e3)));
-        let a = 60f64.to_radians();
+        if k == 0 {
+            continue;
+        }
+        // Positive rings labelled outside at 50°, negative inside at 130°.
+        let value = fmt_num(k as f64 * step * 1e3, decimals(step * 1e3));
+        let (deg, anchor, dx, sign) = if k > 0 {
+            (50f64, "start", 3.0, "+")
+        } else {
+            (130f64, "end", -3.0, "")
+        };
+        let a = deg.to_radians();
         text(
             &mut s,
-            cx + rho * a.cos() + 3.0,
+            cx + rho * a.cos() + dx,
             cy - rho * a.sin(),
             9.0,
-            "start",
-            &if k == 0 {
-                "0 µm".into()
-            } else {
-                format!("{label} µm")
-            },
+            anchor,
+            &format!("{sign}{value} µm"),
         );
     }
     // Raw samples in time order, then the filtered profile.
@@ -225,13 +235,21 @@ pub fn path_svg(test: &CircleTest, title: &str, magnify: f64) -> String {
     text(
         &mut s,
         w / 2.0,
-        h - 24.0,
+        h - 34.0,
         12.0,
         "middle",
         &format!(
-            "{} samples, {dir}, {:.0}° swept · centre {:.3}, {:.3}, {:.3} mm · grey: samples, blue: filtered",
+            "{} samples, {dir}, {:.0}° swept · centre {:.3}, {:.3}, {:.3} mm",
             test.n_samples, test.coverage_deg, c[0], c[1], c[2]
         ),
+    );
+    text(
+        &mut s,
+        w / 2.0,
+        h - 16.0,
+        12.0,
+        "middle",
+        "dashed: least-squares circle · grey: samples · blue: filtered profile",
     );
     s.push_str("</svg>\n");
     s
@@ -478,6 +496,12 @@ pub fn angular_svg(test: &CircleTest, title: &str) -> String {
             chart.curve(&mut s, &series, 1.0, color);
         }
     }
+    let _ = writeln!(
+        s,
+        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"272\" height=\"22\" fill=\"white\" fill-opacity=\"0.85\" stroke=\"#cccccc\"/>",
+        chart.left + 4.0,
+        chart.top + 3.0
+    );
     for (k, name) in ["about X", "about Y", "about Z"].iter().enumerate() {
         let x = chart.left + 10.0 + 90.0 * k as f64;
         let y = chart.top + 14.0;

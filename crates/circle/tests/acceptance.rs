@@ -106,26 +106,26 @@ fn noise_free_cell_recovers_the_injected_tcp_error_exactly() {
     let tcp = analyse(&tcp_poses(&cell, &camera), &AnalysisOptions::default()).unwrap();
     let injected_f = cell.error.radial_f_mm();
     assert!(injected_f > 0.04, "{injected_f}");
-    assert!((tcp.radius_mm - 149.9).abs() < 1e-5, "{}", tcp.radius_mm);
+    assert!((tcp.radius_mm - 149.9).abs() < 1e-4, "{}", tcp.radius_mm);
     assert!(
-        (tcp.f_mm - injected_f).abs() < 2e-5,
+        (tcp.f_mm - injected_f).abs() < 1e-4,
         "{} vs {injected_f}",
         tcp.f_mm
     );
-    assert!((tcp.f_filtered_mm.unwrap() - injected_f).abs() < 2e-5);
+    assert!((tcp.f_filtered_mm.unwrap() - injected_f).abs() < 1e-4);
     // Per sample: the radial deviation is the injected one at the commanded
     // phase, the orientation deviation the injected wobble (from its mean).
     let mean = wobble_mean(&samples, &cell.error);
     for (d, s) in tcp.samples.iter().zip(&samples) {
         let dr = d.radial_mm - cell.error.radial_at(s.phase);
-        assert!(dr.abs() < 2e-5, "{dr} at {}", s.phase);
+        assert!(dr.abs() < 1e-4, "{dr} at {}", s.phase);
         let w = cell.error.wobble_at(s.phase);
         for k in 0..3 {
             let dw = d.rotation_deg[k] - (w[k] - mean[k]);
             assert!(dw.abs() < 1e-7, "{k}: {dw}");
         }
     }
-    assert!(radial_error(&tcp, &cell.error) < 2e-5);
+    assert!(radial_error(&tcp, &cell.error) < 1e-4);
     assert!(wobble_error(&tcp, &samples, &cell.error) < 1e-7);
     // The projection centre does not see the TCP's error: the wobble moves
     // the camera on its 100 mm lever. Without the hand-eye transform the
