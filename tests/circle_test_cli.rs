@@ -183,3 +183,57 @@ fn bad_lines_and_hand_eye_files_are_named() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("he.toml") && err.contains("xyzabc"), "{err}");
 }
+
+#[test]
+fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
+    let dir = scratch("circle-test-resect");
+    let cell = Cell::default();
+    let samples = cell.samples().unwrap();
+    let mut text = String::new();
+    for (i, s) in samples.iter().step_by(59).enumerate() {
+        let e = photopose_circle::pose::exterior_of(&s.camera);
+        let r = e.rotation;
+        let rows = [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]);
+        let line = if i == 3 {
+            serde_json::json!({"image": format!("f{i}.png"), "ok": false, "error": "too few targets"})
+        } else {
+            serde_json::json!({
+                "image": format!("f{i}.png"), "ok": true,
+                "center": [e.center.x, e.center.y, e.center.z],
+                "rotation": rows,
+            })
+        };
+        text.push_str(&format!("{line}\n"));
+    }
+    let poses = dir.join("resect.jsonl");
+    std::fs::write(&poses, text).unwrap();
+    let out = bin()
+        .arg("circle-test")
+        .arg(&poses)
+        .arg("--out-dir")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    // 40 lines, one failed; 39 poses are too few for a 15-UPR filter.
+    assert!(
+        stdout.contains("40 lines, 39 poses used, skipped: 1 failed"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("F filtered           —"), "{stdout}");
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(v["tcp"], Value::Null);
+    assert_eq!(v["plots_of"], "camera");
+    assert_eq!(v["camera"]["f_filtered_mm"], Value::Null);
+    // The camera's raw F over 39 noise-free poses: the injected pattern as
+    // the camera sees it (the wobble's lever arm adds micrometres).
+    let f = v["camera"]["f_mm"].as_f64().unwrap();
+    assert!((f - cell.error.radial_f_mm()).abs() < 0.03, "{f}");
+}
