@@ -62,14 +62,26 @@ struct CameraInTcp {
 }
 
 /// What was read from one pose file.
-#[derive(Serialize)]
-struct InputSummary {
-    path: String,
-    lines: usize,
-    used: usize,
+#[derive(Serialize, Debug, Clone)]
+pub struct InputSummary {
+    /// The file (or a name for an in-memory stream).
+    pub path: String,
+    /// Non-empty lines.
+    pub lines: usize,
+    /// Poses used.
+    pub used: usize,
     /// Lines without a pose, by status (`stale`, `too_few_targets`,
     /// `error`, `failed` for a resect line with `ok: false`).
-    skipped: BTreeMap<String, usize>,
+    pub skipped: BTreeMap<String, usize>,
+}
+
+/// A hand-eye transform as read.
+#[derive(Debug, Clone, Copy)]
+pub struct HandEye {
+    /// `X` as KUKA `X, Y, Z, A, B, C` (mm, degrees).
+    pub xyzabc: [f64; 6],
+    /// `X = T_tcp←camera`.
+    pub camera_in_tcp: Isometry3<f64>,
 }
 
 /// The JSON report (report.json).
@@ -82,6 +94,16 @@ struct Report<'a> {
     plots_of: &'static str,
     camera: &'a CircleTest,
     tcp: Option<&'a CircleTest>,
+}
+
+/// Everything a circular test writes, in memory.
+pub struct Outputs {
+    /// The text report.
+    pub text: String,
+    /// The JSON report.
+    pub json: String,
+    /// File name and content of each output file.
+    pub files: Vec<(&'static str, String)>,
 }
 
 /// Runs the command.
@@ -98,13 +120,47 @@ pub fn run(args: Args) -> Result<ExitCode> {
         bail!("no usable pose in {} file(s)", args.poses.len());
     }
     let hand_eye = args.hand_eye.as_deref().map(read_hand_eye).transpose()?;
-    let options = AnalysisOptions {
-        harmonics: args.harmonics,
-    };
-    let camera = analyse(&poses, &options).context("circular test of the projection centres")?;
-    let tcp = match &hand_eye {
-        Some((_, x)) => {
-            let tcp: Vec<Isometry3<f64>> = poses.iter().map(|c| tcp_from_camera(c, x)).collect();
+    let out = evaluate(
+        &poses,
+        &inputs,
+        hand_eye.as_ref(),
+        args.harmonics,
+        args.magnify,
+    )?;
+    let written = write_outputs(&args.out_dir, &out)?;
+    if args.json {
+        println!("{}", out.json);
+    } else {
+        print!("{}", out.text);
+        println!(
+            "\nwritten: {}",
+            written
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The circular test of camera poses (time order, plate frame) and, with a
+/// hand-eye transform, of the TCP: reports and plots (of the TCP if given).
+pub fn evaluate(
+    poses: &[Isometry3<f64>],
+    inputs: &[InputSummary],
+    hand_eye: Option<&HandEye>,
+    harmonics: u32,
+    magnify: f64,
+) -> Result<Outputs> {
+    let options = AnalysisOptions { harmonics };
+    let camera = analyse(poses, &options).context("circular test of the projection centres")?;
+    let tcp = match hand_eye {
+        Some(h) => {
+            let tcp: Vec<Isometry3<f64>> = poses
+                .iter()
+                .map(|c| tcp_from_camera(c, &h.camera_in_tcp))
+                .collect();
             Some(analyse(&tcp, &options).context("circular test of the TCP")?)
         }
         None => None,
@@ -114,17 +170,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
         None => ("projection centre", &camera),
     };
     let report = Report {
-        inputs: &inputs,
+        inputs,
         n_poses: poses.len(),
-        hand_eye_xyzabc: hand_eye.as_ref().map(|(xyzabc, _)| *xyzabc),
-        magnify: args.magnify,
+        hand_eye_xyzabc: hand_eye.map(|h| h.xyzabc),
+        magnify,
         plots_of: if tcp.is_some() { "tcp" } else { "camera" },
         camera: &camera,
         tcp: tcp.as_ref(),
     };
     let json = serde_json::to_string_pretty(&report)?;
     let mut text = String::new();
-    for i in &inputs {
+    for i in inputs {
         let skipped: Vec<String> = i.skipped.iter().map(|(k, n)| format!("{n} {k}")).collect();
         text.push_str(&format!(
             "{}: {} lines, {} poses used{}\n",
@@ -143,26 +199,20 @@ pub fn run(args: Args) -> Result<ExitCode> {
         "Circular test (ISO 230-4) of the projection centre",
         &camera,
     ));
-    if let (Some(t), Some((xyzabc, _))) = (&tcp, &hand_eye) {
+    if let (Some(t), Some(h)) = (&tcp, hand_eye) {
         text.push('\n');
         let title = format!(
             "Circular test (ISO 230-4) of the TCP (camera in TCP X,Y,Z,A,B,C = {})",
-            xyzabc.map(|v| format!("{v}")).join(", ")
+            h.xyzabc.map(|v| format!("{v}")).join(", ")
         );
         text.push_str(&report::text(&title, t));
     }
-    let dir = &args.out_dir;
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let files = [
+    let files = vec![
         ("report.txt", text.clone()),
         ("report.json", json.clone() + "\n"),
         (
             "circle.svg",
-            plot::path_svg(
-                plotted,
-                &format!("Circular path of the {subject}"),
-                args.magnify,
-            ),
+            plot::path_svg(plotted, &format!("Circular path of the {subject}"), magnify),
         ),
         (
             "radial.svg",
@@ -173,28 +223,23 @@ pub fn run(args: Args) -> Result<ExitCode> {
             plot::angular_svg(plotted, &format!("Orientation deviation of the {subject}")),
         ),
     ];
-    for (name, body) in &files {
+    Ok(Outputs { text, json, files })
+}
+
+/// Writes the output files into `dir` (created if needed); their paths.
+pub fn write_outputs(dir: &Path, out: &Outputs) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut written = Vec::new();
+    for (name, body) in &out.files {
         let p = dir.join(name);
         std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+        written.push(p);
     }
-    if args.json {
-        println!("{json}");
-    } else {
-        print!("{text}");
-        println!(
-            "\nwritten: {}",
-            files
-                .iter()
-                .map(|(n, _)| dir.join(n).display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(written)
 }
 
 /// Appends the camera poses of one file; lines without a pose are counted.
-fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary> {
+pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary> {
     let name = path.display().to_string();
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
     let mut summary = InputSummary {
@@ -249,7 +294,7 @@ fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary
 }
 
 /// The hand-eye transform `X = T_tcp←camera` of a hand-eye file.
-fn read_hand_eye(path: &Path) -> Result<([f64; 6], Isometry3<f64>)> {
+pub fn read_hand_eye(path: &Path) -> Result<HandEye> {
     let name = path.display().to_string();
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
     let file: HandEyeFile = toml::from_str(&text)
@@ -261,5 +306,8 @@ fn read_hand_eye(path: &Path) -> Result<([f64; 6], Isometry3<f64>)> {
             xyzabc[k]
         );
     }
-    Ok((xyzabc, from_xyzabc(xyzabc)))
+    Ok(HandEye {
+        xyzabc,
+        camera_in_tcp: from_xyzabc(xyzabc),
+    })
 }

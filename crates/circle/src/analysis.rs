@@ -86,6 +86,9 @@ pub struct SampleDeviation {
     pub rotation_deg: [f64; 3],
     /// The filtered orientation profiles at this angle, degrees.
     pub rotation_filtered_deg: Option<[f64; 3]>,
+    /// The same small rotation about the plane's axes `u`, `v`, `normal`,
+    /// degrees.
+    pub rotation_plane_deg: [f64; 3],
     /// The position, field frame, mm.
     pub position_mm: [f64; 3],
 }
@@ -270,6 +273,8 @@ pub fn analyse(
                 out_of_plane_mm: out_of_plane[i],
                 rotation_deg: [rx[i], ry[i], rz[i]],
                 rotation_filtered_deg: rot_f,
+                rotation_plane_deg: [plane.u, plane.v, plane.normal]
+                    .map(|a| a.dot(&omegas[i]).to_degrees()),
                 position_mm: positions[i].into(),
             }
         })
@@ -412,6 +417,35 @@ mod tests {
         assert!((r.coverage_deg - 359.5).abs() < 1e-6);
         assert!((r.samples[90].phase_deg - 45.0).abs() < 1e-9);
         assert_eq!(r.plane.normal, [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn a_tilted_circle_reports_rotations_about_its_plane_axes() {
+        // Plane tilted 30° about X; the pose turns about the plane normal by
+        // 0.01° sin θ.
+        let tilt = UnitQuaternion::from_scaled_axis(Vector3::x() * 30f64.to_radians());
+        let normal = tilt * Vector3::z();
+        let base = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
+        let poses: Vec<_> = (0..720)
+            .map(|i| {
+                let t = (i as f64 * 0.5).to_radians();
+                let p = tilt * Vector3::new(100.0 * t.cos(), 100.0 * t.sin(), 0.0);
+                let q = UnitQuaternion::from_scaled_axis(normal * (0.01f64.to_radians() * t.sin()))
+                    * base;
+                Isometry3::from_parts(p.into(), q)
+            })
+            .collect();
+        let r = analyse(&poses, &AnalysisOptions::default()).unwrap();
+        assert!((Vector3::from(r.plane.normal) - normal).norm() < 1e-9);
+        for s in &r.samples {
+            let t = s.phase_deg.to_radians();
+            assert!(
+                (s.rotation_plane_deg[2] - 0.01 * t.sin()).abs() < 1e-9,
+                "{s:?}"
+            );
+            assert!(s.rotation_plane_deg[0].abs() < 1e-9 && s.rotation_plane_deg[1].abs() < 1e-9);
+        }
+        assert!((r.rotation_x_deg.span - 0.0).abs() < 1e-9);
     }
 
     #[test]
