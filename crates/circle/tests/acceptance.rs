@@ -229,3 +229,32 @@ fn recovery_errors_over_seeds() {
         }
     }
 }
+
+/// The default cell is renderable: from every camera pose of the path the
+/// default camera sees a good part of the default plate.
+#[test]
+fn every_camera_pose_of_the_default_cell_sees_the_plate() {
+    let camera = photopose_formats::default_camera();
+    let field = photopose_field::design::default_plate();
+    let samples = Cell::default().samples().unwrap();
+    let mut pts = Vec::new();
+    let fewest = samples
+        .iter()
+        .map(|s| {
+            visible_points(
+                &camera,
+                &s.exterior(),
+                field.targets().iter().map(|t| t.position),
+                10.0,
+                &mut pts,
+            );
+            pts.len()
+        })
+        .min()
+        .unwrap();
+    assert!(
+        fewest >= 90,
+        "only {fewest} of {} targets visible",
+        field.len()
+    );
+}
