@@ -136,7 +136,7 @@ pub struct RobotError {
 }
 
 impl Default for RobotError {
-    /// A pattern of a size a real robot shows on such a circle: F ≈ 0.18 mm
+    /// A pattern of a size a real robot shows on such a circle: F ≈ 0.17 mm
     /// from orders 2, 3 and 4, a wobble of up to ≈ 0.014° about each axis,
     /// no jitter.
     fn default() -> Self {

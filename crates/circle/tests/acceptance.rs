@@ -205,6 +205,22 @@ fn noisy_cell_recovers_f_within_5_um_and_wobble_within_a_thousandth_degree() {
 #[test]
 #[ignore]
 fn recovery_errors_over_seeds() {
+    let cell = Cell::default();
+    let samples = cell.samples().unwrap();
+    let camera: Vec<_> = samples.iter().map(|s| s.camera).collect();
+    let tcp = analyse(&tcp_poses(&cell, &camera), &AnalysisOptions::default()).unwrap();
+    let cam = analyse(&camera, &AnalysisOptions::default()).unwrap();
+    println!(
+        "noise-free, {} poses: injected F {:.3} µm; TCP F {:.3} µm (filtered {:.3} µm), profile error {:.4} µm, wobble error {:.2e}°; camera without hand-eye: F {:.3} µm, profile off by {:.2} µm",
+        samples.len(),
+        cell.error.radial_f_mm() * 1e3,
+        tcp.f_mm * 1e3,
+        tcp.f_filtered_mm.unwrap() * 1e3,
+        radial_error(&tcp, &cell.error) * 1e3,
+        wobble_error(&tcp, &samples, &cell.error),
+        cam.f_mm * 1e3,
+        radial_error(&cam, &cell.error) * 1e3
+    );
     for sigma_px in [0.01, 0.02] {
         for harmonics in [8, 15] {
             let (mut f_max, mut f_sum, mut p_max, mut w_max, mut within) =
