@@ -36,6 +36,8 @@ enum Command {
     Field(cmd::field::Args),
     /// Calibrations: hand-eye (camera on the flange, plate in the robot base).
     Calibrate(cmd::calibrate::Args),
+    /// ISO 230-4 circular test of a recorded pose stream: report and plots.
+    CircleTest(cmd::circle_test::Args),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +54,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cmd::render::run(args),
         Command::Field(args) => cmd::field::run(args),
         Command::Calibrate(args) => cmd::calibrate::run(args),
+        Command::CircleTest(args) => cmd::circle_test::run(args),
     };
     match result {
         Ok(code) => code,

@@ -4,6 +4,7 @@ pub mod batch;
 pub mod bench;
 pub mod calibrate;
 pub mod calibrate_hand_eye;
+pub mod circle_test;
 pub mod defaults;
 pub mod detect;
 pub mod field;

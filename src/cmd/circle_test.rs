@@ -1,0 +1,313 @@
+//! `photopose circle-test`: the ISO 230-4 circular test of a recorded pose
+//! stream (the daemon's JSON lines, docs/streams.md, or `photopose resect`
+//! output), of the projection centres and — with a hand-eye transform — of
+//! the TCP. Writes report.txt, report.json and the figure-2 style plots
+//! circle.svg, radial.svg and angular.svg into the output folder.
+
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use photopose_circle::pose::{camera_pose, from_xyzabc, tcp_from_camera};
+use photopose_circle::{analyse, plot, report, AnalysisOptions, CircleTest, Isometry3};
+use photopose_geometry::{rotation, Exterior, Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// Arguments of `photopose circle-test`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// Pose files: JSON lines of the daemon's pose stream (docs/streams.md)
+    /// or of `photopose resect`; several files are joined in order.
+    #[arg(required = true)]
+    pub poses: Vec<PathBuf>,
+    /// Hand-eye file (TOML, `[camera_in_tcp] xyzabc = [x, y, z, a, b, c]`,
+    /// mm and KUKA degrees): also test the TCP, and plot it.
+    #[arg(long)]
+    pub hand_eye: Option<PathBuf>,
+    /// Magnification of the radial deviations in circle.svg.
+    #[arg(long, default_value_t = 25.0)]
+    pub magnify: f64,
+    /// Highest harmonic order (undulations per revolution) of the filtered
+    /// profiles; 0: no filter.
+    #[arg(long, default_value_t = AnalysisOptions::default().harmonics)]
+    pub harmonics: u32,
+    /// Folder for report.txt, report.json, circle.svg, radial.svg, angular.svg.
+    #[arg(long, default_value = "circle-test")]
+    pub out_dir: PathBuf,
+    /// Print the JSON report on stdout instead of the text report.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One input line: a pose message (`status`) or a resect line (`ok`).
+#[derive(Deserialize)]
+struct PoseLine {
+    status: Option<String>,
+    ok: Option<bool>,
+    center: Option<[f64; 3]>,
+    rotation: Option<[[f64; 3]; 3]>,
+}
+
+/// The hand-eye file: only `[camera_in_tcp] xyzabc` is read here; other
+/// tables and keys are left to their readers.
+#[derive(Deserialize)]
+struct HandEyeFile {
+    camera_in_tcp: CameraInTcp,
+}
+
+#[derive(Deserialize)]
+struct CameraInTcp {
+    xyzabc: [f64; 6],
+}
+
+/// What was read from one pose file.
+#[derive(Serialize, Debug, Clone)]
+pub struct InputSummary {
+    /// The file (or a name for an in-memory stream).
+    pub path: String,
+    /// Non-empty lines.
+    pub lines: usize,
+    /// Poses used.
+    pub used: usize,
+    /// Lines without a pose, by status (`stale`, `too_few_targets`,
+    /// `error`, `failed` for a resect line with `ok: false`).
+    pub skipped: BTreeMap<String, usize>,
+}
+
+/// A hand-eye transform as read.
+#[derive(Debug, Clone, Copy)]
+pub struct HandEye {
+    /// `X` as KUKA `X, Y, Z, A, B, C` (mm, degrees).
+    pub xyzabc: [f64; 6],
+    /// `X = T_tcp←camera`.
+    pub camera_in_tcp: Isometry3<f64>,
+}
+
+/// The JSON report (report.json).
+#[derive(Serialize)]
+struct Report<'a> {
+    inputs: &'a [InputSummary],
+    n_poses: usize,
+    hand_eye_xyzabc: Option<[f64; 6]>,
+    magnify: f64,
+    plots_of: &'static str,
+    camera: &'a CircleTest,
+    tcp: Option<&'a CircleTest>,
+}
+
+/// Everything a circular test writes, in memory.
+pub struct Outputs {
+    /// The text report.
+    pub text: String,
+    /// The JSON report.
+    pub json: String,
+    /// File name and content of each output file.
+    pub files: Vec<(&'static str, String)>,
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<ExitCode> {
+    if !(args.magnify.is_finite() && args.magnify > 0.0) {
+        bail!("--magnify {}: must be a positive number", args.magnify);
+    }
+    let mut poses = Vec::new();
+    let mut inputs = Vec::new();
+    for path in &args.poses {
+        inputs.push(read_poses(path, &mut poses)?);
+    }
+    if poses.is_empty() {
+        bail!("no usable pose in {} file(s)", args.poses.len());
+    }
+    let hand_eye = args.hand_eye.as_deref().map(read_hand_eye).transpose()?;
+    let out = evaluate(
+        &poses,
+        &inputs,
+        hand_eye.as_ref(),
+        args.harmonics,
+        args.magnify,
+    )?;
+    let written = write_outputs(&args.out_dir, &out)?;
+    if args.json {
+        println!("{}", out.json);
+    } else {
+        print!("{}", out.text);
+        println!(
+            "\nwritten: {}",
+            written
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The circular test of camera poses (time order, plate frame) and, with a
+/// hand-eye transform, of the TCP: reports and plots (of the TCP if given).
+pub fn evaluate(
+    poses: &[Isometry3<f64>],
+    inputs: &[InputSummary],
+    hand_eye: Option<&HandEye>,
+    harmonics: u32,
+    magnify: f64,
+) -> Result<Outputs> {
+    let options = AnalysisOptions { harmonics };
+    let camera = analyse(poses, &options).context("circular test of the projection centres")?;
+    let tcp = match hand_eye {
+        Some(h) => {
+            let tcp: Vec<Isometry3<f64>> = poses
+                .iter()
+                .map(|c| tcp_from_camera(c, &h.camera_in_tcp))
+                .collect();
+            Some(analyse(&tcp, &options).context("circular test of the TCP")?)
+        }
+        None => None,
+    };
+    let (subject, plotted) = match &tcp {
+        Some(t) => ("TCP", t),
+        None => ("projection centre", &camera),
+    };
+    let report = Report {
+        inputs,
+        n_poses: poses.len(),
+        hand_eye_xyzabc: hand_eye.map(|h| h.xyzabc),
+        magnify,
+        plots_of: if tcp.is_some() { "tcp" } else { "camera" },
+        camera: &camera,
+        tcp: tcp.as_ref(),
+    };
+    let json = serde_json::to_string_pretty(&report)?;
+    let mut text = String::new();
+    for i in inputs {
+        let skipped: Vec<String> = i.skipped.iter().map(|(k, n)| format!("{n} {k}")).collect();
+        text.push_str(&format!(
+            "{}: {} lines, {} poses used{}\n",
+            i.path,
+            i.lines,
+            i.used,
+            if skipped.is_empty() {
+                String::new()
+            } else {
+                format!(", skipped: {}", skipped.join(", "))
+            }
+        ));
+    }
+    text.push('\n');
+    text.push_str(&report::text(
+        "Circular test (ISO 230-4) of the projection centre",
+        &camera,
+    ));
+    if let (Some(t), Some(h)) = (&tcp, hand_eye) {
+        text.push('\n');
+        let title = format!(
+            "Circular test (ISO 230-4) of the TCP (camera in TCP X,Y,Z,A,B,C = {})",
+            h.xyzabc.map(|v| format!("{v}")).join(", ")
+        );
+        text.push_str(&report::text(&title, t));
+    }
+    let files = vec![
+        ("report.txt", text.clone()),
+        ("report.json", json.clone() + "\n"),
+        (
+            "circle.svg",
+            plot::path_svg(plotted, &format!("Circular path of the {subject}"), magnify),
+        ),
+        (
+            "radial.svg",
+            plot::radial_svg(plotted, &format!("Radial deviation of the {subject}")),
+        ),
+        (
+            "angular.svg",
+            plot::angular_svg(plotted, &format!("Orientation deviation of the {subject}")),
+        ),
+    ];
+    Ok(Outputs { text, json, files })
+}
+
+/// Writes the output files into `dir` (created if needed); their paths.
+pub fn write_outputs(dir: &Path, out: &Outputs) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut written = Vec::new();
+    for (name, body) in &out.files {
+        let p = dir.join(name);
+        std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+        written.push(p);
+    }
+    Ok(written)
+}
+
+/// Appends the camera poses of one file; lines without a pose are counted.
+pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
+    let mut summary = InputSummary {
+        path: name.clone(),
+        lines: 0,
+        used: 0,
+        skipped: BTreeMap::new(),
+    };
+    for (k, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let at = format!("{name}:{}", k + 1);
+        summary.lines += 1;
+        let l: PoseLine =
+            serde_json::from_str(line).with_context(|| format!("{at}: not a JSON pose line"))?;
+        let has_pose = match (&l.status, l.ok) {
+            (Some(status), _) => {
+                if status != "ok" {
+                    *summary.skipped.entry(status.clone()).or_default() += 1;
+                }
+                status == "ok"
+            }
+            (None, Some(ok)) => {
+                if !ok {
+                    *summary.skipped.entry("failed".into()).or_default() += 1;
+                }
+                ok
+            }
+            (None, None) => {
+                bail!("{at}: neither a pose message (no \"status\") nor a resect line (no \"ok\")")
+            }
+        };
+        if !has_pose {
+            continue;
+        }
+        let (Some(c), Some(r)) = (l.center, l.rotation) else {
+            bail!("{at}: a pose line without \"center\" and \"rotation\"");
+        };
+        let r = Matrix3::from_fn(|i, j| r[i][j]);
+        if !c.iter().all(|v| v.is_finite()) {
+            bail!("{at}: \"center\" {c:?} is not finite");
+        }
+        if !rotation::is_rotation(&r, 1e-6) {
+            bail!("{at}: \"rotation\" is not a rotation matrix");
+        }
+        out.push(camera_pose(&Exterior::new(r, Vector3::from(c))));
+        summary.used += 1;
+    }
+    Ok(summary)
+}
+
+/// The hand-eye transform `X = T_tcp←camera` of a hand-eye file.
+pub fn read_hand_eye(path: &Path) -> Result<HandEye> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
+    let file: HandEyeFile = toml::from_str(&text)
+        .with_context(|| format!("{name}: expected [camera_in_tcp] xyzabc = [x, y, z, a, b, c]"))?;
+    let xyzabc = file.camera_in_tcp.xyzabc;
+    if let Some(k) = xyzabc.iter().position(|v| !v.is_finite()) {
+        bail!(
+            "{name}: camera_in_tcp.xyzabc[{k}] = {} is not finite",
+            xyzabc[k]
+        );
+    }
+    Ok(HandEye {
+        xyzabc,
+        camera_in_tcp: from_xyzabc(xyzabc),
+    })
+}

@@ -1,0 +1,239 @@
+//! End-to-end test of `photopose circle-test`: a pose stream written from
+//! the simulated cell (with pose noise and some lines without a pose), run
+//! through the real binary with a hand-eye file; checks the report's keys,
+//! the files written and the recovered radial deviation F.
+
+mod common;
+
+use common::{bin, scratch};
+use nalgebra::Matrix6;
+use photopose_circle::cell::{perturb, CameraMount, Cell};
+use photopose_geometry::rng::SplitMix64;
+use photopose_stream::{PoseMessage, PoseStatus};
+use serde_json::Value;
+use std::io::Write;
+
+/// Writes the cell's camera poses as the daemon's JSON lines, with noise of
+/// 5 µm and 0.0005° per axis, every 100th frame `too_few_targets` and one
+/// `stale` line.
+fn write_stream(cell: &Cell, path: &std::path::Path) -> usize {
+    let samples = cell.samples().unwrap();
+    let mut cov = Matrix6::zeros();
+    for k in 0..3 {
+        cov[(k, k)] = 0.005f64.powi(2);
+        cov[(3 + k, 3 + k)] = 0.0005f64.to_radians().powi(2);
+    }
+    let mut rng = SplitMix64::new(5);
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut buf = Vec::new();
+    let mut used = 0;
+    for (i, s) in samples.iter().enumerate() {
+        let t = (s.time_s * 1e9) as u64;
+        let m = if i % 100 == 50 {
+            PoseMessage::without_pose(i as u64, t, t, PoseStatus::TooFewTargets)
+        } else {
+            let e = photopose_circle::pose::exterior_of(&perturb(&s.camera, &cov, &mut rng));
+            let r = e.rotation;
+            let mut m = PoseMessage::without_pose(i as u64, t, t, PoseStatus::Ok);
+            m.center = Some(e.center.into());
+            m.rotation = Some([0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]));
+            m.n_targets = 200;
+            used += 1;
+            m
+        };
+        m.encode_line(&mut buf);
+        file.write_all(&buf).unwrap();
+        if i == 1000 {
+            PoseMessage::without_pose(i as u64, t, t, PoseStatus::Stale).encode_line(&mut buf);
+            file.write_all(&buf).unwrap();
+        }
+    }
+    used
+}
+
+#[test]
+fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
+    let dir = scratch("circle-test");
+    let cell = Cell::default();
+    let poses = dir.join("poses.jsonl");
+    let used = write_stream(&cell, &poses);
+    let x = CameraMount::DEFAULT_XYZABC;
+    let hand_eye = dir.join("hand_eye.toml");
+    std::fs::write(
+        &hand_eye,
+        format!(
+            "# written by the test\n[camera_in_tcp]\nxyzabc = [{}, {}, {}, {}, {}, {}]\n\n[solution]\nmethod = \"test\"\n",
+            x[0], x[1], x[2], x[3], x[4], x[5]
+        ),
+    )
+    .unwrap();
+    let out_dir = dir.join("out");
+    let out = bin()
+        .arg("circle-test")
+        .arg(&poses)
+        .arg("--hand-eye")
+        .arg(&hand_eye)
+        .arg("--out-dir")
+        .arg(&out_dir)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "inputs",
+        "n_poses",
+        "hand_eye_xyzabc",
+        "magnify",
+        "plots_of",
+        "camera",
+        "tcp",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["n_poses"], used);
+    assert_eq!(v["plots_of"], "tcp");
+    assert_eq!(v["inputs"][0]["skipped"]["stale"], 1);
+    assert_eq!(v["inputs"][0]["skipped"]["too_few_targets"], 24);
+    let tcp = &v["tcp"];
+    for key in [
+        "n_samples",
+        "plane",
+        "center_mm",
+        "radius_mm",
+        "std_center_mm",
+        "std_radius_mm",
+        "direction",
+        "coverage_deg",
+        "harmonics_upr",
+        "f_mm",
+        "f_filtered_mm",
+        "radial_mm",
+        "out_of_plane_mm",
+        "mean_orientation_abc_deg",
+        "rotation_x_deg",
+        "rotation_y_deg",
+        "rotation_z_deg",
+        "rotation_max_angle_deg",
+        "samples",
+    ] {
+        assert!(tcp.get(key).is_some(), "missing tcp.{key}");
+    }
+    let injected = cell.error.radial_f_mm();
+    let f = tcp["f_filtered_mm"].as_f64().unwrap();
+    assert!((f - injected).abs() < 0.005, "F {f} vs injected {injected}");
+    let r = tcp["radius_mm"].as_f64().unwrap();
+    assert!((r - 149.9).abs() < 0.002, "{r}");
+    assert_eq!(tcp["direction"], "ccw");
+    // The TCP circle is centred where it was commanded; the camera's 60 mm
+    // further along X and 80 mm higher.
+    let c = |t: &Value, k: usize| t["center_mm"][k].as_f64().unwrap();
+    assert!((c(tcp, 0) + 60.0).abs() < 0.01 && (c(tcp, 2) - 520.0).abs() < 0.01);
+    assert!(c(&v["camera"], 0).abs() < 0.01 && (c(&v["camera"], 2) - 600.0).abs() < 0.01);
+    for name in [
+        "report.txt",
+        "report.json",
+        "circle.svg",
+        "radial.svg",
+        "angular.svg",
+    ] {
+        let p = out_dir.join(name);
+        let body = std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        assert!(body.len() > 500, "{name} too short");
+        if name.ends_with(".svg") {
+            assert!(body.starts_with("<svg") && body.trim_end().ends_with("</svg>"));
+        }
+    }
+    let text = std::fs::read_to_string(out_dir.join("report.txt")).unwrap();
+    assert!(text.contains("radial deviation F") && text.contains("of the TCP"));
+}
+
+#[test]
+fn bad_lines_and_hand_eye_files_are_named() {
+    let dir = scratch("circle-test-bad");
+    let poses = dir.join("bad.jsonl");
+    std::fs::write(&poses, "{\"status\":\"stale\"}\nnot json\n").unwrap();
+    let out = bin().arg("circle-test").arg(&poses).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.jsonl:2"), "{err}");
+
+    std::fs::write(&poses, "{\"status\":\"stale\"}\n").unwrap();
+    let out = bin().arg("circle-test").arg(&poses).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no usable pose"));
+
+    let cell = Cell::default();
+    write_stream(&cell, &poses);
+    let hand_eye = dir.join("he.toml");
+    std::fs::write(&hand_eye, "[camera_in_tcp]\nxyz = [1, 2, 3]\n").unwrap();
+    let out = bin()
+        .arg("circle-test")
+        .arg(&poses)
+        .arg("--hand-eye")
+        .arg(&hand_eye)
+        .arg("--out-dir")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("he.toml") && err.contains("xyzabc"), "{err}");
+}
+
+#[test]
+fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
+    let dir = scratch("circle-test-resect");
+    let cell = Cell::default();
+    let samples = cell.samples().unwrap();
+    let mut text = String::new();
+    for (i, s) in samples.iter().step_by(59).enumerate() {
+        let e = photopose_circle::pose::exterior_of(&s.camera);
+        let r = e.rotation;
+        let rows = [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]);
+        let line = if i == 3 {
+            serde_json::json!({"image": format!("f{i}.png"), "ok": false, "error": "too few targets"})
+        } else {
+            serde_json::json!({
+                "image": format!("f{i}.png"), "ok": true,
+                "center": [e.center.x, e.center.y, e.center.z],
+                "rotation": rows,
+            })
+        };
+        text.push_str(&format!("{line}\n"));
+    }
+    let poses = dir.join("resect.jsonl");
+    std::fs::write(&poses, text).unwrap();
+    let out = bin()
+        .arg("circle-test")
+        .arg(&poses)
+        .arg("--out-dir")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    // 40 lines, one failed; 39 poses are too few for a 15-UPR filter.
+    assert!(
+        stdout.contains("40 lines, 39 poses used, skipped: 1 failed"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("F filtered           —"), "{stdout}");
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(v["tcp"], Value::Null);
+    assert_eq!(v["plots_of"], "camera");
+    assert_eq!(v["camera"]["f_filtered_mm"], Value::Null);
+    // The camera's raw F over 39 noise-free poses: the injected pattern as
+    // the camera sees it (the wobble's lever arm adds micrometres).
+    let f = v["camera"]["f_mm"].as_f64().unwrap();
+    assert!((f - cell.error.radial_f_mm()).abs() < 0.03, "{f}");
+}
