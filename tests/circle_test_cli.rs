@@ -62,7 +62,8 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     std::fs::write(
         &hand_eye,
         format!(
-            "# written by the test\n[camera_in_tcp]\nxyzabc = [{}, {}, {}, {}, {}, {}]\n\n[solution]\nmethod = \"test\"\n",
+            "# written by the test\n[camera_in_tcp]\nxyzabc = [{}, {}, {}, {}, {}, {}]\nstd_xyzabc = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]\n\n\
+             [plate_in_base]\nxyzabc = [800.0, 0.0, 0.0, 0.0, 0.0, 0.0]\nstd_xyzabc = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]\n",
             x[0], x[1], x[2], x[3], x[4], x[5]
         ),
     )

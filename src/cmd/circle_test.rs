@@ -49,18 +49,6 @@ struct PoseLine {
     rotation: Option<[[f64; 3]; 3]>,
 }
 
-/// The hand-eye file: only `[camera_in_tcp] xyzabc` is read here; other
-/// tables and keys are left to their readers.
-#[derive(Deserialize)]
-struct HandEyeFile {
-    camera_in_tcp: CameraInTcp,
-}
-
-#[derive(Deserialize)]
-struct CameraInTcp {
-    xyzabc: [f64; 6],
-}
-
 /// What was read from one pose file.
 #[derive(Serialize, Debug, Clone)]
 pub struct InputSummary {
@@ -293,12 +281,11 @@ pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSum
     Ok(summary)
 }
 
-/// The hand-eye transform `X = T_tcp←camera` of a hand-eye file.
+/// The hand-eye transform `X = T_tcp←camera` of a hand-eye file
+/// (`photopose calibrate hand-eye`, format in `photopose-formats`).
 pub fn read_hand_eye(path: &Path) -> Result<HandEye> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
-    let file: HandEyeFile = toml::from_str(&text)
-        .with_context(|| format!("{name}: expected [camera_in_tcp] xyzabc = [x, y, z, a, b, c]"))?;
+    let file = photopose_formats::hand_eye::load_hand_eye(path)?;
     let xyzabc = file.camera_in_tcp.xyzabc;
     if let Some(k) = xyzabc.iter().position(|v| !v.is_finite()) {
         bail!(
