@@ -47,11 +47,15 @@ pub fn host_time_ns() -> u64 {
 }
 
 /// Frames rendered along a circle in a horizontal plane, the camera looking
-/// straight down at the plate, paced at the configured rate.
+/// straight down at the plate, paced at the configured rate — or, built
+/// with [`SyntheticSource::along`], at given camera poses (a simulated robot
+/// cell's path).
 #[derive(Debug)]
 pub struct SyntheticSource {
     config: Synthetic,
     renderer: Renderer,
+    /// Camera poses to render one after the other instead of the circle.
+    poses: Option<Vec<Exterior>>,
     next: u64,
     start: Option<Instant>,
 }
@@ -72,9 +76,23 @@ impl SyntheticSource {
         Ok(SyntheticSource {
             config,
             renderer,
+            poses: None,
             next: 0,
             start: None,
         })
+    }
+
+    /// A source rendering `poses` in turn at `config.rate_hz` (the circle
+    /// settings of `config` are not used), then ending.
+    pub fn along(
+        camera: Camera,
+        field: &Field,
+        config: Synthetic,
+        poses: Vec<Exterior>,
+    ) -> Result<Self, RenderError> {
+        let mut me = Self::new(camera, field, config)?;
+        me.poses = Some(poses);
+        Ok(me)
     }
 
     /// The camera's exterior orientation for frame `seq` (the truth).
@@ -99,7 +117,11 @@ impl FrameSource for SyntheticSource {
     }
 
     fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
-        if self.config.frames > 0 && self.next >= self.config.frames {
+        let end = match &self.poses {
+            Some(p) => Some(p.len() as u64),
+            None => (self.config.frames > 0).then_some(self.config.frames),
+        };
+        if end.is_some_and(|n| self.next >= n) {
             return Err(SourceError::Ended);
         }
         let start = *self.start.get_or_insert_with(Instant::now);
@@ -115,7 +137,10 @@ impl FrameSource for SyntheticSource {
             seed: self.config.seed.wrapping_mul(1_000_003).wrapping_add(seq),
             ..*self.renderer.options()
         };
-        let pose = Self::pose_at(&self.config, seq);
+        let pose = match &self.poses {
+            Some(p) => p[seq as usize],
+            None => Self::pose_at(&self.config, seq),
+        };
         let rendered = self
             .renderer
             .set_options(options)
@@ -135,10 +160,17 @@ impl FrameSource for SyntheticSource {
     fn stop(&mut self) {}
 
     fn describe(&self) -> String {
-        format!(
-            "synthetic: {} frames/s on a circle of {} mm radius at {:?} mm",
-            self.config.rate_hz, self.config.radius_mm, self.config.center_mm
-        )
+        match &self.poses {
+            Some(p) => format!(
+                "synthetic: {} frames/s along {} given camera poses",
+                self.config.rate_hz,
+                p.len()
+            ),
+            None => format!(
+                "synthetic: {} frames/s on a circle of {} mm radius at {:?} mm",
+                self.config.rate_hz, self.config.radius_mm, self.config.center_mm
+            ),
+        }
     }
 }
 
