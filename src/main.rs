@@ -34,6 +34,8 @@ enum Command {
     Render(cmd::render::Args),
     /// Test-field tools: a printable SVG of a plate, a new plate design.
     Field(cmd::field::Args),
+    /// Calibration: `calibrate camera` from images of the test field.
+    Calibrate(cmd::calibrate::Args),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +51,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Render(args) => cmd::render::run(args),
         Command::Field(args) => cmd::field::run(args),
+        Command::Calibrate(args) => cmd::calibrate::run(args),
     };
     match result {
         Ok(code) => code,

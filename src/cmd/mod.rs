@@ -2,6 +2,8 @@
 
 pub mod batch;
 pub mod bench;
+pub mod calibrate;
+pub mod calibrate_camera;
 pub mod defaults;
 pub mod detect;
 pub mod field;
