@@ -132,3 +132,54 @@ pub fn radial_plot(camera: &Camera, images: &[AdjustedImage]) -> String {
     s.push_str("</svg>\n");
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::Residual;
+    use photopose_geometry::{Distortion, Exterior, Interior, Sensor};
+
+    #[test]
+    fn plots_draw_every_residual_and_mark_rejected_ones_red() {
+        let camera = Camera::new(
+            Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            Distortion::default(),
+        )
+        .unwrap();
+        let residual = |col: f64, used| Residual {
+            id: 1,
+            col,
+            row: 100.0,
+            dcol: 0.05,
+            drow: -0.02,
+            used,
+        };
+        let images = [AdjustedImage {
+            name: "a".into(),
+            exterior: Exterior::from_kuka_pose([0.0, 0.0, 800.0, 0.0, 0.0, 0.0]),
+            residuals: vec![
+                residual(10.0, true),
+                residual(600.0, true),
+                residual(900.0, false),
+            ],
+        }];
+        let v = vector_plot(&camera, &images);
+        assert!(v.starts_with("<svg") && v.ends_with("</svg>\n"));
+        assert_eq!(v.matches("<line").count(), 3);
+        assert_eq!(v.matches("stroke=\"red\"").count(), 1);
+        // Largest residual 0.054 px drawn 65 px long: × 1204.
+        assert!(v.contains("× 1204"), "{v}");
+        let r = radial_plot(&camera, &images);
+        assert_eq!(r.matches("r=\"1.2\"").count(), 3);
+        assert_eq!(r.matches("fill=\"red\"").count(), 1);
+    }
+}
