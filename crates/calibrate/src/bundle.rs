@@ -39,6 +39,17 @@ pub struct PointObservation {
     pub measured: Vector2<f64>,
     /// Whether the observation takes part (false: rejected by snooping).
     pub used: bool,
+    /// Eccentricity of the target's image (centre of the imaged ellipse
+    /// minus image of the circle's centre), mm, taken off `measured`.
+    pub eccentricity: Vector2<f64>,
+}
+
+impl PointObservation {
+    /// The measured position with the eccentricity taken off: the image of
+    /// the target's centre that the model predicts.
+    pub fn centre(&self) -> Vector2<f64> {
+        self.measured - self.eccentricity
+    }
 }
 
 /// The observations of one image and its exterior orientation.
@@ -175,7 +186,7 @@ impl Bundle {
                     &self.camera,
                     &im.exterior,
                     &self.targets[p.target],
-                    &p.measured,
+                    &p.centre(),
                 )?;
                 sum += v.norm_squared();
             }
@@ -200,7 +211,7 @@ impl Bundle {
                     &self.camera,
                     &im.exterior,
                     &self.targets[p.target],
-                    &p.measured,
+                    &p.centre(),
                 )?;
                 let je = &lin.exterior;
                 cost += lin.v.norm_squared();
@@ -578,7 +589,7 @@ fn worst_standardised(
     let mut u = Matrix6::zeros();
     let mut lins = Vec::with_capacity(im.points.len());
     for (k, p) in im.points.iter().enumerate().filter(|(_, p)| p.used) {
-        let lin = linearise(camera, &im.exterior, &targets[p.target], &p.measured)?;
+        let lin = linearise(camera, &im.exterior, &targets[p.target], &p.centre())?;
         u += lin.exterior.transpose() * lin.exterior;
         lins.push((k, lin));
     }

@@ -64,6 +64,10 @@ pub struct CalibrationOptions {
     pub min_tilt_deg: f64,
     /// Least number of usable images.
     pub min_images: usize,
+    /// Take the eccentricity of each target's image off its measured
+    /// position (the centre of the imaged ellipse is not the image of the
+    /// circle's centre), with the current camera and orientation.
+    pub eccentricity: bool,
 }
 
 impl Default for CalibrationOptions {
@@ -77,6 +81,7 @@ impl Default for CalibrationOptions {
             max_rounds: 5,
             min_tilt_deg: 3.0,
             min_images: 3,
+            eccentricity: true,
         }
     }
 }
@@ -190,15 +195,19 @@ pub fn calibrate(
         targets,
         images: blocks,
     };
+    // Round 1 over the coded targets; then identify (and take the
+    // eccentricities off with the current solution) and adjust again until
+    // the identified set stops changing.
     let mut result = bundle.adjust(&options.bundle)?;
     let mut rounds = 1;
     while rounds < options.max_rounds {
         let first = rounds == 1;
         let mut changed = false;
         for (block, &k) in bundle.images.iter_mut().zip(&used_inputs) {
-            let next = identify(
+            let mut next = identify(
                 &bundle.camera,
                 field,
+                &bundle.targets,
                 &block.exterior,
                 &images[k].blobs,
                 options,
@@ -209,16 +218,21 @@ pub fn calibrate(
                     .iter()
                     .zip(&block.points)
                     .all(|(a, b)| a.target == b.target && a.measured == b.measured);
-            if !same {
+            if same {
+                // Keep what data snooping decided.
+                for (n, old) in next.iter_mut().zip(&block.points) {
+                    n.used = old.used;
+                }
+            } else {
                 changed = true;
-                block.points = next;
             }
-        }
-        if !changed {
-            break;
+            block.points = next;
         }
         rounds += 1;
         result = bundle.adjust(&options.bundle)?;
+        if !changed {
+            break;
+        }
     }
     let ps = initial.sensor.pixel_size;
     let adjusted = bundle
@@ -236,7 +250,7 @@ pub fn calibrate(
                         &bundle.camera,
                         &b.exterior,
                         &bundle.targets[p.target],
-                        &p.measured,
+                        &p.centre(),
                     )?;
                     let px = bundle.camera.image_to_pixel(p.measured);
                     Some(Residual {
@@ -303,6 +317,7 @@ fn start_block(
             target: ti,
             measured: camera.pixel_to_image(b.col, b.row),
             used: true,
+            eccentricity: Vector2::zeros(),
         });
     }
     if obs.len() < options.min_coded {
@@ -325,9 +340,11 @@ fn start_block(
 
 /// The coded observations plus the uncoded targets identified by projection
 /// with `camera` and `exterior`, sorted by target.
+#[allow(clippy::too_many_arguments)]
 fn identify(
     camera: &Camera,
     field: &Field,
+    positions: &[Vector3<f64>],
     exterior: &Exterior,
     blobs: &[Blob],
     options: &CalibrationOptions,
@@ -350,7 +367,7 @@ fn identify(
         .map(|x| exterior.project_ideal(c, &x.position))
         .collect();
     for (fi, target) in t.iter().enumerate() {
-        let Some(p) = project(&target.position) else {
+        let Some(p) = project(&positions[fi]) else {
             continue;
         };
         if !camera.contains_pixel(p, 2.0) {
@@ -399,6 +416,12 @@ fn identify(
             target: fi,
             measured: camera.pixel_to_image(blobs[k].col, blobs[k].row),
             used: true,
+            eccentricity: if options.eccentricity {
+                photopose_locate::eccentricity(c, exterior, &positions[fi], t[fi].radius)
+                    .unwrap_or_else(Vector2::zeros)
+            } else {
+                Vector2::zeros()
+            },
         });
     }
     out

@@ -3,7 +3,7 @@
 //! planar test field carried out before-hand" of the reference paper.
 //!
 //! From the blobs the detector found in 10–30 images of the plate and a
-//! nominal camera (sensor, pixel size, principal distance), [`calibrate`]
+//! nominal camera (sensor, pixel size, principal distance), [`calibrate()`]
 //! finds each image's start orientation from its coded targets, identifies
 //! the uncoded ones by projection as the solution improves, and adjusts the
 //! camera parameters of `conventions.md` (`c, x0, y0, K1 K2 K3 P1 P2 b1 b2`,

@@ -65,7 +65,10 @@ fn detections(
         .targets()
         .iter()
         .filter_map(|t| {
-            let p = e.project_pixel(camera, &t.position)?;
+            // The blob's centre is the centre of the imaged ellipse.
+            let ideal = e.project_ideal(camera.interior.c, &t.position)?
+                + photopose_locate::eccentricity(camera.interior.c, e, &t.position, t.radius)?;
+            let p = camera.image_to_pixel(camera.distort(ideal)?);
             camera.contains_pixel(p, 12.0).then(|| Blob {
                 col: p.x + noise_px * rng.normal(),
                 row: p.y + noise_px * rng.normal(),
@@ -240,7 +243,7 @@ fn images_parallel_to_the_plate_are_diagnosed() {
     };
     match &e {
         CalibrateError::NotDeterminable { combination } => {
-            assert!(combination.starts_with("c "), "{e}")
+            assert!(combination.split_whitespace().any(|w| w == "c"), "{e}")
         }
         other => panic!("{other}"),
     }
