@@ -177,8 +177,12 @@ fn calibrates_rendered_images_and_names_the_image_without_plate() {
     assert_eq!(cam, again);
     let report: Value = serde_json::from_str(&std::fs::read_to_string(&r.report).unwrap()).unwrap();
     check_within_3_sigma(&truth, &report);
-    assert_eq!(
-        report["parameters"][0]["value"].as_f64().unwrap(),
+    // The report and the camera file agree (serde_json's float parsing
+    // may differ in the last bit).
+    let c = report["parameters"][0]["value"].as_f64().unwrap();
+    assert!(
+        (c - cam.interior.c).abs() < 1e-12,
+        "{c} vs {}",
         cam.interior.c
     );
     // The blank image is skipped and named; the others are used.

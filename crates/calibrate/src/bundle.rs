@@ -105,7 +105,8 @@ pub struct BundleResult {
     pub n_observations: usize,
     /// Unknowns (minus the datum defect).
     pub n_unknowns: usize,
-    /// Levenberg–Marquardt iterations, all runs together.
+    /// Levenberg–Marquardt iterations, all runs together (in a
+    /// [`crate::Calibration`]: of all identification rounds).
     pub iterations: usize,
     /// Observations rejected by data snooping.
     pub n_snooped: usize,

@@ -199,6 +199,7 @@ pub fn calibrate(
     // eccentricities off with the current solution) and adjust again until
     // the identified set stops changing.
     let mut result = bundle.adjust(&options.bundle)?;
+    let mut iterations = result.iterations;
     let mut rounds = 1;
     while rounds < options.max_rounds {
         let first = rounds == 1;
@@ -230,10 +231,12 @@ pub fn calibrate(
         }
         rounds += 1;
         result = bundle.adjust(&options.bundle)?;
+        iterations += result.iterations;
         if !changed {
             break;
         }
     }
+    result.iterations = iterations;
     let ps = initial.sensor.pixel_size;
     let adjusted = bundle
         .images
