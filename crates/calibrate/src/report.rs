@@ -11,6 +11,9 @@ use std::fmt::Write;
 /// Correlations above this are named.
 pub const CORRELATION_LIMIT: f64 = 0.9;
 
+/// An image whose residual RMS exceeds this multiple of the median is named.
+pub const BAD_IMAGE_RATIO: f64 = 3.0;
+
 /// One camera parameter.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ParameterLine {
@@ -168,6 +171,20 @@ impl Report {
                     sd,
                     p.name()
                 ));
+            }
+        }
+        // An image that fits far worse than the others (moved, refocused,
+        // a wrong identification the snooping could not take out).
+        let mut rms: Vec<f64> = images.iter().map(|i| i.rms_px).collect();
+        rms.sort_by(f64::total_cmp);
+        if let Some(&median) = rms.get(rms.len() / 2) {
+            for im in &images {
+                if im.rms_px > BAD_IMAGE_RATIO * median && im.rms_px > 0.05 {
+                    warnings.push(format!(
+                        "image {} fits badly: residual RMS {:.3} px against a median of {:.3} px (did the camera move or refocus?)",
+                        im.image, im.rms_px, median
+                    ));
+                }
             }
         }
         let mut skipped = skipped_before.to_vec();

@@ -175,6 +175,30 @@ fn gross_errors_are_snooped_and_named_per_image() {
     }
     let _ = moved;
     assert_within_3_sigma(&truth, &cal);
+    assert!(!report.warnings.iter().any(|w| w.contains("fits badly")));
+}
+
+#[test]
+fn an_image_that_fits_badly_is_named() {
+    let truth = strong_camera();
+    let mut imgs = images(&truth, 6, 0.05, 13);
+    // Image 2 measured with 0.4 px noise instead of 0.05 px.
+    let mut rng = SplitMix64::new(99);
+    for b in &mut imgs[2].blobs {
+        b.col += 0.4 * rng.normal();
+        b.row += 0.4 * rng.normal();
+    }
+    let mut options = CalibrationOptions::default();
+    options.bundle.snooping_critical = 0.0;
+    let cal = calibrate(&nominal(&truth), &plate(), &imgs, &options).unwrap();
+    let report = Report::new(&cal, &Fixed::none(), &[]);
+    let bad: Vec<_> = report
+        .warnings
+        .iter()
+        .filter(|w| w.contains("fits badly"))
+        .collect();
+    assert_eq!(bad.len(), 1, "{:?}", report.warnings);
+    assert!(bad[0].contains("img02"), "{}", bad[0]);
 }
 
 #[test]
