@@ -108,7 +108,7 @@ pub struct BundleResult {
     /// Levenberg–Marquardt iterations, all runs together (in a
     /// [`crate::Calibration`]: of all identification rounds).
     pub iterations: usize,
-    /// Observations rejected by data snooping.
+    /// Observations newly rejected by data snooping in this adjustment.
     pub n_snooped: usize,
 }
 

@@ -198,7 +198,7 @@ impl Report {
             rms_px: (total / (2 * count.max(1)) as f64).sqrt(),
             n_observations: r.n_observations,
             n_unknowns: r.n_unknowns,
-            n_rejected: r.n_snooped,
+            n_rejected: images.iter().map(|i| i.rejected_ids.len()).sum(),
             iterations: r.iterations,
             rounds: cal.rounds,
             parameters,

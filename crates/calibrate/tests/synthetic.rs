@@ -165,6 +165,7 @@ fn gross_errors_are_snooped_and_named_per_image() {
     let report = Report::new(&cal, &Fixed::none(), &[]);
     let rejected = &report.images[3].rejected_ids;
     assert_eq!(rejected.len(), 2, "{rejected:?}");
+    assert_eq!(report.n_rejected, 2);
     for im in &report.images[..3] {
         assert!(
             im.rejected_ids.is_empty(),
