@@ -34,7 +34,8 @@ enum Command {
     Render(cmd::render::Args),
     /// Test-field tools: a printable SVG of a plate, a new plate design.
     Field(cmd::field::Args),
-    /// Calibrations: hand-eye (camera on the flange, plate in the robot base).
+    /// Calibrations: the camera (bundle adjustment on images of the test
+    /// field) and hand-eye (camera on the flange, plate in the robot base).
     Calibrate(cmd::calibrate::Args),
     /// ISO 230-4 circular test of a recorded pose stream: report and plots.
     CircleTest(cmd::circle_test::Args),

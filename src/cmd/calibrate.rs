@@ -1,5 +1,5 @@
-//! `photopose calibrate`: the calibration commands, one subcommand each
-//! (this module is only the dispatch).
+//! `photopose calibrate …`: the calibration command group, one subcommand
+//! each (this module is only the dispatch).
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -15,6 +15,9 @@ pub struct Args {
 /// What to calibrate.
 #[derive(Subcommand, Debug)]
 enum What {
+    /// The camera (interior orientation and distortion) from images of the
+    /// test field: a self-calibrating bundle adjustment.
+    Camera(crate::cmd::calibrate_camera::Args),
     /// Camera on the flange (hand-eye) and plate in the robot base from
     /// stations of robot and camera poses.
     HandEye(crate::cmd::calibrate_hand_eye::Args),
@@ -23,6 +26,7 @@ enum What {
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
     match args.what {
+        What::Camera(a) => crate::cmd::calibrate_camera::run(a),
         What::HandEye(a) => crate::cmd::calibrate_hand_eye::run(a),
     }
 }

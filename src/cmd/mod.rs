@@ -5,6 +5,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod calibrate_hand_eye;
 pub mod circle_test;
+pub mod calibrate_camera;
 pub mod defaults;
 pub mod detect;
 pub mod field;

@@ -362,35 +362,14 @@ impl Locator {
         let c = self.camera.interior.c;
         let ps = self.camera.sensor.pixel_size;
         let e = &coarse.exterior;
-        let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
         for (o, t) in self.obs.iter_mut().zip(self.identified.iter_mut()) {
             debug_assert_eq!(o.id, t.id);
             let Some(target) = self.field.get(t.id) else {
                 continue;
             };
-            let Some(centre) = e.project_ideal(c, &target.position) else {
+            let Some(offset) = eccentricity(c, e, &target.position, target.radius) else {
                 continue;
             };
-            // Plane (s, t) of a target facing +Z, origin at its centre.
-            let plane =
-                Matrix3::from_columns(&[Vector3::x(), Vector3::y(), target.position - e.center]);
-            let Some(m_inv) = (k * e.rotation * plane).try_inverse() else {
-                continue;
-            };
-            let r2 = target.radius * target.radius;
-            let q =
-                m_inv.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -r2)) * m_inv;
-            let a2 = Matrix2::new(q[(0, 0)], q[(0, 1)], q[(1, 0)], q[(1, 1)]);
-            let Some(ellipse_centre) = a2
-                .try_inverse()
-                .map(|i| -(i * Vector2::new(q[(0, 2)], q[(1, 2)])))
-            else {
-                continue;
-            };
-            let offset = ellipse_centre - centre;
-            if !(offset.x.is_finite() && offset.y.is_finite()) {
-                continue;
-            }
             o.image -= offset;
             t.col -= offset.x / ps;
             t.row += offset.y / ps;
@@ -487,4 +466,30 @@ impl Locator {
             ));
         }
     }
+}
+
+/// The eccentricity of a circular target facing `+Z` (centre `position`,
+/// radius `radius`, mm) seen from `e` with principal distance `c`: the
+/// centre of its image (an ellipse) minus the image of its centre, in ideal
+/// image coordinates, mm. Under the collinearity equations the image of the
+/// rim is exactly the conic `Q' = M⁻ᵀ diag(1, 1, −r²) M⁻¹`, `M` the
+/// plane-to-image transformation of the target's plane. `None` if the
+/// target is not in front of the camera or the conic degenerates.
+pub fn eccentricity(
+    c: f64,
+    e: &photopose_geometry::Exterior,
+    position: &Vector3<f64>,
+    radius: f64,
+) -> Option<Vector2<f64>> {
+    let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
+    let centre = e.project_ideal(c, position)?;
+    // Plane (s, t) of a target facing +Z, origin at its centre.
+    let plane = Matrix3::from_columns(&[Vector3::x(), Vector3::y(), position - e.center]);
+    let m_inv = (k * e.rotation * plane).try_inverse()?;
+    let r2 = radius * radius;
+    let q = m_inv.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -r2)) * m_inv;
+    let a2 = Matrix2::new(q[(0, 0)], q[(0, 1)], q[(1, 0)], q[(1, 1)]);
+    let ellipse_centre = -(a2.try_inverse()? * Vector2::new(q[(0, 2)], q[(1, 2)]));
+    let offset = ellipse_centre - centre;
+    (offset.x.is_finite() && offset.y.is_finite()).then_some(offset)
 }
