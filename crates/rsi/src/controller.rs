@@ -6,7 +6,7 @@
 //! integrating the received corrections (relative or absolute, in the Base
 //! or Tool frame, HOLDON as the mode needs) into the commanded pose.
 
-use crate::codec::{parse_sen, Ipoc, Pose6, SenFormat};
+use crate::codec::{parse_sen, Pose6, SenFormat};
 use crate::law::{apply_correction, isometry_to_pose, pose_to_isometry, CorrFrame, CorrectionMode};
 use crate::server::RsiClock;
 use nalgebra::Isometry3;
@@ -50,6 +50,9 @@ pub struct SimConfig {
     pub rsol_includes_correction: bool,
     /// Start like a KR C2: the first datagram holds only `<IPOC>`.
     pub krc2_first_packet: bool,
+    /// SCHED_FIFO priority of the controller thread (a real controller is
+    /// hard real-time); failing to get it is a warning.
+    pub realtime_priority: Option<u8>,
 }
 
 impl SimConfig {
@@ -72,6 +75,7 @@ impl SimConfig {
             error_drift_per_s: [0.01, 0.005, -0.005, 0.0005, 0.0, -0.0005],
             rsol_includes_correction: false,
             krc2_first_packet: false,
+            realtime_priority: None,
         }
     }
 }
@@ -94,8 +98,14 @@ pub struct RobotState {
 pub struct SimReport {
     /// Cycles sent.
     pub cycles: u64,
+    /// Cycle slots the simulator itself missed (its thread woke more than a
+    /// cycle late on a loaded machine); skipped like a clock that moved on,
+    /// never counted against the sensor.
+    pub skipped: u64,
     /// Cycles without a matching reply before the next cycle.
     pub late: u64,
+    /// The cycles (slot numbers) that were late.
+    pub late_cycles: Vec<u64>,
     /// Replies with another IPOC, a wrong Type or that did not parse.
     pub mismatched: u64,
     /// The final `Delay` (late + mismatched).
@@ -109,14 +119,42 @@ pub struct SimReport {
     /// Per cycle: `(translation error mm, rotation error deg)` of the actual
     /// TCP against the programmed pose.
     pub errors: Vec<(f64, f64)>,
+    /// Per cycle: when it was sent, s on the shared clock.
+    pub times: Vec<f64>,
+    /// Per cycle: the total correction after the cycle's reply.
+    pub totals: Vec<Pose6>,
     /// The final total correction.
     pub total: Pose6,
+}
+
+/// A cheap, cloneable view of a running simulation for other threads (the
+/// test's camera).
+#[derive(Debug, Clone)]
+pub struct SimProbe {
+    state: Arc<Mutex<RobotState>>,
+    finished: Arc<AtomicBool>,
+}
+
+impl SimProbe {
+    /// The robot's state now.
+    pub fn state(&self) -> RobotState {
+        self.state
+            .lock()
+            .map(|s| s.clone())
+            .unwrap_or_else(|p| p.into_inner().clone())
+    }
+
+    /// The run has ended (cycles done, timeout or stop).
+    pub fn is_finished(&self) -> bool {
+        self.finished.load(Ordering::Relaxed)
+    }
 }
 
 /// A running simulated controller.
 #[derive(Debug)]
 pub struct SimController {
     state: Arc<Mutex<RobotState>>,
+    finished: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<io::Result<SimReport>>>,
     local: SocketAddr,
@@ -153,12 +191,18 @@ impl SimController {
             time_s: start_s,
         }));
         let stop = Arc::new(AtomicBool::new(false));
-        let (st, sp) = (state.clone(), stop.clone());
+        let finished = Arc::new(AtomicBool::new(false));
+        let (st, sp, fin) = (state.clone(), stop.clone(), finished.clone());
         let handle = std::thread::Builder::new()
             .name("rsi-sim-controller".into())
-            .spawn(move || run(cfg, clock, socket, st, sp))?;
+            .spawn(move || {
+                let r = run(cfg, clock, socket, st, sp);
+                fin.store(true, Ordering::Relaxed);
+                r
+            })?;
         Ok(SimController {
             state,
+            finished,
             stop,
             handle: Some(handle),
             local,
@@ -170,17 +214,22 @@ impl SimController {
         self.local
     }
 
-    /// The robot's state now.
-    pub fn state(&self) -> RobotState {
-        self.state
-            .lock()
-            .map(|s| s.clone())
-            .unwrap_or_else(|p| p.into_inner().clone())
+    /// A view for other threads.
+    pub fn probe(&self) -> SimProbe {
+        SimProbe {
+            state: self.state.clone(),
+            finished: self.finished.clone(),
+        }
     }
 
-    /// The thread has ended (cycles done or timeout).
+    /// The robot's state now.
+    pub fn state(&self) -> RobotState {
+        self.probe().state()
+    }
+
+    /// The run has ended (cycles done, timeout or stop).
     pub fn is_finished(&self) -> bool {
-        self.handle.as_ref().is_none_or(|h| h.is_finished())
+        self.finished.load(Ordering::Relaxed)
     }
 
     /// Waits for the run to end and returns its report.
@@ -221,15 +270,34 @@ fn run(
     let mut total = [0.0; 6];
     let mut msg = String::with_capacity(1024);
     let mut buf = vec![0u8; 70_000];
-    for k in 0..cfg.cycles {
+    if let Some(p) = cfg.realtime_priority {
+        if let Err(e) = crate::server::set_realtime_priority(p) {
+            tracing::warn!(target: "photopose::rsi", "simulated controller without SCHED_FIFO: {e}");
+        }
+    }
+    let mut k: u64 = 0;
+    while k < cfg.cycles {
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        let deadline = start + cfg.cycle * k as u32;
-        let next = deadline + cfg.cycle;
+        let mut deadline = start + cfg.cycle * k as u32;
         if let Some(d) = deadline.checked_duration_since(Instant::now()) {
             std::thread::sleep(d);
+        } else {
+            let behind = Instant::now() - deadline;
+            if behind >= cfg.cycle {
+                // This thread was not scheduled for a whole cycle: move on
+                // to the current slot as a real controller's clock would.
+                let slots = (behind.as_nanos() / cfg.cycle.as_nanos()) as u64;
+                report.skipped += slots.min(cfg.cycles - k);
+                k += slots;
+                if k >= cfg.cycles {
+                    break;
+                }
+                deadline = start + cfg.cycle * k as u32;
+            }
         }
+        let next = deadline + cfg.cycle;
         let now_s = clock.now_s();
         let actual = actual_pose(&cfg, &total, now_s - t0);
         let rsol = if cfg.rsol_includes_correction {
@@ -278,19 +346,13 @@ fn run(
             match socket.recv_from(&mut buf) {
                 Ok((n, _)) => {
                     match parse_sen(&buf[..n], &cfg.sen.sentype, &cfg.sen.correction_element) {
-                        Ok(f)
-                            if f.type_matches
-                                && f.ipoc == Ipoc::from_value(ipoc)
-                                && f.ipoc.value() == ipoc =>
-                        {
-                            match f.correction {
-                                Some(c) => {
-                                    answered = Some(c);
-                                    break;
-                                }
-                                None => report.mismatched += 1,
+                        Ok(f) if f.type_matches && f.ipoc.value() == ipoc => match f.correction {
+                            Some(c) => {
+                                answered = Some(c);
+                                break;
                             }
-                        }
+                            None => report.mismatched += 1,
+                        },
                         _ => report.mismatched += 1,
                     }
                 }
@@ -306,6 +368,20 @@ fn run(
                 Err(_) => break, // ICMP errors: no reply this cycle
             }
         }
+        if answered.is_none() {
+            // This thread may itself have woken late: a reply already queued
+            // arrived in time.
+            socket.set_nonblocking(true)?;
+            while let Ok((n, _)) = socket.recv_from(&mut buf) {
+                match parse_sen(&buf[..n], &cfg.sen.sentype, &cfg.sen.correction_element) {
+                    Ok(f) if f.type_matches && f.ipoc.value() == ipoc && f.correction.is_some() => {
+                        answered = f.correction;
+                    }
+                    _ => report.mismatched += 1,
+                }
+            }
+            socket.set_nonblocking(false)?;
+        }
         let before = total;
         match answered {
             Some(c) => match cfg.mode {
@@ -313,16 +389,22 @@ fn run(
                 CorrectionMode::Absolute => total = c,
             },
             // HOLDON: absolute keeps the last value, relative adds nothing.
-            None => report.late += 1,
+            None => {
+                report.late += 1;
+                report.late_cycles.push(k);
+            }
         }
         for i in 0..6 {
             report.max_step[i] = report.max_step[i].max((total[i] - before[i]).abs());
             report.max_total[i] = report.max_total[i].max(total[i].abs());
         }
+        report.times.push(now_s);
+        report.totals.push(total);
         if report.late + report.mismatched > cfg.timeout {
             report.stopped_by_timeout = true;
             break;
         }
+        k += 1;
     }
     report.delay = report.late + report.mismatched;
     report.total = total;

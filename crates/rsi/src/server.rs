@@ -180,6 +180,11 @@ fn setup_thread(s: &RsiSettings) {
     }
 }
 
+/// Gives the calling thread SCHED_FIFO priority `p` (1–99).
+pub fn set_realtime_priority(p: u8) -> Result<(), String> {
+    set_fifo(p)
+}
+
 #[cfg(unix)]
 fn set_fifo(p: u8) -> Result<(), String> {
     use thread_priority::unix::{
