@@ -87,11 +87,26 @@ impl RsiServer {
         slot: SlotReader,
         clock: RsiClock,
     ) -> Result<RsiServer, ServerError> {
+        let socket = UdpSocket::bind(settings.bind).map_err(|source| ServerError::Socket {
+            addr: settings.bind,
+            source,
+        })?;
+        Self::spawn_on(socket, settings, hand_eye, slot, clock)
+    }
+
+    /// Starts the RSI thread on an already bound socket (`settings.bind` is
+    /// then not used; e.g. a socket handed over by the service manager).
+    pub fn spawn_on(
+        socket: UdpSocket,
+        settings: RsiSettings,
+        hand_eye: HandEye,
+        slot: SlotReader,
+        clock: RsiClock,
+    ) -> Result<RsiServer, ServerError> {
         let sock_err = |source| ServerError::Socket {
             addr: settings.bind,
             source,
         };
-        let socket = UdpSocket::bind(settings.bind).map_err(sock_err)?;
         socket.set_read_timeout(Some(STOP_POLL)).map_err(sock_err)?;
         let local = socket.local_addr().map_err(sock_err)?;
         for w in &settings.warnings {

@@ -95,6 +95,41 @@ fn direct_exchanges_follow_the_controller_file() {
 }
 
 #[test]
+fn queued_datagrams_are_drained_and_only_the_newest_is_answered() {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let to = socket.local_addr().unwrap();
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    // Three cycles queue up before the server runs (a stall).
+    for ipoc in [100, 104, 108] {
+        sock.send_to(
+            format!("<Rob Type=\"KUKA\"><IPOC>{ipoc}</IPOC></Rob>").as_bytes(),
+            to,
+        )
+        .unwrap();
+    }
+    let (_p, reader) = latest_slot();
+    let server = RsiServer::spawn_on(
+        socket,
+        settings(|_| {}),
+        hand_eye(),
+        reader,
+        RsiClock::new(),
+    )
+    .unwrap();
+    let mut buf = [0u8; 1024];
+    let (n, _) = sock.recv_from(&mut buf).unwrap();
+    let f = parse_sen(&buf[..n], "ImFree", "RKorr").unwrap();
+    assert_eq!(f.ipoc.value(), 108);
+    // Nothing else is answered.
+    sock.set_read_timeout(Some(Duration::from_millis(200)))
+        .unwrap();
+    assert!(sock.recv_from(&mut buf).is_err());
+    let st = server.stop();
+    assert_eq!((st.replies, st.drained), (1, 2));
+}
+
+#[test]
 fn bad_datagrams_and_unlisted_senders_are_dropped_and_the_server_keeps_answering() {
     let clock = RsiClock::new();
     let s = settings(|c| c.realtime_priority = Some(50));
