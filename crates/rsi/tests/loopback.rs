@@ -290,3 +290,37 @@ fn frames_stop_then_the_correction_freezes_and_resumes_without_a_jump() {
     // Timeliness is the closed-loop test's business (the one long test).
     assert!(!report.stopped_by_timeout, "{report:?} {st:?}");
 }
+
+#[test]
+fn the_simulated_controller_stops_after_timeout_faults() {
+    // Nobody answers: every cycle is late.
+    let silent = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut cfg = SimConfig::new(silent.local_addr().unwrap());
+    cfg.timeout = 10;
+    let r = SimController::spawn(cfg, RsiClock::new())
+        .unwrap()
+        .join()
+        .unwrap();
+    assert!(r.stopped_by_timeout);
+    assert_eq!((r.late, r.mismatched, r.delay), (11, 0, 11));
+    assert_eq!(r.cycles, 11);
+
+    // A server whose SENTYPE does not match the context: mismatched replies.
+    let (_p, reader) = latest_slot();
+    let server = RsiServer::spawn(
+        settings(|c| c.sentype = Some("Other".into())),
+        hand_eye(),
+        reader,
+        RsiClock::new(),
+    )
+    .unwrap();
+    let cfg = SimConfig::new(server.local_addr());
+    let r = SimController::spawn(cfg, RsiClock::new())
+        .unwrap()
+        .join()
+        .unwrap();
+    assert!(r.stopped_by_timeout);
+    assert!(r.mismatched > 0 && r.delay > 10, "{r:?}");
+    let st = server.stop();
+    assert!(st.replies > 0);
+}
