@@ -1,0 +1,486 @@
+//! The `[rsi]` section of the daemon's TOML config ([`RsiConfig`], unknown
+//! keys rejected) and its validation into the server's settings
+//! ([`RsiSettings`]), optionally merged with the controller's own
+//! `RSI_EthernetConfig.xml` (its text handed in). Pure.
+
+use crate::codec::{SenFormat, POSE_ATTRS};
+use crate::ethernet_config::{EthernetConfig, EthernetConfigError};
+use crate::law::{CorrFrame, CorrectionMode, LawConfig};
+use serde::{Deserialize, Serialize};
+use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
+use std::time::Duration;
+use thiserror::Error;
+
+/// Why the `[rsi]` section was rejected.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ConfigError {
+    /// The TOML does not parse or has an unknown key.
+    #[error("[rsi]: {0}")]
+    Toml(String),
+    /// A key's value is out of range or malformed.
+    #[error("[rsi] {key} = {value}: {why}")]
+    Invalid {
+        /// The key.
+        key: &'static str,
+        /// The value as written.
+        value: String,
+        /// Why it is wrong.
+        why: &'static str,
+    },
+    /// A key given both in `[rsi]` and by the controller's file.
+    #[error("[rsi] {key} is taken from ethernet_config; remove it from [rsi]")]
+    Conflict {
+        /// The key.
+        key: &'static str,
+    },
+    /// `ethernet_config` is set but its text was not handed in.
+    #[error("[rsi] ethernet_config is set but the file's text was not read")]
+    EthernetNotRead,
+    /// The controller's file is invalid.
+    #[error(transparent)]
+    Ethernet(#[from] EthernetConfigError),
+}
+
+/// The `[rsi]` section. Every key has a default; unknown keys are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RsiConfig {
+    /// Run the RSI server.
+    pub enabled: bool,
+    /// Local IP address to bind (`"0.0.0.0"`: all interfaces).
+    pub bind: String,
+    /// UDP port; taken from `ethernet_config`'s `PORT` when that is set.
+    pub port: Option<u16>,
+    /// Controller IP addresses that are answered; datagrams from any other
+    /// address are dropped. Must not be empty when enabled.
+    pub controllers: Vec<String>,
+    /// Path of the controller's `RSI_EthernetConfig.xml`: port, SENTYPE and
+    /// element names then come from it (and must not be set here).
+    pub ethernet_config: Option<PathBuf>,
+    /// Reply root `Type` (the controller's SENTYPE), default `"ImFree"`.
+    pub sentype: Option<String>,
+    /// Reply correction element, default `"RKorr"`.
+    pub correction_element: Option<String>,
+    /// Fixed decimals printed in replies, 4–6.
+    pub decimals: usize,
+    /// `"relative"` (pair with HOLDON="0") or `"absolute"` (HOLDON="1").
+    pub mode: CorrectionMode,
+    /// POSCORR frame the controller applies RKorr in: `"base"` or `"tool"`.
+    pub frame: CorrFrame,
+    /// Answer with zero correction (commissioning).
+    pub measure_only: bool,
+    /// The controller's RSol already includes the RSI correction.
+    pub rsol_includes_correction: bool,
+    /// Share of each new measurement's error taken, (0, 1].
+    pub gain: f64,
+    /// Per-cycle slew limit of each translation component, mm.
+    pub max_step_mm: f64,
+    /// Per-cycle slew limit of each angle component, degrees.
+    pub max_step_deg: f64,
+    /// Total clamp of each translation component, mm (< `poscorr_limit_mm`).
+    pub clamp_mm: f64,
+    /// Total clamp of each angle component, degrees (< `poscorr_limit_deg`).
+    pub clamp_deg: f64,
+    /// The controller's POSCORR translation limit, mm (default ±5).
+    pub poscorr_limit_mm: f64,
+    /// The controller's POSCORR `MaxRotAngle`, degrees (default 5).
+    pub poscorr_limit_deg: f64,
+    /// A measurement older than this freezes the correction, ms.
+    pub max_age_ms: f64,
+    /// A measurement with fewer targets freezes the correction.
+    pub min_targets: u32,
+    /// A measurement with a position std above this freezes, mm.
+    pub max_std_mm: f64,
+    /// A measurement with a rotation std above this freezes, degrees.
+    pub max_std_deg: f64,
+    /// The controller's cycle, ms (4 with `#IPO_FAST`, 12 with `#IPO`): the
+    /// reference of the jitter statistics.
+    pub cycle_ms: f64,
+    /// SCHED_FIFO priority (1–99) of the RSI thread; failing to get it is a
+    /// warning.
+    pub realtime_priority: Option<u8>,
+    /// CPU core to pin the RSI thread to.
+    pub cpu: Option<usize>,
+}
+
+impl Default for RsiConfig {
+    fn default() -> Self {
+        let law = LawConfig::default();
+        RsiConfig {
+            enabled: false,
+            bind: "0.0.0.0".into(),
+            port: None,
+            controllers: Vec::new(),
+            ethernet_config: None,
+            sentype: None,
+            correction_element: None,
+            decimals: 4,
+            mode: law.mode,
+            frame: law.frame,
+            measure_only: law.measure_only,
+            rsol_includes_correction: law.rsol_includes_correction,
+            gain: law.gain,
+            max_step_mm: law.max_step_mm,
+            max_step_deg: law.max_step_deg,
+            clamp_mm: law.clamp_mm,
+            clamp_deg: law.clamp_deg,
+            poscorr_limit_mm: 5.0,
+            poscorr_limit_deg: 5.0,
+            max_age_ms: law.max_age_s * 1e3,
+            min_targets: law.min_targets,
+            max_std_mm: law.max_std_mm,
+            max_std_deg: law.max_std_deg,
+            cycle_ms: 4.0,
+            realtime_priority: None,
+            cpu: None,
+        }
+    }
+}
+
+/// Everything the server needs, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiSettings {
+    /// Local address and port.
+    pub bind: SocketAddr,
+    /// Addresses answered.
+    pub controllers: Vec<IpAddr>,
+    /// Reply spelling.
+    pub sen: SenFormat,
+    /// The correction law's parameters.
+    pub law: LawConfig,
+    /// The controller's cycle.
+    pub cycle: Duration,
+    /// SCHED_FIFO priority.
+    pub realtime_priority: Option<u8>,
+    /// CPU core to pin to.
+    pub cpu: Option<usize>,
+    /// Consistency warnings to log (HOLDON pairing, ...).
+    pub warnings: Vec<String>,
+}
+
+fn positive(key: &'static str, v: f64) -> Result<f64, ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(ConfigError::Invalid {
+            key,
+            value: v.to_string(),
+            why: "must be a positive number",
+        })
+    }
+}
+
+impl RsiConfig {
+    /// Parses a TOML document whose `[rsi]` table is this section (other
+    /// tables are ignored; unknown keys inside `[rsi]` are errors).
+    pub fn from_toml(text: &str) -> Result<RsiConfig, ConfigError> {
+        #[derive(Deserialize)]
+        struct Doc {
+            #[serde(default)]
+            rsi: RsiConfig,
+        }
+        toml::from_str::<Doc>(text)
+            .map(|d| d.rsi)
+            .map_err(|e| ConfigError::Toml(e.to_string()))
+    }
+
+    /// Validates the section into settings. `ethernet_xml` is the text of
+    /// the file named by `ethernet_config` (the caller reads it).
+    pub fn settings(&self, ethernet_xml: Option<&str>) -> Result<RsiSettings, ConfigError> {
+        let bad = |key: &'static str, value: String, why: &'static str| ConfigError::Invalid {
+            key,
+            value,
+            why,
+        };
+        let ip: IpAddr = self
+            .bind
+            .parse()
+            .map_err(|_| bad("bind", format!("{:?}", self.bind), "not an IP address"))?;
+        let mut controllers = Vec::new();
+        for c in &self.controllers {
+            controllers.push(
+                c.parse::<IpAddr>()
+                    .map_err(|_| bad("controllers", format!("{c:?}"), "not an IP address"))?,
+            );
+        }
+        if self.enabled && controllers.is_empty() {
+            return Err(bad(
+                "controllers",
+                "[]".into(),
+                "name at least one controller address",
+            ));
+        }
+        if !(4..=6).contains(&self.decimals) {
+            return Err(bad(
+                "decimals",
+                self.decimals.to_string(),
+                "must be 4, 5 or 6",
+            ));
+        }
+        let mut warnings = Vec::new();
+        let (port, sen) = match (&self.ethernet_config, ethernet_xml) {
+            (Some(_), None) => return Err(ConfigError::EthernetNotRead),
+            (Some(_), Some(xml)) => {
+                if self.port.is_some() {
+                    return Err(ConfigError::Conflict { key: "port" });
+                }
+                if self.sentype.is_some() {
+                    return Err(ConfigError::Conflict { key: "sentype" });
+                }
+                if self.correction_element.is_some() {
+                    return Err(ConfigError::Conflict {
+                        key: "correction_element",
+                    });
+                }
+                let e = EthernetConfig::parse(xml)?;
+                warnings.extend(e.warnings(self.mode));
+                (e.port, e.sen_format(self.decimals)?)
+            }
+            (None, _) => {
+                let port = self.port.filter(|p| *p != 0).ok_or_else(|| {
+                    bad(
+                        "port",
+                        format!("{:?}", self.port),
+                        "set a port (or ethernet_config)",
+                    )
+                })?;
+                let sentype = self.sentype.clone().unwrap_or_else(|| "ImFree".into());
+                let element = self
+                    .correction_element
+                    .clone()
+                    .unwrap_or_else(|| "RKorr".into());
+                for (key, v) in [("sentype", &sentype), ("correction_element", &element)] {
+                    if v.is_empty() || !v.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
+                        return Err(bad(key, format!("{v:?}"), "must be a non-empty XML name"));
+                    }
+                }
+                (
+                    port,
+                    SenFormat {
+                        sentype,
+                        correction_element: element,
+                        correction_attrs: POSE_ATTRS.map(String::from),
+                        zero_elements: Vec::new(),
+                        decimals: self.decimals,
+                    },
+                )
+            }
+        };
+        if !(self.gain.is_finite() && self.gain > 0.0 && self.gain <= 1.0) {
+            return Err(bad("gain", self.gain.to_string(), "must be in (0, 1]"));
+        }
+        let poscorr_mm = positive("poscorr_limit_mm", self.poscorr_limit_mm)?;
+        let poscorr_deg = positive("poscorr_limit_deg", self.poscorr_limit_deg)?;
+        let clamp_mm = positive("clamp_mm", self.clamp_mm)?;
+        let clamp_deg = positive("clamp_deg", self.clamp_deg)?;
+        if clamp_mm >= poscorr_mm {
+            return Err(bad(
+                "clamp_mm",
+                clamp_mm.to_string(),
+                "must be below poscorr_limit_mm",
+            ));
+        }
+        if clamp_deg >= poscorr_deg {
+            return Err(bad(
+                "clamp_deg",
+                clamp_deg.to_string(),
+                "must be below poscorr_limit_deg",
+            ));
+        }
+        let max_step_mm = positive("max_step_mm", self.max_step_mm)?;
+        let max_step_deg = positive("max_step_deg", self.max_step_deg)?;
+        if max_step_mm > clamp_mm {
+            return Err(bad(
+                "max_step_mm",
+                max_step_mm.to_string(),
+                "must not exceed clamp_mm",
+            ));
+        }
+        if max_step_deg > clamp_deg {
+            return Err(bad(
+                "max_step_deg",
+                max_step_deg.to_string(),
+                "must not exceed clamp_deg",
+            ));
+        }
+        let cycle_ms = positive("cycle_ms", self.cycle_ms)?;
+        let max_age_ms = positive("max_age_ms", self.max_age_ms)?;
+        let max_std_mm = positive("max_std_mm", self.max_std_mm)?;
+        let max_std_deg = positive("max_std_deg", self.max_std_deg)?;
+        if let Some(p) = self.realtime_priority {
+            if !(1..=99).contains(&p) {
+                return Err(bad("realtime_priority", p.to_string(), "must be 1..=99"));
+            }
+        }
+        Ok(RsiSettings {
+            bind: SocketAddr::new(ip, port),
+            controllers,
+            sen,
+            law: LawConfig {
+                mode: self.mode,
+                frame: self.frame,
+                gain: self.gain,
+                max_step_mm,
+                max_step_deg,
+                clamp_mm,
+                clamp_deg,
+                max_age_s: max_age_ms * 1e-3,
+                min_targets: self.min_targets,
+                max_std_mm,
+                max_std_deg,
+                measure_only: self.measure_only,
+                rsol_includes_correction: self.rsol_includes_correction,
+            },
+            cycle: Duration::from_secs_f64(cycle_ms * 1e-3),
+            realtime_priority: self.realtime_priority,
+            cpu: self.cpu,
+            warnings,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const XML: &str = "<ROOT><CONFIG><PORT>59152</PORT><SENTYPE>Cam</SENTYPE></CONFIG><SEND><ELEMENTS><ELEMENT TAG=\"DEF_RSol\"/></ELEMENTS></SEND><RECEIVE><ELEMENTS>\
+        <ELEMENT TAG=\"RKorr.X\" HOLDON=\"0\"/><ELEMENT TAG=\"RKorr.Y\" HOLDON=\"0\"/><ELEMENT TAG=\"RKorr.Z\" HOLDON=\"0\"/>\
+        <ELEMENT TAG=\"RKorr.A\" HOLDON=\"0\"/><ELEMENT TAG=\"RKorr.B\" HOLDON=\"0\"/><ELEMENT TAG=\"RKorr.C\" HOLDON=\"0\"/></ELEMENTS></RECEIVE></ROOT>";
+
+    #[test]
+    fn default_round_trips_through_toml() {
+        let d = RsiConfig::default();
+        let text = format!("[rsi]\n{}", toml::to_string(&d).unwrap());
+        assert_eq!(RsiConfig::from_toml(&text).unwrap(), d);
+        assert_eq!(RsiConfig::from_toml("").unwrap(), d);
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let e = RsiConfig::from_toml("[rsi]\nport = 1\ngian = 0.5\n").unwrap_err();
+        assert!(e.to_string().contains("gian"), "{e}");
+    }
+
+    #[test]
+    fn settings_from_keys() {
+        let c = RsiConfig::from_toml("[rsi]\nenabled = true\nport = 49152\ncontrollers = [\"127.0.0.1\"]\nmode = \"absolute\"\nframe = \"tool\"\n").unwrap();
+        let s = c.settings(None).unwrap();
+        assert_eq!(s.bind, "0.0.0.0:49152".parse().unwrap());
+        assert_eq!(s.law.mode, CorrectionMode::Absolute);
+        assert_eq!(s.law.frame, CorrFrame::Tool);
+        assert_eq!(s.sen.sentype, "ImFree");
+        assert_eq!(s.cycle, Duration::from_millis(4));
+    }
+
+    #[test]
+    fn settings_from_the_controller_file() {
+        let c = RsiConfig {
+            enabled: true,
+            controllers: vec!["10.0.0.2".into()],
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            ..RsiConfig::default()
+        };
+        let s = c.settings(Some(XML)).unwrap();
+        assert_eq!(s.bind.port(), 59152);
+        assert_eq!(s.sen.sentype, "Cam");
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        let abs = RsiConfig {
+            mode: CorrectionMode::Absolute,
+            ..c.clone()
+        };
+        assert_eq!(abs.settings(Some(XML)).unwrap().warnings.len(), 6);
+        assert_eq!(c.settings(None), Err(ConfigError::EthernetNotRead));
+        let both = RsiConfig { port: Some(1), ..c };
+        assert_eq!(
+            both.settings(Some(XML)),
+            Err(ConfigError::Conflict { key: "port" })
+        );
+    }
+
+    #[test]
+    fn validation_names_the_key() {
+        let base = RsiConfig {
+            port: Some(49152),
+            ..RsiConfig::default()
+        };
+        let cases: Vec<(RsiConfig, &str)> = vec![
+            (
+                RsiConfig {
+                    clamp_mm: 6.0,
+                    ..base.clone()
+                },
+                "clamp_mm",
+            ),
+            (
+                RsiConfig {
+                    clamp_deg: 5.0,
+                    ..base.clone()
+                },
+                "clamp_deg",
+            ),
+            (
+                RsiConfig {
+                    gain: 0.0,
+                    ..base.clone()
+                },
+                "gain",
+            ),
+            (
+                RsiConfig {
+                    max_step_mm: 10.0,
+                    ..base.clone()
+                },
+                "max_step_mm",
+            ),
+            (
+                RsiConfig {
+                    decimals: 2,
+                    ..base.clone()
+                },
+                "decimals",
+            ),
+            (
+                RsiConfig {
+                    bind: "localhost".into(),
+                    ..base.clone()
+                },
+                "bind",
+            ),
+            (
+                RsiConfig {
+                    enabled: true,
+                    ..base.clone()
+                },
+                "controllers",
+            ),
+            (
+                RsiConfig {
+                    port: None,
+                    ..base.clone()
+                },
+                "port",
+            ),
+            (
+                RsiConfig {
+                    max_age_ms: -1.0,
+                    ..base.clone()
+                },
+                "max_age_ms",
+            ),
+            (
+                RsiConfig {
+                    realtime_priority: Some(0),
+                    ..base.clone()
+                },
+                "realtime_priority",
+            ),
+        ];
+        for (c, key) in cases {
+            match c.settings(None) {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
+    }
+}
