@@ -26,6 +26,14 @@ pub enum ConfigError {
         /// toml's message (names the key and line).
         message: String,
     },
+    /// The `[rsi]` section is invalid (the key is named).
+    #[error("{path}: {source}")]
+    Rsi {
+        /// The file.
+        path: String,
+        /// What is wrong with the section.
+        source: photopose_rsi::ConfigError,
+    },
     /// A value is out of range.
     #[error("{path}: `{key}` = {value}: {why}")]
     Value {
@@ -52,6 +60,8 @@ struct File {
     output: OutputSection,
     #[serde(default)]
     metrics: MetricsSection,
+    #[serde(default)]
+    rsi: photopose_rsi::RsiConfig,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -350,6 +360,17 @@ pub struct Config {
     pub tcp_client_queue: usize,
     /// Prometheus endpoint address.
     pub metrics_listen: Option<SocketAddr>,
+    /// The KUKA RSI server, when `[rsi] enabled = true`.
+    pub rsi: Option<Rsi>,
+}
+
+/// The RSI server of the daemon: validated settings and the hand-eye file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rsi {
+    /// Socket, reply spelling, correction law, thread options.
+    pub settings: photopose_rsi::RsiSettings,
+    /// The hand-eye file giving `X = T_tcp←camera` and `Z = T_base←plate`.
+    pub hand_eye: PathBuf,
 }
 
 impl Config {
@@ -538,7 +559,34 @@ impl Config {
                 "must be 1..=1000000",
             ));
         }
+        let rsi = if f.rsi.enabled {
+            let rsi_err = |source| ConfigError::Rsi {
+                path: origin.into(),
+                source,
+            };
+            let xml = match &f.rsi.ethernet_config {
+                Some(p) => Some(
+                    std::fs::read_to_string(p).map_err(|source| ConfigError::Io {
+                        path: format!("{} (rsi.ethernet_config)", p.display()),
+                        source,
+                    })?,
+                ),
+                None => None,
+            };
+            let settings = f.rsi.settings(xml.as_deref()).map_err(rsi_err)?;
+            let Some(hand_eye) = f.rsi.hand_eye.clone() else {
+                return Err(bad(
+                    "rsi.hand_eye",
+                    "(missing)".into(),
+                    "name the hand-eye file (photopose calibrate hand-eye) when [rsi] is enabled",
+                ));
+            };
+            Some(Rsi { settings, hand_eye })
+        } else {
+            None
+        };
         Ok(Config {
+            rsi,
             camera_file: f.camera.camera_file,
             field_file: f.camera.field_file,
             source,

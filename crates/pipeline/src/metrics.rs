@@ -107,6 +107,16 @@ pub fn render(c: &Counters) -> String {
             );
         }
     }
+    if let Some(rsi) = &c.rsi {
+        for (name, value) in rsi.snapshot().metrics() {
+            let kind = if name.ends_with("_total") {
+                "counter"
+            } else {
+                "gauge"
+            };
+            let _ = writeln!(s, "# TYPE {name} {kind}\n{name} {value}");
+        }
+    }
     let name = "photopose_latency_seconds";
     let _ = writeln!(
         s,

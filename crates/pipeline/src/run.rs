@@ -28,6 +28,12 @@ pub enum PipelineError {
     /// The frame locator could not be built.
     #[error("frame locator: {0}")]
     Locate(#[from] photopose_locate::LocateError),
+    /// The hand-eye file of the RSI server cannot be used.
+    #[error("rsi.hand_eye: {0}")]
+    HandEye(#[from] photopose_formats::FormatError),
+    /// The RSI server could not start.
+    #[error("RSI server: {0}")]
+    Rsi(#[from] photopose_rsi::server::ServerError),
     /// A thread could not be started.
     #[error("cannot start thread {name}: {source}")]
     Thread {
@@ -63,6 +69,8 @@ pub struct Counters {
     pub source: Option<Arc<photopose_acquire::SourceCounters>>,
     /// The TCP pose stream's counters (clients), when one is configured.
     pub tcp: Option<Arc<photopose_stream::TcpStats>>,
+    /// The RSI server's counters, when it runs.
+    pub rsi: Option<Arc<photopose_rsi::monitor::Stats>>,
 }
 
 /// Buckets of the latency histogram (10 µs to about 40 s).
@@ -117,6 +125,7 @@ impl Default for Counters {
             latency_histogram: std::array::from_fn(|_| AtomicU64::new(0)),
             source: None,
             tcp: None,
+            rsi: None,
         }
     }
 }
@@ -138,6 +147,8 @@ enum Outcome {
 
 /// A running pipeline.
 pub struct Pipeline {
+    rsi: Option<photopose_rsi::server::RsiServer>,
+    rsi_addr: Option<SocketAddr>,
     grabber: Option<photopose_acquire::Grabber<Box<dyn FrameSource>>>,
     stop: Arc<AtomicBool>,
     counters: Arc<Counters>,
@@ -199,9 +210,33 @@ impl Pipeline {
             None => None,
         };
         let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
+        // The RSI server reads the latest pose from a lock-free slot the
+        // output stage publishes into; it never waits on vision.
+        let (rsi, rsi_link) = match &config.rsi {
+            Some(r) => {
+                let file = photopose_formats::hand_eye::load_hand_eye(&r.hand_eye)?;
+                let hand_eye = photopose_rsi::HandEye {
+                    tcp_from_camera: file.camera_in_tcp.isometry(),
+                    base_from_plate: file.plate_in_base.isometry(),
+                };
+                let (publisher, reader) = photopose_rsi::latest_slot();
+                let clock = photopose_rsi::server::RsiClock::new();
+                let server = photopose_rsi::server::RsiServer::spawn(
+                    r.settings.clone(),
+                    hand_eye,
+                    reader,
+                    clock,
+                )?;
+                let stats = Arc::clone(server.stats());
+                (Some(server), Some((publisher, clock, stats)))
+            }
+            None => (None, None),
+        };
+        let rsi_addr = rsi.as_ref().map(|s| s.local_addr());
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
             tcp: tcp.as_ref().map(|t| t.shared_stats()),
+            rsi: rsi_link.as_ref().map(|(_, _, s)| Arc::clone(s)),
             ..Counters::default()
         });
         let metrics = match config.metrics_listen {
@@ -266,10 +301,14 @@ impl Pipeline {
             let max_age = Duration::from_secs_f64(config.max_age_ms / 1000.0);
             let window = slots * 2 + config.workers;
             threads.push(spawn("output", move || {
-                output_loop(out_rx, udp, tcp, counters, max_age, window, stop_out);
+                output_loop(
+                    out_rx, udp, tcp, rsi_link, counters, max_age, window, stop_out,
+                );
             })?);
         }
         Ok(Pipeline {
+            rsi,
+            rsi_addr,
             grabber: Some(grabber),
             stop,
             counters,
@@ -283,6 +322,11 @@ impl Pipeline {
     /// The TCP stream's address, if one is configured.
     pub fn tcp_addr(&self) -> Option<SocketAddr> {
         self.tcp_addr
+    }
+
+    /// The RSI server's address, if it runs.
+    pub fn rsi_addr(&self) -> Option<SocketAddr> {
+        self.rsi_addr
     }
 
     /// The metrics endpoint's address, if one is configured.
@@ -324,6 +368,17 @@ impl Pipeline {
         }
         for t in self.threads {
             let _ = t.join();
+        }
+        if let Some(server) = self.rsi.take() {
+            // The robot keeps being answered until the poses have stopped.
+            let s = server.stop();
+            tracing::info!(
+                cycles = s.cycles,
+                replies = s.replies,
+                p99_us = ?s.latency_p99_us,
+                p999_us = ?s.latency_p999_us,
+                "RSI server stopped"
+            );
         }
         if let Some(m) = self.metrics {
             self.stop.store(true, Ordering::Release);
@@ -387,11 +442,46 @@ fn locate(locator: &mut Locator, frame: &Slot) -> PoseMessage {
     m
 }
 
+/// What the output stage keeps of the RSI server: the slot it publishes
+/// poses into, the server's clock and its counters (for the status flag).
+type RsiLink = (
+    photopose_rsi::SlotPublisher,
+    photopose_rsi::server::RsiClock,
+    Arc<photopose_rsi::monitor::Stats>,
+);
+
+/// Publishes a pose to the RSI server and flags the message with the
+/// correction's state.
+fn publish_to_rsi(link: &mut RsiLink, message: &mut PoseMessage, received: Instant) {
+    let (publisher, clock, stats) = link;
+    if let (PoseStatus::Ok, Some(c), Some(r), Some(sc), Some(sr)) = (
+        message.status,
+        message.center,
+        message.rotation,
+        message.std_center,
+        message.std_rotation_deg,
+    ) {
+        let rotation = photopose_geometry::Matrix3::from_fn(|i, j| r[i][j]);
+        let center = photopose_geometry::Vector3::from(c);
+        publisher.publish(&photopose_rsi::Measurement {
+            plate_from_camera: photopose_rsi::law::isometry(&rotation.transpose(), &center),
+            std_mm: sc.into_iter().fold(0.0, f64::max),
+            std_deg: sr.into_iter().fold(0.0, f64::max),
+            n_targets: message.n_targets,
+            time_s: clock.at(received),
+            seq: message.seq,
+        });
+    }
+    message.rsi =
+        photopose_rsi::LawStatus::from_code(stats.status.load(Ordering::Relaxed)).map(|s| s.name());
+}
+
 #[allow(clippy::too_many_arguments)]
 fn output_loop(
     rx: Receiver<Outcome>,
     mut udp: Option<UdpSender>,
     mut tcp: Option<TcpServer>,
+    mut rsi: Option<RsiLink>,
     counters: Arc<Counters>,
     max_age: Duration,
     window: usize,
@@ -437,6 +527,9 @@ fn output_loop(
                         ..
                     } = o
                     {
+                        if let Some(link) = rsi.as_mut() {
+                            publish_to_rsi(link, &mut message, received);
+                        }
                         let latency = received.elapsed();
                         message.latency_us = latency.as_secs_f64() * 1e6;
                         counters.record_latency(message.latency_us);
@@ -466,6 +559,12 @@ fn output_loop(
                         let mut s = *m;
                         s.status = PoseStatus::Stale;
                         s.host_time_ns = host_time_ns();
+                        if let Some((_, _, stats)) = rsi.as_ref() {
+                            s.rsi = photopose_rsi::LawStatus::from_code(
+                                stats.status.load(Ordering::Relaxed),
+                            )
+                            .map(|st| st.name());
+                        }
                         emit(&s, &mut line, &mut udp, &mut tcp);
                         counters.stale.fetch_add(1, Ordering::Relaxed);
                         last_sent = Instant::now();

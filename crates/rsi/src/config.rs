@@ -102,6 +102,9 @@ pub struct RsiConfig {
     pub realtime_priority: Option<u8>,
     /// CPU core to pin the RSI thread to.
     pub cpu: Option<usize>,
+    /// The hand-eye file (`photopose calibrate hand-eye`): `X` and `Z` of
+    /// the correction law. The daemon requires it when enabled and reads it.
+    pub hand_eye: Option<PathBuf>,
 }
 
 impl Default for RsiConfig {
@@ -134,6 +137,7 @@ impl Default for RsiConfig {
             cycle_ms: 4.0,
             realtime_priority: None,
             cpu: None,
+            hand_eye: None,
         }
     }
 }

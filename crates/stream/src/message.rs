@@ -45,6 +45,11 @@ pub struct PoseMessage {
     pub sigma0_px: Option<f64>,
     /// Targets used in the pose.
     pub n_targets: u32,
+    /// State of the robot correction (KUKA RSI) when it runs: `tracking`,
+    /// `measure_only` or `stale_…` (the correction is frozen); absent
+    /// without RSI.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rsi: Option<&'static str>,
 }
 
 impl PoseMessage {
@@ -68,6 +73,7 @@ impl PoseMessage {
             std_rotation_deg: None,
             sigma0_px: None,
             n_targets: 0,
+            rsi: None,
         }
     }
 
