@@ -39,6 +39,8 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// ISO 230-4 circular test of a recorded pose stream: report and plots.
     CircleTest(cmd::circle_test::Args),
+    /// A simulated KUKA controller against the daemon's RSI server.
+    RsiSim(cmd::rsi_sim::Args),
 }
 
 fn main() -> ExitCode {
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
         Command::Field(args) => cmd::field::run(args),
         Command::Calibrate(args) => cmd::calibrate::run(args),
         Command::CircleTest(args) => cmd::circle_test::run(args),
+        Command::RsiSim(args) => cmd::rsi_sim::run(args),
     };
     match result {
         Ok(code) => code,

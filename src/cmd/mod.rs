@@ -3,9 +3,9 @@
 pub mod batch;
 pub mod bench;
 pub mod calibrate;
+pub mod calibrate_camera;
 pub mod calibrate_hand_eye;
 pub mod circle_test;
-pub mod calibrate_camera;
 pub mod defaults;
 pub mod detect;
 pub mod field;
@@ -13,5 +13,6 @@ pub mod pose_arg;
 pub mod record;
 pub mod render;
 pub mod resect;
+pub mod rsi_sim;
 pub mod run;
 pub mod simulate;

@@ -26,6 +26,9 @@ pub struct Args {
     /// `source.synthetic.frames`).
     #[arg(long)]
     pub frames: Option<u64>,
+    /// Print the histogram of the frame-to-pose latency at the end.
+    #[arg(long)]
+    pub latency_histogram: bool,
 }
 
 /// The built-in configuration (`config/photopose.toml`).
@@ -121,6 +124,23 @@ pub fn run(args: Args) -> Result<ExitCode> {
         done as f64 / secs.max(1e-9),
         c.latency_us_sum.load(Ordering::Relaxed) as f64 / done.max(1) as f64 / 1000.0
     );
+    if args.latency_histogram {
+        print_histogram(&c);
+    }
+    if let Some(rsi) = &c.rsi {
+        let s = rsi.snapshot();
+        let us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.0} µs"));
+        println!(
+            "RSI: {} cycles, {} replies; reply latency (datagram received → reply sent)              p50 {}, p99 {}, p99.9 {}, max {:.0} µs; controller Delay max {}",
+            s.cycles,
+            s.replies,
+            us(s.latency_p50_us),
+            us(s.latency_p99_us),
+            us(s.latency_p999_us),
+            s.latency_max_us,
+            s.delay_max
+        );
+    }
     tracing::info!(
         frames_in = c.frames_in.load(Ordering::Relaxed),
         dropped = c.frames_dropped.load(Ordering::Relaxed),
@@ -128,6 +148,37 @@ pub fn run(args: Args) -> Result<ExitCode> {
         "photopose stopped"
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the non-empty buckets of the latency histogram (upper edges,
+/// eight buckets per octave) with a bar each.
+fn print_histogram(c: &photopose_pipeline::Counters) {
+    use photopose_pipeline::run::LATENCY_BASE_US;
+    let counts: Vec<u64> = c
+        .latency_histogram
+        .iter()
+        .map(|b| b.load(Ordering::Relaxed))
+        .collect();
+    let total: u64 = counts.iter().sum();
+    let (Some(first), Some(last)) = (
+        counts.iter().position(|&n| n > 0),
+        counts.iter().rposition(|&n| n > 0),
+    ) else {
+        return;
+    };
+    let most = counts.iter().copied().max().unwrap_or(1).max(1);
+    println!("latency histogram (frame handed over → pose sent):");
+    let mut below = 0u64;
+    for (k, &n) in counts.iter().enumerate().take(last + 1).skip(first) {
+        below += n;
+        println!(
+            "  ≤ {:>9.3} ms {:>8} {:>6.2} % {}",
+            LATENCY_BASE_US * 2f64.powf(k as f64 / 8.0) / 1000.0,
+            n,
+            100.0 * below as f64 / total as f64,
+            "#".repeat((n * 50).div_ceil(most) as usize)
+        );
+    }
 }
 
 /// Arguments of `photopose check-config`.
