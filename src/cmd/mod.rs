@@ -7,6 +7,7 @@ pub mod calibrate_camera;
 pub mod calibrate_hand_eye;
 pub mod circle_test;
 pub mod defaults;
+pub mod demo;
 pub mod detect;
 pub mod field;
 pub mod pose_arg;

@@ -131,7 +131,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         let s = rsi.snapshot();
         let us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.0} µs"));
         println!(
-            "RSI: {} cycles, {} replies; reply latency (datagram received → reply sent)              p50 {}, p99 {}, p99.9 {}, max {:.0} µs; controller Delay max {}",
+            "RSI: {} cycles, {} replies; reply latency (datagram received → reply sent) p50 {}, p99 {}, p99.9 {}, max {:.0} µs; controller Delay max {}",
             s.cycles,
             s.replies,
             us(s.latency_p50_us),
