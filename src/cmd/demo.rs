@@ -126,12 +126,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let rsi_addr = pipeline
         .rsi_addr()
         .context("the RSI server did not start")?;
-    println!(
-        "poses: TCP JSON lines on {} (nc {} {}), RSI server on {rsi_addr}",
-        pipeline.tcp_addr().map_or("-".into(), |a| a.to_string()),
-        "127.0.0.1",
-        pipeline.tcp_addr().map_or(0, |a| a.port())
-    );
+    if let Some(tcp) = pipeline.tcp_addr() {
+        println!(
+            "poses: TCP JSON lines on {tcp} (nc {} {}), RSI server on {rsi_addr}",
+            tcp.ip(),
+            tcp.port()
+        );
+    }
     let cycle = Duration::from_millis(4);
     let cycles = (frames as f64 / args.rate / cycle.as_secs_f64()).ceil() as u64;
     let controller = SimController::spawn(
