@@ -21,6 +21,9 @@ enum What {
     /// Camera on the flange (hand-eye) and plate in the robot base from
     /// stations of robot and camera poses.
     HandEye(crate::cmd::calibrate_hand_eye::Args),
+    /// Hand-eye stations gathered live from a running daemon's pose stream
+    /// (the robot's RIst from the RSI server), one per still phase.
+    Stations(crate::cmd::calibrate_stations::Args),
 }
 
 /// Runs the command.
@@ -28,5 +31,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
     match args.what {
         What::Camera(a) => crate::cmd::calibrate_camera::run(a),
         What::HandEye(a) => crate::cmd::calibrate_hand_eye::run(a),
+        What::Stations(a) => crate::cmd::calibrate_stations::run(a),
     }
 }

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod calibrate_camera;
 pub mod calibrate_hand_eye;
+pub mod calibrate_stations;
 pub mod circle_test;
 pub mod defaults;
 pub mod demo;

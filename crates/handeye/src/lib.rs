@@ -26,6 +26,7 @@
 //! format ([`stations`]) parses text handed in.
 
 pub mod closed_form;
+pub mod gather;
 pub mod kuka;
 pub mod refine;
 pub mod solve;

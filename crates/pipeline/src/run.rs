@@ -474,6 +474,7 @@ fn publish_to_rsi(link: &mut RsiLink, message: &mut PoseMessage, received: Insta
     }
     message.rsi =
         photopose_rsi::LawStatus::from_code(stats.status.load(Ordering::Relaxed)).map(|s| s.name());
+    message.robot_xyzabc = stats.robot_pose();
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -564,6 +565,7 @@ fn output_loop(
                                 stats.status.load(Ordering::Relaxed),
                             )
                             .map(|st| st.name());
+                            s.robot_xyzabc = stats.robot_pose();
                         }
                         emit(&s, &mut line, &mut udp, &mut tcp);
                         counters.stale.fetch_add(1, Ordering::Relaxed);

@@ -144,6 +144,11 @@ pub struct Stats {
     pub latency: Histogram,
     /// Inter-arrival times of answered datagrams.
     pub interarrival: Histogram,
+    /// The last `RIst` (actual TCP pose, KUKA `X … C`) as `f64` bits, for
+    /// the pose stream and hand-eye stations; see [`Stats::robot_pose`].
+    pub rist: [AtomicU64; 6],
+    /// Cycles that carried `RIst` (0: none yet).
+    pub rist_cycles: AtomicU64,
 }
 
 impl Stats {
@@ -152,6 +157,23 @@ impl Stats {
         let s = Stats::default();
         s.status.store(255, Ordering::Relaxed);
         s
+    }
+
+    /// Stores a cycle's `RIst`.
+    pub fn record_rist(&self, pose: &[f64; 6]) {
+        for (a, v) in self.rist.iter().zip(pose) {
+            a.store(v.to_bits(), Ordering::Relaxed);
+        }
+        self.rist_cycles.fetch_add(1, Ordering::Release);
+    }
+
+    /// The last `RIst` the controller sent, if any. The six values are read
+    /// one by one: while the robot moves, they may come from two
+    /// consecutive cycles (one interpolation cycle apart); while it stands
+    /// still they are exact.
+    pub fn robot_pose(&self) -> Option<[f64; 6]> {
+        (self.rist_cycles.load(Ordering::Acquire) > 0)
+            .then(|| std::array::from_fn(|k| f64::from_bits(self.rist[k].load(Ordering::Relaxed))))
     }
 
     /// A plain copy for reports and metrics.

@@ -366,6 +366,9 @@ impl Worker {
     }
 
     fn answer(&mut self, frame: &RobFrame, to: SocketAddr, t_rx: Instant) {
+        if let Some(p) = &frame.rist {
+            self.stats.record_rist(p);
+        }
         if let Some(m) = self.slot.read() {
             self.latest = Some(m);
         }

@@ -50,6 +50,11 @@ pub struct PoseMessage {
     /// without RSI.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rsi: Option<&'static str>,
+    /// The robot's actual TCP pose (`RIst`, KUKA `X, Y, Z, A, B, C` in mm
+    /// and degrees) last reported to the RSI server when this message was
+    /// sent; absent without RSI or before the first `RIst`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robot_xyzabc: Option<[f64; 6]>,
 }
 
 impl PoseMessage {
@@ -74,6 +79,7 @@ impl PoseMessage {
             sigma0_px: None,
             n_targets: 0,
             rsi: None,
+            robot_xyzabc: None,
         }
     }
 

@@ -1,0 +1,168 @@
+//! `photopose calibrate stations --stream HOST:PORT --out STATIONS.csv
+//! --count N`: gathers hand-eye stations live from a running daemon. It
+//! reads the daemon's TCP pose stream (which carries the robot's `RIst`
+//! when the RSI server runs), and each time the robot has stood still long
+//! enough (and has moved on since the previous station) it appends a
+//! station — the robot pose and the mean camera pose — to the station file
+//! that `photopose calibrate hand-eye` reads.
+
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use photopose_handeye::gather::{GatherSettings, Gatherer, Sample};
+use photopose_handeye::STATIONS_HEADER;
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Arguments of `photopose calibrate stations`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// The daemon's TCP pose stream (`[output] tcp_listen`).
+    #[arg(long)]
+    pub stream: String,
+    /// Station file to write (CSV, `photopose calibrate hand-eye --stations`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Stations to gather before stopping.
+    #[arg(long, default_value_t = 12)]
+    pub count: usize,
+    /// Seconds the robot must stand still for a station.
+    #[arg(long, default_value_t = 1.0)]
+    pub still_s: f64,
+    /// Largest robot motion while still, mm.
+    #[arg(long, default_value_t = 0.01)]
+    pub still_mm: f64,
+    /// Largest robot rotation while still, degrees.
+    #[arg(long, default_value_t = 0.002)]
+    pub still_deg: f64,
+    /// Motion away from the previous station before the next one counts, mm.
+    #[arg(long, default_value_t = 5.0)]
+    pub move_mm: f64,
+    /// Rotation away from the previous station before the next one counts, degrees.
+    #[arg(long, default_value_t = 2.0)]
+    pub move_deg: f64,
+    /// Give up after this many seconds.
+    #[arg(long, default_value_t = 3600.0)]
+    pub timeout_s: f64,
+}
+
+/// The camera pose of an `ok` pose-stream line that carries `RIst`.
+fn sample(v: &serde_json::Value) -> Option<Sample> {
+    if v["status"] != "ok" {
+        return None;
+    }
+    let nums = |key: &str, n: usize| -> Option<Vec<f64>> {
+        let a = v[key].as_array()?;
+        (a.len() == n)
+            .then(|| a.iter().map(|x| x.as_f64()).collect::<Option<Vec<f64>>>())
+            .flatten()
+    };
+    let robot = nums("robot_xyzabc", 6)?;
+    let c = nums("center", 3)?;
+    let sc = nums("std_center", 3)?;
+    let sr = nums("std_rotation_deg", 3)?;
+    let rows = v["rotation"].as_array()?;
+    let mut r = photopose_geometry::Matrix3::zeros();
+    for (i, row) in rows.iter().enumerate().take(3) {
+        for (j, x) in row.as_array()?.iter().enumerate().take(3) {
+            r[(i, j)] = x.as_f64()?;
+        }
+    }
+    Some(Sample {
+        time_s: v["camera_time_ns"].as_u64()? as f64 / 1e9,
+        robot_xyzabc: std::array::from_fn(|k| robot[k]),
+        camera: photopose_handeye::kuka::isometry(
+            &r.transpose(),
+            &photopose_geometry::Vector3::new(c[0], c[1], c[2]),
+        ),
+        camera_std: [sc[0], sc[1], sc[2], sr[0], sr[1], sr[2]],
+    })
+}
+
+/// Runs the command.
+pub fn run(args: Args) -> Result<ExitCode> {
+    if args.count == 0 {
+        bail!("--count 0: gather at least one station");
+    }
+    let settings = GatherSettings {
+        still_s: args.still_s,
+        still_mm: args.still_mm,
+        still_deg: args.still_deg,
+        move_mm: args.move_mm,
+        move_deg: args.move_deg,
+        ..GatherSettings::default()
+    };
+    for (name, v) in [
+        ("--still-s", settings.still_s),
+        ("--still-mm", settings.still_mm),
+        ("--still-deg", settings.still_deg),
+        ("--move-mm", settings.move_mm),
+        ("--move-deg", settings.move_deg),
+        ("--timeout-s", args.timeout_s),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            bail!("{name} {v}: must be a positive number");
+        }
+    }
+    let stream = TcpStream::connect(&args.stream)
+        .with_context(|| format!("cannot connect to the pose stream {}", args.stream))?;
+    stream.set_read_timeout(Some(Duration::from_secs(1)))?;
+    let mut out = std::fs::File::create(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    writeln!(out, "{STATIONS_HEADER}")?;
+    let mut gatherer = Gatherer::new(settings);
+    let (mut lines, mut without_robot) = (0u64, 0u64);
+    let started = Instant::now();
+    let mut reader = BufReader::new(stream);
+    let mut line = String::new();
+    while gatherer.taken() < args.count {
+        if started.elapsed().as_secs_f64() > args.timeout_s {
+            bail!(
+                "{} of {} stations after {} s ({lines} pose lines, {without_robot} ok without RIst: is [rsi] enabled and the controller sending RIst?)",
+                gatherer.taken(),
+                args.count,
+                args.timeout_s
+            );
+        }
+        line.clear();
+        match reader.read_line(&mut line) {
+            Ok(0) => bail!(
+                "the pose stream {} closed after {} of {} stations",
+                args.stream,
+                gatherer.taken(),
+                args.count
+            ),
+            Ok(_) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                continue
+            }
+            Err(e) => return Err(e).context("reading the pose stream"),
+        }
+        lines += 1;
+        let v: serde_json::Value = serde_json::from_str(line.trim())
+            .with_context(|| format!("pose stream line {lines} is not JSON"))?;
+        let Some(s) = sample(&v) else {
+            if v["status"] == "ok" {
+                without_robot += 1;
+            }
+            continue;
+        };
+        if let Some(row) = gatherer.push(s) {
+            writeln!(out, "{}", row.csv_line()?)?;
+            out.flush()?;
+            println!(
+                "station {} of {}: robot {:?}",
+                row.name, args.count, row.robot_xyzabc
+            );
+        }
+    }
+    println!("{}: {} stations", args.out.display(), gatherer.taken());
+    Ok(ExitCode::SUCCESS)
+}
