@@ -94,6 +94,42 @@ fn check_config_accepts_the_example_and_names_bad_keys() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.toml: cannot read"));
+    // RSI on without its hand-eye file, and with one that does not exist.
+    let text = std::fs::read_to_string(root().join("config/photopose.toml")).unwrap();
+    for (edit, want) in [
+        ("enabled = true", "rsi.hand_eye"),
+        (
+            "enabled = true\nhand_eye = \"/nonexistent/hand-eye.toml\"",
+            "/nonexistent/hand-eye.toml",
+        ),
+    ] {
+        std::fs::write(&bad, text.replace("enabled = false", edit)).unwrap();
+        let out = bin().args(["check-config"]).arg(&bad).output().unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{err}");
+    }
+}
+
+#[test]
+fn the_benchmark_configurations_check() {
+    for entry in std::fs::read_dir(root().join("config/bench")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") && !path.ends_with("hand-eye.toml") {
+            let out = bin()
+                .current_dir(root())
+                .args(["check-config"])
+                .arg(&path)
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}: {}",
+                path.display(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    }
 }
 
 #[test]

@@ -193,6 +193,10 @@ pub fn check(args: CheckArgs) -> Result<ExitCode> {
     let config = Config::load(&args.file)?;
     defaults::camera(config.camera_file.as_deref())?;
     defaults::field(config.field_file.as_deref())?;
+    if let Some(rsi) = &config.rsi {
+        photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye)
+            .with_context(|| format!("{}: rsi.hand_eye", args.file.display()))?;
+    }
     println!("{}: ok", args.file.display());
     Ok(ExitCode::SUCCESS)
 }
