@@ -263,24 +263,8 @@ fn fewer_than_three_usable_images_is_an_error_naming_the_skipped_ones() {
 #[test]
 #[ignore]
 fn acceptance_twenty_images() {
-    let strong = Camera::new(
-        photopose_formats::default_camera().sensor,
-        Interior {
-            c: 12.0,
-            x0: 0.15,
-            y0: -0.1,
-        },
-        Distortion {
-            k1: -2.5e-3,
-            k2: 2.0e-5,
-            k3: -1.0e-7,
-            p1: 3.0e-5,
-            p2: -2.0e-5,
-            b1: 1.0e-4,
-            b2: -5.0e-5,
-        },
-    )
-    .unwrap();
+    let strong =
+        photopose_calibrate::cases::strong_lens(photopose_formats::default_camera().sensor);
     for (name, truth) in [
         ("default", photopose_formats::default_camera()),
         ("strong", strong),

@@ -20,24 +20,7 @@ fn main() {
         height: 1030,
         pixel_size: 0.0067,
     };
-    let truth = Camera::new(
-        sensor,
-        Interior {
-            c: 12.0,
-            x0: 0.15,
-            y0: -0.1,
-        },
-        Distortion {
-            k1: -2.5e-3,
-            k2: 2.0e-5,
-            k3: -1.0e-7,
-            p1: 3.0e-5,
-            p2: -2.0e-5,
-            b1: 1.0e-4,
-            b2: -5.0e-5,
-        },
-    )
-    .unwrap();
+    let truth = photopose_calibrate::cases::strong_lens(sensor);
     let nominal = Camera::new(
         sensor,
         Interior {

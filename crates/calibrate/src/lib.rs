@@ -19,6 +19,7 @@
 
 pub mod bundle;
 pub mod calibrate;
+pub mod cases;
 pub mod error;
 pub mod model;
 pub mod params;
