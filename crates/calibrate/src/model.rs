@@ -114,31 +114,14 @@ mod tests {
     use super::*;
     use crate::params::{values, with_values};
     use photopose_geometry::rotation::cayley;
-    use photopose_geometry::{Distortion, Interior, Sensor};
+    use photopose_geometry::Sensor;
 
     fn camera() -> Camera {
-        Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.05,
-                y0: -0.03,
-            },
-            Distortion {
-                k1: -2.5e-3,
-                k2: 2.0e-5,
-                k3: -1.0e-7,
-                p1: 3.0e-5,
-                p2: -2.0e-5,
-                b1: 1.0e-4,
-                b2: -5.0e-5,
-            },
-        )
-        .unwrap()
+        crate::cases::strong_lens(Sensor {
+            width: 1300,
+            height: 1030,
+            pixel_size: 0.0067,
+        })
     }
 
     #[test]
