@@ -113,13 +113,32 @@ fn check_config_accepts_the_example_and_names_bad_keys() {
 
 #[test]
 fn the_benchmark_configurations_check() {
+    // check-config opens a replay's recording as run does: the benchmark
+    // configurations get a small recording of their own here.
+    let dir = scratch("bench-configs");
+    let recording = dir.join("rec.mcap");
+    let out = bin()
+        .args(["record", "--frames", "3", "--out"])
+        .arg(&recording)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     for entry in std::fs::read_dir(root().join("config/bench")).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") && !path.ends_with("hand-eye.toml") {
+            let text = std::fs::read_to_string(&path)
+                .unwrap()
+                .replace("target/bench/rec200.mcap", &recording.display().to_string());
+            let copy = dir.join(path.file_name().unwrap());
+            std::fs::write(&copy, text).unwrap();
             let out = bin()
                 .current_dir(root())
-                .args(["check-config"])
-                .arg(&path)
+                .args(["check-config", "--strict"])
+                .arg(&copy)
                 .output()
                 .unwrap();
             assert!(
@@ -130,6 +149,64 @@ fn the_benchmark_configurations_check() {
             );
         }
     }
+}
+
+#[test]
+fn check_config_runs_the_validation_of_run() {
+    let dir = scratch("check-parity");
+    let config = dir.join("photopose.toml");
+    // The recording of a replay is opened (it used to pass unread).
+    std::fs::write(
+        &config,
+        "[source]\nkind = \"replay\"\n[source.replay]\npath = \"/nonexistent/run.mcap\"\n",
+    )
+    .unwrap();
+    let out = bin().args(["check-config"]).arg(&config).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("/nonexistent/run.mcap"), "{err}");
+    // The controller file's HOLDON pairing warning that run prints is
+    // printed; --strict makes it an error.
+    let xml = dir.join("RSI_EthernetConfig.xml");
+    std::fs::write(
+        &xml,
+        "<ROOT><CONFIG><IP_NUMBER>127.0.0.1</IP_NUMBER><PORT>49152</PORT><SENTYPE>ImFree</SENTYPE>\
+         <ONLYSEND>FALSE</ONLYSEND></CONFIG><SEND><ELEMENTS>\
+         <ELEMENT TAG=\"DEF_RIst\" TYPE=\"DOUBLE\" INDX=\"INTERNAL\"/>\
+         <ELEMENT TAG=\"DEF_RSol\" TYPE=\"DOUBLE\" INDX=\"INTERNAL\"/></ELEMENTS></SEND>\
+         <RECEIVE><ELEMENTS>\
+         <ELEMENT TAG=\"RKorr.X\" TYPE=\"DOUBLE\" INDX=\"1\" HOLDON=\"1\"/>\
+         <ELEMENT TAG=\"RKorr.Y\" TYPE=\"DOUBLE\" INDX=\"2\" HOLDON=\"1\"/>\
+         <ELEMENT TAG=\"RKorr.Z\" TYPE=\"DOUBLE\" INDX=\"3\" HOLDON=\"1\"/>\
+         <ELEMENT TAG=\"RKorr.A\" TYPE=\"DOUBLE\" INDX=\"4\" HOLDON=\"1\"/>\
+         <ELEMENT TAG=\"RKorr.B\" TYPE=\"DOUBLE\" INDX=\"5\" HOLDON=\"1\"/>\
+         <ELEMENT TAG=\"RKorr.C\" TYPE=\"DOUBLE\" INDX=\"6\" HOLDON=\"1\"/>\
+         </ELEMENTS></RECEIVE></ROOT>",
+    )
+    .unwrap();
+    std::fs::write(
+        &config,
+        format!(
+            "[source]\nkind = \"synthetic\"\n[rsi]\nenabled = true\nbind = \"127.0.0.1\"\n\
+             controllers = [\"127.0.0.1\"]\nhand_eye = \"{}\"\nethernet_config = \"{}\"\n\
+             mode = \"relative\"\n",
+            root().join("config/bench/hand-eye.toml").display(),
+            xml.display()
+        ),
+    )
+    .unwrap();
+    let out = bin().args(["check-config"]).arg(&config).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning") && err.contains("HOLDON"), "{err}");
+    let out = bin()
+        .args(["check-config", "--strict"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("HOLDON") && err.contains("--strict"), "{err}");
 }
 
 #[test]

@@ -7,8 +7,9 @@ use crate::cmd::defaults;
 use anyhow::{Context, Result};
 use clap::Parser;
 use photopose_pipeline::config::Source;
+use photopose_pipeline::run::Wedge;
 use photopose_pipeline::source::{ReplaySource, SyntheticSource};
-use photopose_pipeline::{Config, Pipeline};
+use photopose_pipeline::{Config, Pipeline, Supervision};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -60,22 +61,97 @@ pub fn open_source(
     })
 }
 
-/// Runs the daemon until a signal or the end of the source.
-pub fn run(args: Args) -> Result<ExitCode> {
-    let mut config = load(args.config.as_deref())?;
-    if let (Some(n), Source::Synthetic(s)) = (args.frames, &mut config.source) {
+/// Everything `run` needs before it starts a thread, validated exactly as
+/// `check-config` validates it: the configuration, the camera and field
+/// files, the hand-eye file, the source (a replay's recording is opened and
+/// checked), and the warnings of the combination.
+pub struct Prepared {
+    /// The configuration.
+    pub config: Config,
+    /// The camera.
+    pub camera: photopose_geometry::Camera,
+    /// The test field.
+    pub field: photopose_field::Field,
+    /// The configured frame source, constructed (not started).
+    pub source: Box<dyn photopose_pipeline::FrameSource>,
+    /// What is valid but probably not meant (printed by both commands;
+    /// `check-config --strict` refuses them).
+    pub warnings: Vec<String>,
+}
+
+/// Loads and validates `path` (or the built-in configuration) with every
+/// file it names; `frames` overrides the frame count of the source.
+pub fn prepare(path: Option<&std::path::Path>, frames: Option<u64>) -> Result<Prepared> {
+    let mut config = load(path)?;
+    if let (Some(n), Source::Synthetic(s)) = (frames, &mut config.source) {
         s.frames = n;
     }
-    let camera = defaults::camera(config.camera_file.as_deref())?;
-    let field = defaults::field(config.field_file.as_deref())?;
-    let source = open_source(&config, &camera, &field)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
-        signal_hook::flag::register(sig, stop.clone()).context("cannot install signal handlers")?;
+    prepare_config(config)
+}
+
+/// [`prepare`] for a configuration already loaded.
+pub fn prepare_config(config: Config) -> Result<Prepared> {
+    let camera = defaults::camera(config.camera_file.as_deref()).context("camera.camera_file")?;
+    let field = defaults::field(config.field_file.as_deref()).context("camera.field_file")?;
+    let mut warnings = Vec::new();
+    if let Some(rsi) = &config.rsi {
+        photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye).context("rsi.hand_eye")?;
+        warnings.extend(rsi.settings.warnings.iter().map(|w| format!("rsi: {w}")));
     }
-    let pipeline =
-        Pipeline::start(&config, camera, field, source).context("cannot start the pipeline")?;
-    let pipeline_started = Instant::now();
+    let source = open_source(&config, &camera, &field)?;
+    Ok(Prepared {
+        config,
+        camera,
+        field,
+        source,
+        warnings,
+    })
+}
+
+/// The signals the daemon handles, installed before anything else is done
+/// so that a signal during start-up is handled too: SIGTERM and SIGINT
+/// stop cleanly (exit 0), SIGHUP reloads the configuration.
+struct Signals {
+    stop: Arc<AtomicBool>,
+    reload: Arc<AtomicBool>,
+}
+
+impl Signals {
+    fn install() -> Result<Signals> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let reload = Arc::new(AtomicBool::new(false));
+        for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+            signal_hook::flag::register(sig, stop.clone())
+                .context("cannot install signal handlers")?;
+        }
+        signal_hook::flag::register(signal_hook::consts::SIGHUP, reload.clone())
+            .context("cannot install the SIGHUP handler")?;
+        Ok(Signals { stop, reload })
+    }
+
+    fn stopping(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+}
+
+/// Starts the pipeline of a prepared configuration.
+fn start(prepared: Prepared, wedge: Option<Wedge>) -> Result<(Pipeline, Config)> {
+    for w in &prepared.warnings {
+        tracing::warn!("{w}");
+    }
+    let Prepared {
+        config,
+        camera,
+        field,
+        source,
+        ..
+    } = prepared;
+    let supervision = Supervision {
+        wedge,
+        ..Supervision::from_env()
+    };
+    let pipeline = Pipeline::start_supervised(&config, camera, field, source, supervision)
+        .context("cannot start the pipeline")?;
     tracing::info!(
         workers = config.workers,
         slots = config.slots,
@@ -83,9 +159,34 @@ pub fn run(args: Args) -> Result<ExitCode> {
         tcp = ?pipeline.tcp_addr(),
         "photopose running"
     );
+    Ok((pipeline, config))
+}
+
+/// Runs the daemon until a signal or the end of the source; SIGHUP
+/// re-reads the configuration and restarts the pipeline with it, or keeps
+/// the running one when the new one does not validate.
+pub fn run(args: Args) -> Result<ExitCode> {
+    let signals = Signals::install()?;
+    let notifier = photopose_pipeline::notify::Notifier::from_env();
+    // Fault injection for the watchdog's tests (never set in service).
+    let wedge = std::env::var("PHOTOPOSE_TEST_WEDGE")
+        .ok()
+        .and_then(|w| Wedge::parse(&w));
+    let prepared = prepare(args.config.as_deref(), args.frames)?;
+    if signals.stopping() {
+        tracing::info!("signal received during start-up: stopping");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let (mut pipeline, mut config) = start(prepared, wedge)?;
+    notifier.notify("READY=1");
+    let mut pipeline_started = Instant::now();
     let mut last_report = Instant::now();
-    while !stop.load(Ordering::Acquire) && !pipeline.finished() {
+    while !signals.stopping() && !pipeline.finished() {
         std::thread::sleep(Duration::from_millis(50));
+        if signals.reload.swap(false, Ordering::AcqRel) {
+            (pipeline, config) = reload(pipeline, config, &args, &notifier, wedge)?;
+            pipeline_started = Instant::now();
+        }
         if last_report.elapsed() >= Duration::from_secs(10) {
             let c = pipeline.counters();
             tracing::info!(
@@ -98,13 +199,66 @@ pub fn run(args: Args) -> Result<ExitCode> {
             last_report = Instant::now();
         }
     }
-    if stop.load(Ordering::Acquire) {
+    if signals.stopping() {
         tracing::info!("signal received: stopping");
     }
+    notifier.notify("STOPPING=1");
     pipeline.stop();
     let started = pipeline_started;
     let c = pipeline.join();
-    let secs = started.elapsed().as_secs_f64();
+    summary(&c, started.elapsed().as_secs_f64(), args.latency_histogram);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// SIGHUP: validates the configuration file again; a valid one replaces
+/// the running pipeline, an invalid one is logged and the running pipeline
+/// kept. A new pipeline that cannot start (an address taken, …) is
+/// replaced by the previous configuration again.
+fn reload(
+    running: Pipeline,
+    current: Config,
+    args: &Args,
+    notifier: &photopose_pipeline::notify::Notifier,
+    wedge: Option<Wedge>,
+) -> Result<(Pipeline, Config)> {
+    let Some(path) = args.config.as_deref() else {
+        tracing::info!("SIGHUP: running the built-in configuration; nothing to re-read");
+        return Ok((running, current));
+    };
+    notifier.notify("RELOADING=1");
+    let prepared = match prepare(Some(path), args.frames) {
+        Ok(p) => p,
+        Err(e) => {
+            tracing::error!("reload refused, keeping the running configuration: {e:#}");
+            notifier.notify("READY=1");
+            return Ok((running, current));
+        }
+    };
+    tracing::info!(config = %path.display(), "reloading: restarting the pipeline");
+    running.stop();
+    let old = running.join();
+    tracing::info!(
+        poses_ok = old.poses_ok.load(Ordering::Relaxed),
+        "previous pipeline stopped"
+    );
+    let started = match start(prepared, wedge) {
+        Ok(started) => {
+            tracing::info!(config = %path.display(), "configuration reloaded");
+            started
+        }
+        Err(e) => {
+            tracing::error!(
+                "the reloaded configuration did not start ({e:#}); back to the previous one"
+            );
+            start(prepare_config(current)?, wedge)?
+        }
+    };
+    notifier.notify("READY=1");
+    Ok(started)
+}
+
+/// The closing figures of a run.
+fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
     let ok = c.poses_ok.load(Ordering::Relaxed);
     let done = ok + c.poses_failed.load(Ordering::Relaxed);
     let q = |p: f64| c.latency_quantile_us(p).map_or(f64::NAN, |us| us / 1000.0);
@@ -124,8 +278,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
         done as f64 / secs.max(1e-9),
         c.latency_us_sum.load(Ordering::Relaxed) as f64 / done.max(1) as f64 / 1000.0
     );
-    if args.latency_histogram {
-        print_histogram(&c);
+    if histogram {
+        print_histogram(c);
     }
     if let Some(rsi) = &c.rsi {
         let s = rsi.snapshot();
@@ -147,7 +301,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
         poses_ok = c.poses_ok.load(Ordering::Relaxed),
         "photopose stopped"
     );
-    Ok(ExitCode::SUCCESS)
 }
 
 /// Prints the non-empty buckets of the latency histogram (upper edges,
@@ -186,16 +339,26 @@ fn print_histogram(c: &photopose_pipeline::Counters) {
 pub struct CheckArgs {
     /// Configuration file to check.
     pub file: PathBuf,
+    /// Warnings are errors (exit 2).
+    #[arg(long)]
+    pub strict: bool,
 }
 
-/// Checks a configuration (and the camera and field files it names).
+/// Checks a configuration exactly as `run` does before it starts (every
+/// file it names opened and parsed, every warning printed).
 pub fn check(args: CheckArgs) -> Result<ExitCode> {
-    let config = Config::load(&args.file)?;
-    defaults::camera(config.camera_file.as_deref())?;
-    defaults::field(config.field_file.as_deref())?;
-    if let Some(rsi) = &config.rsi {
-        photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye)
-            .with_context(|| format!("{}: rsi.hand_eye", args.file.display()))?;
+    let prepared =
+        prepare(Some(&args.file), None).with_context(|| format!("{}", args.file.display()))?;
+    for w in &prepared.warnings {
+        eprintln!("photopose: warning: {}: {w}", args.file.display());
+    }
+    if args.strict && !prepared.warnings.is_empty() {
+        eprintln!(
+            "photopose: error: {}: {} warning(s) and --strict",
+            args.file.display(),
+            prepared.warnings.len()
+        );
+        return Ok(ExitCode::from(2));
     }
     println!("{}: ok", args.file.display());
     Ok(ExitCode::SUCCESS)

@@ -29,6 +29,19 @@ pub struct GrabberCounters {
     pub bad_frames: AtomicU64,
 }
 
+impl GrabberCounters {
+    /// Turns of the grabber's loop so far: every `next_frame` call ends in
+    /// exactly one of the counters, so their sum advances while the thread
+    /// is alive and polling, with or without a camera.
+    pub fn turns(&self) -> u64 {
+        self.published.load(Ordering::Relaxed)
+            + self.timeouts.load(Ordering::Relaxed)
+            + self.losses.load(Ordering::Relaxed)
+            + self.unavailable.load(Ordering::Relaxed)
+            + self.bad_frames.load(Ordering::Relaxed)
+    }
+}
+
 /// Why a grabber thread ended.
 #[derive(Debug)]
 pub enum GrabberExit {
@@ -52,6 +65,12 @@ impl<S> Grabber<S> {
     /// The grabber's counters.
     pub fn counters(&self) -> &GrabberCounters {
         &self.counters
+    }
+
+    /// The grabber's counters, shared (for a watchdog or metrics that
+    /// outlive a borrow of the grabber).
+    pub fn shared_counters(&self) -> Arc<GrabberCounters> {
+        Arc::clone(&self.counters)
     }
 
     /// Raises the stop flag (the one given at spawn).

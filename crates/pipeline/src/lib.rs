@@ -18,11 +18,12 @@
 //! end of the source shuts them down in order.
 
 pub mod config;
+pub mod health;
 pub mod metrics;
 pub mod notify;
 pub mod run;
 pub mod source;
 
 pub use config::{Config, ConfigError};
-pub use run::{Counters, Pipeline};
+pub use run::{Counters, Pipeline, Supervision};
 pub use source::{FrameSource, Slot, SourceError};

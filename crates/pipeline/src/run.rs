@@ -2,6 +2,7 @@
 //! output, and its counters. See the crate documentation for the picture.
 
 use crate::config::{Config, Overflow};
+use crate::health::{Heartbeat, Threads, Watchdog};
 use crate::notify::Notifier;
 use crate::source::host_time_ns;
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
@@ -145,6 +146,73 @@ enum Outcome {
     },
 }
 
+/// How the pipeline reports to the service manager: where notifications
+/// go, the watchdog interval systemd asks for, and a fault to inject
+/// (tests of the watchdog only).
+#[derive(Debug)]
+pub struct Supervision {
+    /// Where `WATCHDOG=1` and `STATUS=` go.
+    pub notifier: Notifier,
+    /// systemd's watchdog interval (`WATCHDOG_USEC`); `None`: no pings.
+    pub watchdog: Option<Duration>,
+    /// A thread to wedge after its first frame (fault injection for the
+    /// watchdog's tests; `None` in service).
+    #[doc(hidden)]
+    pub wedge: Option<Wedge>,
+}
+
+impl Supervision {
+    /// From the environment systemd gives a service (`NOTIFY_SOCKET`,
+    /// `WATCHDOG_USEC`, `WATCHDOG_PID`).
+    pub fn from_env() -> Supervision {
+        Supervision {
+            notifier: Notifier::from_env(),
+            watchdog: crate::notify::watchdog_interval(),
+            wedge: None,
+        }
+    }
+
+    /// No notifications, no watchdog.
+    pub fn none() -> Supervision {
+        Supervision {
+            notifier: Notifier::disabled(),
+            watchdog: None,
+            wedge: None,
+        }
+    }
+}
+
+/// A thread that stops turning after its first frame, to prove that the
+/// watchdog notices (fault injection for tests).
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wedge {
+    /// The ordered output thread.
+    Output,
+    /// The first detection worker.
+    Worker,
+}
+
+impl Wedge {
+    /// `output` or `worker`.
+    pub fn parse(s: &str) -> Option<Wedge> {
+        match s {
+            "output" => Some(Wedge::Output),
+            "worker" => Some(Wedge::Worker),
+            _ => None,
+        }
+    }
+}
+
+/// Holds a wedged thread until the pipeline stops: it neither works nor
+/// turns (its heartbeat stands still).
+fn hold_wedged(stop: &AtomicBool, role: &str) {
+    tracing::warn!(thread = role, "fault injection: thread wedged");
+    while !stop.load(Ordering::Acquire) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// A running pipeline.
 pub struct Pipeline {
     rsi: Option<photopose_rsi::server::RsiServer>,
@@ -156,6 +224,7 @@ pub struct Pipeline {
     tcp_addr: Option<SocketAddr>,
     metrics: Option<crate::metrics::MetricsServer>,
     metrics_addr: Option<SocketAddr>,
+    watchdog: Option<Watchdog>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -178,14 +247,28 @@ fn spawn(name: &str, f: impl FnOnce() + Send + 'static) -> Result<JoinHandle<()>
 
 impl Pipeline {
     /// Starts the threads: grabber on `source`, `config.workers` detection
-    /// workers, the ordered output.
+    /// workers, the ordered output, and the watchdog as systemd's
+    /// environment asks ([`Supervision::from_env`]).
     pub fn start(
         config: &Config,
         camera: Camera,
         field: Field,
         source: Box<dyn FrameSource>,
     ) -> Result<Self, PipelineError> {
+        Self::start_supervised(config, camera, field, source, Supervision::from_env())
+    }
+
+    /// [`Pipeline::start`] reporting to `supervision`.
+    pub fn start_supervised(
+        config: &Config,
+        camera: Camera,
+        field: Field,
+        source: Box<dyn FrameSource>,
+        supervision: Supervision,
+    ) -> Result<Self, PipelineError> {
         let stop = Arc::new(AtomicBool::new(false));
+        let mut watched = Threads::default();
+        let wedge = supervision.wedge;
         let slots = config.slots;
         let (producer, consumer) = Ring::build(
             slots,
@@ -258,12 +341,22 @@ impl Pipeline {
             let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
             let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();
-            threads.push(spawn(&format!("detect-{k}"), move || loop {
+            let name = format!("detect-{k}");
+            let beat = Arc::new(Heartbeat::default());
+            watched.watch_heartbeat(name.clone(), &beat);
+            let wedged = (k == 0 && wedge == Some(Wedge::Worker)).then(|| stop.clone());
+            threads.push(spawn(&name, move || loop {
+                beat.beat();
                 let frame = match consumer.recv_timeout(Duration::from_millis(100)) {
                     Ok(f) => f,
                     Err(RecvError::Timeout) => continue,
                     Err(RecvError::Disconnected) => return,
                 };
+                if let Some(stop) = &wedged {
+                    drop(frame);
+                    hold_wedged(stop, "detect-0");
+                    return;
+                }
                 let message = locate(&mut locator, &frame);
                 counters.frames_processed.fetch_add(1, Ordering::Relaxed);
                 let outcome = Outcome::Message {
@@ -295,17 +388,38 @@ impl Pipeline {
             })?
         };
         drop(out_tx);
+        {
+            let g = grabber.shared_counters();
+            watched.watch("grabber", move || g.turns());
+        }
+        if let Some((_, _, stats)) = &rsi_link {
+            let s = Arc::clone(stats);
+            watched.watch("rsi", move || s.loops.load(Ordering::Relaxed));
+        }
         // Output.
         {
             let (stop_out, counters) = (stop.clone(), counters.clone());
             let max_age = Duration::from_secs_f64(config.max_age_ms / 1000.0);
             let window = slots * 2 + config.workers;
+            let beat = Arc::new(Heartbeat::default());
+            watched.watch_heartbeat("output", &beat);
+            let wedged = wedge == Some(Wedge::Output);
             threads.push(spawn("output", move || {
                 output_loop(
-                    out_rx, udp, tcp, rsi_link, counters, max_age, window, stop_out,
+                    out_rx, udp, tcp, rsi_link, counters, max_age, window, stop_out, beat, wedged,
                 );
             })?);
         }
+        let watchdog = Watchdog::spawn(
+            supervision.notifier,
+            supervision.watchdog,
+            watched,
+            status_line(Arc::clone(&counters)),
+        )
+        .map_err(|source| PipelineError::Thread {
+            name: "watchdog".into(),
+            source,
+        })?;
         Ok(Pipeline {
             rsi,
             rsi_addr,
@@ -316,6 +430,7 @@ impl Pipeline {
             tcp_addr,
             metrics,
             metrics_addr,
+            watchdog: Some(watchdog),
         })
     }
 
@@ -360,6 +475,9 @@ impl Pipeline {
     /// Waits for every thread to end (after [`Pipeline::stop`] or the end of
     /// the source).
     pub fn join(mut self) -> Arc<Counters> {
+        if let Some(w) = self.watchdog.take() {
+            w.stop();
+        }
         if let Some(g) = self.grabber.take() {
             // Ending the grabber drops the ring's producer: the workers
             // finish the queued frames, then the output drains.
@@ -477,6 +595,32 @@ fn publish_to_rsi(link: &mut RsiLink, message: &mut PoseMessage, received: Insta
     message.robot_xyzabc = stats.robot_pose();
 }
 
+/// The `STATUS=` text the watchdog sends each tick: pose rate since the
+/// last tick, camera state, RSI state.
+fn status_line(counters: Arc<Counters>) -> impl FnMut() -> String + Send + 'static {
+    let mut last = (Instant::now(), 0u64, 0u64);
+    move || {
+        let now = Instant::now();
+        let poses = counters.poses_ok.load(Ordering::Relaxed);
+        let frames = counters.frames_in.load(Ordering::Relaxed);
+        let secs = now.duration_since(last.0).as_secs_f64().max(1e-3);
+        let rate = (poses - last.1) as f64 / secs;
+        let camera = match &counters.source {
+            Some(s) if s.connected.load(Ordering::Relaxed) => "connected",
+            Some(_) => "absent",
+            None if frames > last.2 => "frames arriving",
+            None => "no frames",
+        };
+        last = (now, poses, frames);
+        let rsi = match &counters.rsi {
+            None => "off",
+            Some(s) => photopose_rsi::LawStatus::from_code(s.status.load(Ordering::Relaxed))
+                .map_or("waiting for the controller", |st| st.name()),
+        };
+        format!("{rate:.1} poses/s; camera {camera}; rsi {rsi}")
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn output_loop(
     rx: Receiver<Outcome>,
@@ -487,16 +631,15 @@ fn output_loop(
     max_age: Duration,
     window: usize,
     stop: Arc<AtomicBool>,
+    beat: Arc<Heartbeat>,
+    wedged: bool,
 ) {
-    let notifier = Notifier::from_env();
-    notifier.notify("READY=1");
     // Re-ordering window indexed by admission order.
     let mut pending: Vec<Option<Outcome>> = (0..window).map(|_| None).collect();
     let mut next = 0u64;
     let mut line = Vec::with_capacity(1024);
     let mut last_sent = Instant::now();
     let mut last_message: Option<PoseMessage> = None;
-    let mut last_watchdog = Instant::now();
     let emit = |m: &PoseMessage,
                 line: &mut Vec<u8>,
                 udp: &mut Option<UdpSender>,
@@ -510,7 +653,12 @@ fn output_loop(
         }
     };
     loop {
+        beat.beat();
         match rx.recv_timeout(max_age.min(Duration::from_millis(100))) {
+            Ok(_) if wedged => {
+                hold_wedged(&stop, "output");
+                break;
+            }
             Ok(o) => {
                 let order = match &o {
                     Outcome::Message { order, .. } | Outcome::Skipped { order } => *order,
@@ -547,11 +695,6 @@ fn output_loop(
                         last_sent = Instant::now();
                     }
                 }
-                if last_watchdog.elapsed() >= Duration::from_secs(1) {
-                    // Pinged only on progress: a stuck pipeline stops pinging.
-                    notifier.notify("WATCHDOG=1");
-                    last_watchdog = Instant::now();
-                }
             }
             Err(RecvTimeoutError::Timeout) => {
                 if let Some(m) = last_message.as_mut() {
@@ -577,7 +720,6 @@ fn output_loop(
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
-    notifier.notify("STOPPING=1");
     if let Some(t) = tcp {
         t.shutdown();
     }

@@ -149,6 +149,9 @@ pub struct Stats {
     pub rist: [AtomicU64; 6],
     /// Cycles that carried `RIst` (0: none yet).
     pub rist_cycles: AtomicU64,
+    /// Turns of the server thread's loop (a datagram or a receive timeout
+    /// each): the daemon's watchdog checks that it keeps advancing.
+    pub loops: AtomicU64,
 }
 
 impl Stats {

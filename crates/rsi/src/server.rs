@@ -322,6 +322,7 @@ impl Worker {
 
     fn run(&mut self, stop: &AtomicBool) {
         while !stop.load(Ordering::Relaxed) {
+            self.stats.loops.fetch_add(1, Ordering::Relaxed);
             let (n, from) = match self.socket.recv_from(&mut self.rx) {
                 Ok(x) => x,
                 Err(e)
