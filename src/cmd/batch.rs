@@ -1,6 +1,6 @@
 //! What the batch commands (`resect`, `detect`) share: the error line of a
 //! failed input, loading a frame checked against the camera, and the exit
-//! status of a batch (conventions.md: non-zero if any input failed).
+//! status of a batch (docs/conventions.md: non-zero if any input failed).
 
 use photopose_frame::Image;
 use photopose_geometry::Camera;

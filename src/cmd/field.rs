@@ -129,7 +129,7 @@ fn bright_radius(kind: TargetKind, r: f64) -> f64 {
 }
 
 /// Checks that no bright part of a target (dot or code ring) reaches into
-/// another target's quiet zone (coded-targets.md: "no other target or
+/// another target's quiet zone (docs/coded-targets.md: "no other target or
 /// bright mark reaches into it").
 fn check_bright_marks(field: &Field) -> Result<()> {
     let t = field.targets();

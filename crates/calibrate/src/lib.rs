@@ -6,7 +6,7 @@
 //! nominal camera (sensor, pixel size, principal distance), [`calibrate()`]
 //! finds each image's start orientation from its coded targets, identifies
 //! the uncoded ones by projection as the solution improves, and adjusts the
-//! camera parameters of `conventions.md` (`c, x0, y0, K1 K2 K3 P1 P2 b1 b2`,
+//! camera parameters of `docs/conventions.md` (`c, x0, y0, K1 K2 K3 P1 P2 b1 b2`,
 //! any of them fixable), every image's exterior orientation and optionally
 //! the target coordinates (free network), with sparse normal equations
 //! (Schur complement of the per-image unknowns), Levenberg–Marquardt damping

@@ -1,7 +1,7 @@
 //! The observation equation of the self-calibrating bundle adjustment and
 //! its analytic partials.
 //!
-//! The spec's model corrects *measured* coordinates: `x_corr = x' - x0 +
+//! The model of `docs/conventions.md` corrects *measured* coordinates: `x_corr = x' - x0 +
 //! dx(x' - x0, y' - y0)` must equal the collinearity projection `-c Zx / N`.
 //! The residual of one target in one image is therefore
 //!

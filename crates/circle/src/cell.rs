@@ -242,7 +242,7 @@ impl RobotError {
 }
 
 /// How the camera sits on the robot: `X = T_tcp←camera`, the camera's pose
-/// in the TCP frame (its axes those of `shared/spec/conventions.md`: `z`
+/// in the TCP frame (its axes those of `docs/conventions.md`: `z`
 /// points backwards, away from the scene).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraMount {
@@ -340,7 +340,7 @@ impl Cell {
 
 /// A measured camera pose: `pose` disturbed by a draw from the covariance
 /// `cov` of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (mm², rad²) in the resection's
-/// parameters — the centre moves by `(dXc, dYc, dZc)` and the spec's `R`
+/// parameters — the centre moves by `(dXc, dYc, dZc)` and `R` of `docs/conventions.md`
 /// becomes `R · exp([ω]ₓ)`, as in `photopose-geometry`'s covariance.
 pub fn perturb(pose: &Isometry3<f64>, cov: &Matrix6<f64>, rng: &mut SplitMix64) -> Isometry3<f64> {
     let eig = SymmetricEigen::new(*cov);

@@ -1,5 +1,5 @@
 //! Poses as rigid transforms: the camera's pose in the plate frame from the
-//! spec's exterior orientation, KUKA `X, Y, Z, A, B, C` poses, and the
+//! exterior orientation of `docs/conventions.md`, KUKA `X, Y, Z, A, B, C` poses, and the
 //! hand-eye step from camera to TCP.
 //!
 //! A pose `T_parent←child` is an [`Isometry3`] mapping child coordinates into
@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use photopose_geometry::{rotation, Exterior};
 
 /// The camera's pose in the plate frame, `T_plate←camera = (Rᵀ, centre)`,
-/// from the spec's exterior orientation (`R`: plate → camera).
+/// from the exterior orientation (`R`: plate → camera).
 pub fn camera_pose(exterior: &Exterior) -> Isometry3<f64> {
     from_matrix(&exterior.rotation.transpose(), &exterior.center)
 }

@@ -1,4 +1,4 @@
-//! Coded-target numbering (`coded-targets.md`): 12 sectors read
+//! Coded-target numbering (`docs/coded-targets.md`): 12 sectors read
 //! counter-clockwise seen from +Z, first-read bit most significant, canonical
 //! value the smallest rotation, ids 1..=350 numbering the sorted canonical
 //! values without 0 and 4095.

@@ -1,5 +1,5 @@
 //! The test field: targets with ids, positions, kinds and radii, and the CSV
-//! format of `conventions.md` (`id,x,y,z,kind,radius`, mm).
+//! format of `docs/conventions.md` (`id,x,y,z,kind,radius`, mm).
 
 use crate::codes;
 use nalgebra::Vector3;

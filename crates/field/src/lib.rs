@@ -1,7 +1,7 @@
 //! photopose-field: the test field that defines the object frame.
 //!
-//! Owns the target model, the test-field CSV format of `conventions.md`, the
-//! coded-target numbering of `coded-targets.md` and the design of plates.
+//! Owns the target model, the test-field CSV format of `docs/conventions.md`, the
+//! coded-target numbering of `docs/coded-targets.md` and the design of plates.
 //! Invariant: no IO; parsing works on text handed in by the caller.
 
 pub mod codes;

@@ -1,4 +1,4 @@
-//! The camera file (TOML, `conventions.md`): `[sensor]`, `[interior]`,
+//! The camera file (TOML, `docs/conventions.md`): `[sensor]`, `[interior]`,
 //! optional `[distortion]`. Unknown keys and missing required keys are errors
 //! that name the file and the key.
 

@@ -1,5 +1,5 @@
-//! Observation files: CSV `id,col,row` with a header, pixel coordinates of the
-//! spec (integer values are pixel centres, `row` down).
+//! Observation files: CSV `id,col,row` with a header, pixel coordinates of
+//! `docs/conventions.md` (integer values are pixel centres, `row` down).
 
 use crate::FormatError;
 use std::collections::HashMap;

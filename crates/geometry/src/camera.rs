@@ -1,4 +1,4 @@
-//! The camera model of `conventions.md`: sensor, interior orientation and the
+//! The camera model of `docs/conventions.md`: sensor, interior orientation and the
 //! Brown/Fraser correction of measured image coordinates, with its inverse.
 //!
 //! Measured (distorted) image coordinates `(x', y')` are corrected into ideal
@@ -228,8 +228,8 @@ impl Camera {
         (f.norm() < 1e-9).then(|| p + Vector2::new(self.interior.x0, self.interior.y0))
     }
 
-    /// Projects a point given in camera coordinates (camera frame of the
-    /// spec: `z` backwards) into measured image coordinates. `None` if the
+    /// Projects a point given in camera coordinates (camera frame of
+    /// `docs/conventions.md`: `z` backwards) into measured image coordinates. `None` if the
     /// point is not in front of the camera.
     #[inline]
     pub fn project_camera_point(&self, p: &nalgebra::Vector3<f64>) -> Option<Vector2<f64>> {

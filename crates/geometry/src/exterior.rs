@@ -7,7 +7,7 @@ use nalgebra::{Matrix3, Vector2, Vector3};
 
 /// Exterior orientation of a camera.
 ///
-/// `rotation` is the spec's `R`: it maps object-frame vectors into the camera
+/// `rotation` is `R` of `docs/conventions.md`: it maps object-frame vectors into the camera
 /// frame (rows are the camera axes in object coordinates); `center` is the
 /// projection centre in the object frame. The camera's pose in the object
 /// frame is `(Rᵀ, center)`.

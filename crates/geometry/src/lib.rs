@@ -1,6 +1,6 @@
 //! photopose-geometry: the pure mathematical core of photopose.
 //!
-//! Everything here follows `shared/spec/conventions.md` to the letter:
+//! Everything here follows `docs/conventions.md` to the letter:
 //! millimetres, image coordinates with `y'` up, the Brown/Fraser correction
 //! applied to *measured* coordinates, the collinearity equations with `R`
 //! mapping object vectors into the camera frame, and the Cayley /

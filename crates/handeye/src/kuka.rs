@@ -1,5 +1,5 @@
 //! Poses as KUKA `X, Y, Z, A, B, C` (mm, degrees; `M = Rz(A) Ry(B) Rx(C)`,
-//! conventions.md) and back, and the standard deviations of `X … C` from a
+//! `docs/conventions.md`) and back, and the standard deviations of `X … C` from a
 //! covariance of translation and small rotations about the parent's axes.
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3};

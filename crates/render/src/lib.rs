@@ -2,9 +2,9 @@
 //! fixtures, benchmarks and the simulated robot cell.
 //!
 //! Every sub-pixel sample is traced back through the camera model of
-//! `conventions.md` (pixel → measured image coordinates → Brown/Fraser
+//! `docs/conventions.md` (pixel → measured image coordinates → Brown/Fraser
 //! correction → ray) onto the plane of the plate and looks up the target
-//! pattern of `coded-targets.md`; so a rendered frame obeys the camera model
+//! pattern of `docs/coded-targets.md`; so a rendered frame obeys the camera model
 //! exactly, distortion included. Pixels far from every edge of the pattern
 //! take one sample; a pixel crossed by one edge gets its exact area
 //! coverage (pixel → plate mapping linearised over the pixel from four

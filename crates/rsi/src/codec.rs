@@ -1,13 +1,13 @@
 //! The RSI wire format: a streaming, allocation-free parser of the
 //! controller's `<Rob>` datagrams (by element and attribute name, tolerant of
-//! the variants in the spec) and a writer of `<Sen>` replies into a
+//! the variants of `docs/rsi.md`, "Protocol facts") and a writer of `<Sen>` replies into a
 //! caller-owned buffer. Pure: no IO.
 
 use crate::xml::{Token, Tokenizer, XmlError};
 use std::fmt::Write as _;
 use thiserror::Error;
 
-/// Largest datagram accepted (the spec's 64 KiB).
+/// Largest datagram accepted (64 KiB, `docs/rsi.md`).
 pub const MAX_DATAGRAM: usize = 64 * 1024;
 
 /// A Cartesian pose or correction as KUKA sends it: `X, Y, Z` (mm),

@@ -33,7 +33,7 @@ pub struct PoseMessage {
     pub status: PoseStatus,
     /// Projection centre in the field frame, mm (null without a pose).
     pub center: Option<[f64; 3]>,
-    /// The spec's `R` (field → camera), rows.
+    /// `R` of `docs/conventions.md` (field → camera), rows.
     pub rotation: Option<[[f64; 3]; 3]>,
     /// Unit quaternion `(w, x, y, z)` of `R`.
     pub quaternion_wxyz: Option<[f64; 4]>,

@@ -1,4 +1,4 @@
-//! Reading the 12-sector code ring of a coded target (`coded-targets.md`).
+//! Reading the 12-sector code ring of a coded target (`docs/coded-targets.md`).
 //!
 //! The centre dot's second moments give the ellipse `E` onto which the
 //! plate's circle of radius `r` projects (a uniform disc of radius `r` has

@@ -2,7 +2,7 @@
 //! project's renderer is `photopose-render`; this one is independent of it,
 //! so the two check each other): every sub-pixel sample is traced back
 //! through the camera model (distortion included) onto the plate `Z = 0`
-//! and looks up the target pattern of `coded-targets.md`. The truth of a
+//! and looks up the target pattern of `docs/coded-targets.md`. The truth of a
 //! target is the projection of its centre.
 
 #![allow(dead_code)]
