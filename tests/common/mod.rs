@@ -4,7 +4,8 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
 
 /// The `photopose` binary under test.
 pub fn bin() -> Command {
@@ -27,4 +28,45 @@ pub fn root() -> &'static Path {
 /// A file under `fixtures/`.
 pub fn fixture(name: &str) -> PathBuf {
     root().join("fixtures").join(name)
+}
+
+const FAKE: &str = "arv-fake-gv-camera-0.8";
+const TOOL: &str = "arv-tool-0.8";
+
+/// `arv-fake-gv-camera-0.8 -i 127.0.0.1`, killed on drop.
+pub struct FakeCamera(Child);
+
+impl FakeCamera {
+    pub fn start() -> Self {
+        // Wrapped at once: dropping it kills and reaps the child on any path.
+        let me = FakeCamera(
+            Command::new(FAKE)
+                .args(["-i", "127.0.0.1"])
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot run {FAKE} ({e}): run .ci/deps.sh")),
+        );
+        let t0 = Instant::now();
+        loop {
+            let out = Command::new(TOOL)
+                .args(["-a", "127.0.0.1", "control", "Width"])
+                .stdin(Stdio::null())
+                .output()
+                .unwrap_or_else(|e| panic!("cannot run {TOOL} ({e}): run .ci/deps.sh"));
+            if out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Width") {
+                return me;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "{FAKE} silent");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for FakeCamera {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
