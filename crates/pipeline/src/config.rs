@@ -73,6 +73,7 @@ struct MetricsSection {
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct CameraSection {
+    id: Option<String>,
     camera_file: Option<PathBuf>,
     field_file: Option<PathBuf>,
 }
@@ -338,6 +339,9 @@ pub enum Source {
 /// The validated configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
+    /// The camera's id (`[camera] id`, default `"camera"`): tags its
+    /// results, messages and metrics.
+    pub camera_id: String,
     /// Camera file; `None`: the built-in camera.
     pub camera_file: Option<PathBuf>,
     /// Test field file; `None`: the built-in plate.
@@ -587,6 +591,7 @@ impl Config {
         };
         Ok(Config {
             rsi,
+            camera_id: camera_id(f.camera.id, &bad)?,
             camera_file: f.camera.camera_file,
             field_file: f.camera.field_file,
             source,
@@ -608,6 +613,29 @@ impl Config {
                 None => None,
             },
         })
+    }
+}
+
+/// Validates `[camera] id`: 1–64 characters of `A–Z a–z 0–9 _ -` (it is
+/// used in key expressions, metric labels and file names).
+fn camera_id(
+    id: Option<String>,
+    bad: &dyn Fn(&'static str, String, &'static str) -> ConfigError,
+) -> Result<String, ConfigError> {
+    let id = id.unwrap_or_else(|| "camera".into());
+    let ok = !id.is_empty()
+        && id.len() <= 64
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-');
+    if ok {
+        Ok(id)
+    } else {
+        Err(bad(
+            "camera.id",
+            id,
+            "must be 1 to 64 characters of A-Z, a-z, 0-9, '_' and '-'",
+        ))
     }
 }
 

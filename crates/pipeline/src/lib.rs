@@ -21,7 +21,9 @@ pub mod config;
 pub mod health;
 pub mod metrics;
 pub mod notify;
+pub mod result;
 pub mod run;
+pub mod sink;
 pub mod source;
 
 pub use config::{Config, ConfigError};

@@ -4,15 +4,16 @@
 use crate::config::{Config, Overflow};
 use crate::health::{Heartbeat, Threads, Watchdog};
 use crate::notify::Notifier;
+use crate::result::{CameraId, PoseResult, ResultStatus};
+use crate::sink::{Outgoing, Sinks};
 use crate::source::host_time_ns;
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
 use photopose_acquire::ring::RecvError;
 use photopose_acquire::{spawn_grabber_with, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
-use photopose_geometry::rotation::quaternion_from_matrix;
 use photopose_geometry::Camera;
-use photopose_locate::{LocateOptions, Locator, PoseStatus as LocateStatus};
-use photopose_stream::{PoseMessage, PoseStatus, TcpServer, UdpSender};
+use photopose_locate::{LocateOptions, Locator};
+use photopose_stream::{PoseMessage, PoseStatus};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -136,14 +137,8 @@ impl Default for Counters {
 // allocate per frame.
 #[allow(clippy::large_enum_variant)]
 enum Outcome {
-    Message {
-        order: u64,
-        message: PoseMessage,
-        received: Instant,
-    },
-    Skipped {
-        order: u64,
-    },
+    Message { order: u64, result: PoseResult },
+    Skipped { order: u64 },
 }
 
 /// How the pipeline reports to the service manager: where notifications
@@ -280,19 +275,6 @@ impl Pipeline {
             || photopose_frame::Image::new_mono8(camera.sensor.width, camera.sensor.height),
         );
         let (out_tx, out_rx) = bounded::<Outcome>(slots * 2 + config.workers);
-        let udp = if config.udp.is_empty() {
-            None
-        } else {
-            Some(UdpSender::new(
-                "0.0.0.0:0".parse().expect("literal address"),
-                &config.udp,
-            )?)
-        };
-        let tcp = match config.tcp_listen {
-            Some(a) => Some(TcpServer::bind(a, config.tcp_client_queue)?),
-            None => None,
-        };
-        let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
         // The RSI server reads the latest pose from a lock-free slot the
         // output stage publishes into; it never waits on vision.
         let (rsi, rsi_link) = match &config.rsi {
@@ -311,15 +293,20 @@ impl Pipeline {
                     clock,
                 )?;
                 let stats = Arc::clone(server.stats());
-                (Some(server), Some((publisher, clock, stats)))
+                (
+                    Some(server),
+                    Some(crate::sink::rsi::RsiSink::new(publisher, clock, stats)),
+                )
             }
             None => (None, None),
         };
         let rsi_addr = rsi.as_ref().map(|s| s.local_addr());
+        let sinks = crate::sink::build(config, rsi_link)?;
+        let tcp_addr = sinks.tcp_addr;
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
-            tcp: tcp.as_ref().map(|t| t.shared_stats()),
-            rsi: rsi_link.as_ref().map(|(_, _, s)| Arc::clone(s)),
+            tcp: sinks.tcp.clone(),
+            rsi: sinks.rsi.clone(),
             ..Counters::default()
         });
         let metrics = match config.metrics_listen {
@@ -335,12 +322,14 @@ impl Pipeline {
         };
         let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
+        let camera_id: CameraId = Arc::from(config.camera_id.as_str());
         // Workers: take frames from the ring, hand each result to the output
         // stage; dropping the frame handle returns its slot to the ring.
         for k in 0..config.workers {
             let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
             let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();
+            let camera_id = camera_id.clone();
             let name = format!("detect-{k}");
             let beat = Arc::new(Heartbeat::default());
             watched.watch_heartbeat(name.clone(), &beat);
@@ -357,12 +346,11 @@ impl Pipeline {
                     hold_wedged(stop, "detect-0");
                     return;
                 }
-                let message = locate(&mut locator, &frame);
+                let result = locate(&mut locator, &camera_id, &frame);
                 counters.frames_processed.fetch_add(1, Ordering::Relaxed);
                 let outcome = Outcome::Message {
                     order: frame.order,
-                    message,
-                    received: frame.received,
+                    result,
                 };
                 drop(frame);
                 if out_tx.send(outcome).is_err() {
@@ -392,7 +380,7 @@ impl Pipeline {
             let g = grabber.shared_counters();
             watched.watch("grabber", move || g.turns());
         }
-        if let Some((_, _, stats)) = &rsi_link {
+        if let Some(stats) = &counters.rsi {
             let s = Arc::clone(stats);
             watched.watch("rsi", move || s.loops.load(Ordering::Relaxed));
         }
@@ -406,7 +394,7 @@ impl Pipeline {
             let wedged = wedge == Some(Wedge::Output);
             threads.push(spawn("output", move || {
                 output_loop(
-                    out_rx, udp, tcp, rsi_link, counters, max_age, window, stop_out, beat, wedged,
+                    out_rx, sinks, counters, max_age, window, stop_out, beat, wedged,
                 );
             })?);
         }
@@ -524,75 +512,15 @@ fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) 
     }
 }
 
-/// Locates one frame into a message.
-fn locate(locator: &mut Locator, frame: &Slot) -> PoseMessage {
-    let mut m = PoseMessage::without_pose(
-        frame.meta.seq,
-        frame.meta.camera_time_ns,
-        frame.meta.host_time_ns,
-        PoseStatus::Error,
-    );
-    let Ok(loc) = locator.locate(frame.image.view()) else {
-        return m;
-    };
-    match (loc.status, loc.pose) {
-        (LocateStatus::Ok, Some(p)) => {
-            let e = &p.exterior;
-            let r = e.rotation;
-            m.status = PoseStatus::Ok;
-            m.center = Some([e.center.x, e.center.y, e.center.z]);
-            m.rotation = Some([
-                [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
-                [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
-                [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
-            ]);
-            m.quaternion_wxyz = quaternion_from_matrix(&r).map(|q| [q.w, q.i, q.j, q.k]);
-            m.std_center = Some(p.std_center().into());
-            m.std_rotation_deg = Some(p.std_rotation_deg().into());
-            m.sigma0_px = Some(p.sigma0_px);
-            m.n_targets = p.n_points as u32;
-        }
-        (LocateStatus::TooFewTargets { .. }, _) | (LocateStatus::Frame(_), _) => {
-            m.status = PoseStatus::TooFewTargets;
-        }
-        _ => {}
-    }
-    m
-}
-
-/// What the output stage keeps of the RSI server: the slot it publishes
-/// poses into, the server's clock and its counters (for the status flag).
-type RsiLink = (
-    photopose_rsi::SlotPublisher,
-    photopose_rsi::server::RsiClock,
-    Arc<photopose_rsi::monitor::Stats>,
-);
-
-/// Publishes a pose to the RSI server and flags the message with the
-/// correction's state.
-fn publish_to_rsi(link: &mut RsiLink, message: &mut PoseMessage, received: Instant) {
-    let (publisher, clock, stats) = link;
-    if let (PoseStatus::Ok, Some(c), Some(r), Some(sc), Some(sr)) = (
-        message.status,
-        message.center,
-        message.rotation,
-        message.std_center,
-        message.std_rotation_deg,
-    ) {
-        let rotation = photopose_geometry::Matrix3::from_fn(|i, j| r[i][j]);
-        let center = photopose_geometry::Vector3::from(c);
-        publisher.publish(&photopose_rsi::Measurement {
-            plate_from_camera: photopose_rsi::law::isometry(&rotation.transpose(), &center),
-            std_mm: sc.into_iter().fold(0.0, f64::max),
-            std_deg: sr.into_iter().fold(0.0, f64::max),
-            n_targets: message.n_targets,
-            time_s: clock.at(received),
-            seq: message.seq,
-        });
-    }
-    message.rsi =
-        photopose_rsi::LawStatus::from_code(stats.status.load(Ordering::Relaxed)).map(|s| s.name());
-    message.robot_xyzabc = stats.robot_pose();
+/// Locates one frame into its result.
+fn locate(locator: &mut Locator, camera: &CameraId, frame: &Slot) -> PoseResult {
+    let located = locator.locate(frame.image.view()).ok();
+    PoseResult::from_location(
+        camera,
+        &frame.meta,
+        frame.received,
+        located.as_ref().map(|l| (l.status, l.pose)),
+    )
 }
 
 /// The `STATUS=` text the watchdog sends each tick: pose rate since the
@@ -624,9 +552,7 @@ fn status_line(counters: Arc<Counters>) -> impl FnMut() -> String + Send + 'stat
 #[allow(clippy::too_many_arguments)]
 fn output_loop(
     rx: Receiver<Outcome>,
-    mut udp: Option<UdpSender>,
-    mut tcp: Option<TcpServer>,
-    mut rsi: Option<RsiLink>,
+    mut sinks: Sinks,
     counters: Arc<Counters>,
     max_age: Duration,
     window: usize,
@@ -640,16 +566,16 @@ fn output_loop(
     let mut line = Vec::with_capacity(1024);
     let mut last_sent = Instant::now();
     let mut last_message: Option<PoseMessage> = None;
-    let emit = |m: &PoseMessage,
-                line: &mut Vec<u8>,
-                udp: &mut Option<UdpSender>,
-                tcp: &mut Option<TcpServer>| {
-        m.encode_line(line);
-        if let Some(u) = udp.as_mut() {
-            u.send(line);
-        }
-        if let Some(t) = tcp.as_mut() {
-            t.publish(line);
+    // Encodes a message once and hands it to every sink.
+    let mut emit = |result: Option<&PoseResult>, m: &PoseMessage, sinks: &mut Sinks| {
+        m.encode_line(&mut line);
+        let out = Outgoing {
+            result,
+            message: m,
+            line: &line,
+        };
+        for s in sinks.sinks.iter_mut() {
+            s.publish(&out);
         }
     };
     loop {
@@ -670,27 +596,21 @@ fn output_loop(
                     let idx = (next % window as u64) as usize;
                     let Some(o) = pending[idx].take() else { break };
                     next += 1;
-                    if let Outcome::Message {
-                        mut message,
-                        received,
-                        ..
-                    } = o
-                    {
-                        if let Some(link) = rsi.as_mut() {
-                            publish_to_rsi(link, &mut message, received);
-                        }
-                        let latency = received.elapsed();
+                    if let Outcome::Message { result, .. } = o {
+                        let mut message = crate::sink::message(&result);
+                        crate::sink::annotate(&mut message, sinks.rsi.as_deref());
+                        let latency = result.times.handover.elapsed();
                         message.latency_us = latency.as_secs_f64() * 1e6;
                         counters.record_latency(message.latency_us);
                         counters
                             .latency_us_sum
                             .fetch_add(latency.as_micros() as u64, Ordering::Relaxed);
-                        if message.status == PoseStatus::Ok {
+                        if result.status == ResultStatus::Ok {
                             counters.poses_ok.fetch_add(1, Ordering::Relaxed);
                         } else {
                             counters.poses_failed.fetch_add(1, Ordering::Relaxed);
                         }
-                        emit(&message, &mut line, &mut udp, &mut tcp);
+                        emit(Some(&result), &message, &mut sinks);
                         last_message = Some(message);
                         last_sent = Instant::now();
                     }
@@ -703,14 +623,8 @@ fn output_loop(
                         let mut s = *m;
                         s.status = PoseStatus::Stale;
                         s.host_time_ns = host_time_ns();
-                        if let Some((_, _, stats)) = rsi.as_ref() {
-                            s.rsi = photopose_rsi::LawStatus::from_code(
-                                stats.status.load(Ordering::Relaxed),
-                            )
-                            .map(|st| st.name());
-                            s.robot_xyzabc = stats.robot_pose();
-                        }
-                        emit(&s, &mut line, &mut udp, &mut tcp);
+                        crate::sink::annotate(&mut s, sinks.rsi.as_deref());
+                        emit(None, &s, &mut sinks);
                         counters.stale.fetch_add(1, Ordering::Relaxed);
                         last_sent = Instant::now();
                         tracing::debug!("no fresh pose: stale message sent");
@@ -720,8 +634,8 @@ fn output_loop(
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
-    if let Some(t) = tcp {
-        t.shutdown();
+    for s in sinks.sinks.iter_mut() {
+        s.finish();
     }
     tracing::info!(
         poses_ok = counters.poses_ok.load(Ordering::Relaxed),

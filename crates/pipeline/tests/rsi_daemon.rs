@@ -80,7 +80,8 @@ fn the_daemon_answers_the_controller_and_flags_its_poses() {
         }
     }
     let report = controller.join().unwrap();
-    assert_eq!(report.cycles, 500);
+    // Slots the simulator itself missed on a loaded machine are skipped.
+    assert_eq!(report.cycles + report.skipped, 500, "{report:?}");
     assert!(!report.stopped_by_timeout);
     // Timing is not asserted (tests run on a loaded machine): the answers
     // are, and measure-only never moves the robot.
