@@ -5,6 +5,9 @@
 //!
 //! `cargo run --release -p photopose-calibrate --example adjust_time [-- --free-targets]`
 
+// A timing example: the clock is the example's, not the crate's.
+#![allow(clippy::disallowed_types, clippy::disallowed_methods)]
+
 use nalgebra::Vector3;
 use photopose_calibrate::{calibrate, views, Blob, CalibrationOptions, ImageDetections, Report};
 use photopose_field::{Field, TargetKind};

@@ -2,6 +2,9 @@
 //! `cargo run --release -p photopose-render --example time_render [K...]`).
 //! Timing lives here, not in tests: the pure crate reads no clock.
 
+// A timing example: the clock is the example's, not the crate's.
+#![allow(clippy::disallowed_types, clippy::disallowed_methods)]
+
 use photopose_field::design::default_plate;
 use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
 use photopose_render::{RenderOptions, Renderer};

@@ -4,6 +4,9 @@
 //! [-- ITERATIONS [POSE]]` (POSE 0, 1 or 2 times one frame only; the benchmark `benches/detect.rs` gives the numbers
 //! that count; this is for profilers such as `perf` and callgrind).
 
+// A timing example: the clock is the example's, not the crate's.
+#![allow(clippy::disallowed_types, clippy::disallowed_methods)]
+
 use photopose_field::design::default_plate;
 use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
 use photopose_render::{RenderOptions, Renderer};

@@ -1,0 +1,180 @@
+//! The workspace's invariants as a test, not prose:
+//!
+//! - the pure crates (frame, geometry, field, render, vision, locate,
+//!   circle, handeye, calibrate) use no files, sockets, threads or clocks in
+//!   their sources, carry the `clippy.toml` that makes clippy refuse them,
+//!   and have neither tokio nor aravis (nor glib) in their dependency tree;
+//! - every module opens with a `//!` comment saying what it owns;
+//! - no document of the repository points outside it (`../shared`).
+
+mod common;
+
+use common::root;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const PURE: [&str; 9] = [
+    "frame",
+    "geometry",
+    "field",
+    "render",
+    "vision",
+    "locate",
+    "circle",
+    "handeye",
+    "calibrate",
+];
+
+/// What a pure crate's sources must not name.
+const FORBIDDEN: [&str; 5] = [
+    "std::fs",
+    "std::net",
+    "std::thread",
+    "Instant",
+    "SystemTime",
+];
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// The code of a line, without a trailing `//` comment (good enough for
+/// the names looked for: none of them appears in a string literal here).
+fn code(line: &str) -> &str {
+    let t = line.trim_start();
+    if t.starts_with("//") {
+        return "";
+    }
+    line.split("//").next().unwrap_or("")
+}
+
+#[test]
+fn pure_crates_do_no_io_threads_or_clocks() {
+    let mut found = Vec::new();
+    for c in PURE {
+        let mut files = Vec::new();
+        rust_files(&root().join("crates").join(c).join("src"), &mut files);
+        assert!(!files.is_empty(), "crates/{c}/src has no sources");
+        for f in files {
+            let text = std::fs::read_to_string(&f).unwrap();
+            for (n, line) in text.lines().enumerate() {
+                let code = code(line);
+                for word in FORBIDDEN {
+                    if code.contains(word) {
+                        found.push(format!("{}:{}: {word}", f.display(), n + 1));
+                    }
+                }
+            }
+        }
+        assert!(
+            root().join("crates").join(c).join("clippy.toml").exists(),
+            "crates/{c}/clippy.toml (disallowed IO, threads and clocks) is missing"
+        );
+    }
+    assert!(
+        found.is_empty(),
+        "pure crates doing IO:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn pure_crates_depend_on_neither_tokio_nor_aravis() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    for c in PURE {
+        let out = Command::new(&cargo)
+            .current_dir(root())
+            .args([
+                "tree",
+                "--offline",
+                "-e",
+                "normal",
+                "--prefix",
+                "none",
+                "-p",
+            ])
+            .arg(format!("photopose-{c}"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "cargo tree -p photopose-{c}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let tree = String::from_utf8_lossy(&out.stdout);
+        for bad in ["tokio ", "aravis", "glib "] {
+            assert!(
+                !tree.lines().any(|l| l.starts_with(bad)),
+                "photopose-{c} depends on {bad}:\n{tree}"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_module_says_what_it_owns() {
+    let mut files = Vec::new();
+    rust_files(&root().join("crates"), &mut files);
+    rust_files(&root().join("src"), &mut files);
+    let missing: Vec<String> = files
+        .iter()
+        .filter(|f| {
+            let s = f.to_string_lossy();
+            s.contains("/src/") && !s.contains("/target/")
+        })
+        .filter(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            !text.trim_start().starts_with("//!")
+        })
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "modules without a //! comment:\n{}",
+        missing.join("\n")
+    );
+}
+
+#[test]
+fn no_document_points_outside_the_repository() {
+    let mut docs: Vec<PathBuf> = vec![root().join("README.md"), root().join("ARCHITECTURE.md")];
+    for dir in ["docs", "config", "systemd", "fixtures"] {
+        let mut stack = vec![root().join(dir)];
+        while let Some(d) = stack.pop() {
+            for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    docs.push(p);
+                }
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for d in docs {
+        let Ok(text) = std::fs::read_to_string(&d) else {
+            continue; // binary data (recordings, images)
+        };
+        for (n, line) in text.lines().enumerate() {
+            if line.contains("shared/spec") || line.contains("../shared") {
+                found.push(format!("{}:{}", d.display(), n + 1));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "pointers outside the repository:\n{}",
+        found.join("\n")
+    );
+}
