@@ -175,7 +175,9 @@ impl Watchdog {
                             }
                         }
                     }
-                    notifier.notify(&format!("STATUS={}", status()));
+                    if notifier.enabled() {
+                        notifier.notify(&format!("STATUS={}", status()));
+                    }
                 }
             })?;
         Ok(Watchdog {
