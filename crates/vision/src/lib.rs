@@ -217,7 +217,7 @@ pub struct Rejection {
     pub reason: RejectReason,
 }
 
-/// The result of one frame.
+/// The result of one window (the whole frame or a part of it).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detections {
     /// Targets, in the order their blobs start (row-major).
