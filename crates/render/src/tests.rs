@@ -2,8 +2,12 @@
 //! rendered dots, the code-ring drawing.
 
 use super::*;
+use crate::pattern::{analytic_coverage, reflectance, square_share_below, Flat};
+use nalgebra::{Matrix2, Vector2, Vector3};
 use photopose_field::design::default_plate;
-use photopose_geometry::{Distortion, Interior, Sensor};
+use photopose_field::{codes, TargetKind};
+use photopose_frame::Image;
+use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
 
 fn camera(distortion: Distortion) -> Camera {
     Camera::new(

@@ -342,13 +342,15 @@ impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
         let k = ZONE_RADII[1] * (1.0 + 1e-9) + 1e-9;
         let hx = k * (f.e[0] * f.e[0] + f.e[1] * f.e[1]).sqrt();
         let hy = k * (f.e[1] * f.e[1] + f.e[2] * f.e[2]).sqrt();
-        let (w, h) = (plane.width as f64, plane.height as f64);
+        // (Full-frame coordinates: the window's first and last centres.)
+        let (c0, r0) = (plane.col0 as f64, plane.row0 as f64);
+        let (c1, r1) = (plane.last_col() as f64, plane.last_row() as f64);
         let inside = plane.width >= 2
             && plane.height >= 2
-            && f.col - hx >= 0.0
-            && f.row - hy >= 0.0
-            && f.col + hx <= w - 1.0
-            && f.row + hy <= h - 1.0;
+            && f.col - hx >= c0
+            && f.row - hy >= r0
+            && f.col + hx <= c1
+            && f.row + hy <= r1;
         Sampler { plane, inside }
     }
 

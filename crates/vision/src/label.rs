@@ -5,9 +5,11 @@
 //!
 //! All buffers belong to [`Labeller`] and are sized once; a frame that needs
 //! more runs or blobs than the capacity is reported as overflowing instead of
-//! growing them.
+//! growing them. Runs, bounding boxes and moments' origins are in full-frame
+//! pixel coordinates, whatever window is labelled.
 
-use crate::pixel::Pixel;
+use crate::pixel::{Pixel, Plane};
+use crate::threshold::Threshold;
 
 /// A horizontal run of foreground pixels.
 #[derive(Debug, Clone, Copy, Default)]
@@ -155,14 +157,12 @@ impl Labeller {
         &self.blobs
     }
 
-    /// Labels the pixels strictly above `threshold`; pixels at or above
-    /// `saturation` count as saturated.
+    /// Labels the foreground pixels of the window `plane`; pixels at or
+    /// above `saturation` count as saturated.
     pub fn label<P: Pixel>(
         &mut self,
-        data: &[P],
-        width: usize,
-        height: usize,
-        threshold: u32,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
         saturation: u32,
     ) -> LabelOutcome {
         self.runs.clear();
@@ -171,10 +171,11 @@ impl Labeller {
         self.blobs.clear();
         let mut prev_start = 0usize; // runs of the previous row: prev_start..row_start
         let mut prev_end = 0usize;
-        for row in 0..height {
-            let line = &data[row * width..(row + 1) * width];
+        let col0 = plane.col0 as u32;
+        for row in plane.row0..=plane.last_row() {
+            let line = plane.row(row);
             let row_start = self.runs.len();
-            if !self.extract_runs(line, row as u32, threshold, saturation) {
+            if !self.extract_runs(line, row as u32, col0, threshold, saturation) {
                 return LabelOutcome::TooManyRuns;
             }
             let row_end = self.runs.len();
@@ -250,17 +251,19 @@ impl Labeller {
         LabelOutcome::Complete
     }
 
-    /// Appends the runs of one row; false if the capacity is exceeded.
-    /// The row is scanned in blocks of 64 pixels, each turned into a bit
-    /// mask of the pixels above the threshold (16 at a time for 8-bit
-    /// frames); runs are the mask's stretches of ones, so dark stretches
-    /// cost a few instructions per block.
+    /// Appends the runs of one row of a window whose first column is
+    /// `col0`; false if the capacity is exceeded. The row is scanned in
+    /// blocks of 64 pixels, each turned into a bit mask of the foreground
+    /// pixels (16 at a time for 8-bit frames); runs are the mask's
+    /// stretches of ones, so dark stretches cost a few instructions per
+    /// block.
     #[inline]
     fn extract_runs<P: Pixel>(
         &mut self,
         line: &[P],
         row: u32,
-        threshold: u32,
+        col0: u32,
+        threshold: Threshold,
         saturation: u32,
     ) -> bool {
         const NONE: usize = usize::MAX;
@@ -271,13 +274,13 @@ impl Labeller {
             // Dark stretches (most of a frame) in steps of 256 pixels.
             if open == NONE
                 && width - base >= DARK_SKIP
-                && P::max_of(&line[base..base + DARK_SKIP]) <= threshold
+                && threshold.all_background(&line[base..base + DARK_SKIP])
             {
                 base += DARK_SKIP;
                 continue;
             }
             let n = (width - base).min(64);
-            let m = P::above_mask(&line[base..base + n], threshold);
+            let m = threshold.foreground_mask(&line[base..base + n]);
             if m == 0 && open == NONE {
                 base += n;
                 continue;
@@ -298,7 +301,8 @@ impl Labeller {
                         break;
                     }
                     pos = dark.trailing_zeros();
-                    if !self.push_run(line, row, open, base + pos as usize, saturation) {
+                    let end = base + pos as usize;
+                    if !self.push_run(line, row, col0, open, end, saturation) {
                         return false;
                     }
                     open = NONE;
@@ -306,18 +310,20 @@ impl Labeller {
             }
             base += n;
         }
-        if open != NONE && !self.push_run(line, row, open, width, saturation) {
+        if open != NONE && !self.push_run(line, row, col0, open, width, saturation) {
             return false;
         }
         true
     }
 
-    /// Appends the run `line[start..end]`; false if the capacity is exceeded.
+    /// Appends the run `line[start..end]` (columns `col0 + start ..
+    /// col0 + end`); false if the capacity is exceeded.
     #[inline]
     fn push_run<P: Pixel>(
         &mut self,
         line: &[P],
         row: u32,
+        col0: u32,
         start: usize,
         end: usize,
         saturation: u32,
@@ -334,8 +340,8 @@ impl Labeller {
         }
         self.runs.push(Run {
             row,
-            start: start as u32,
-            end: end as u32,
+            start: col0 + start as u32,
+            end: col0 + end as u32,
             sum,
             max: max.min(u16::MAX as u32) as u16,
             saturated: sat.min(u16::MAX as u32) as u16,
@@ -356,7 +362,11 @@ mod tests {
             .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 0 }))
             .collect();
         let mut l = Labeller::new(1000, 100);
-        assert_eq!(l.label(&data, w, h, 100, 255), LabelOutcome::Complete);
+        let plane = Plane::whole(&data, w, h);
+        assert_eq!(
+            l.label(&plane, Threshold::global(100), 255),
+            LabelOutcome::Complete
+        );
         l.blobs().to_vec()
     }
 
@@ -401,9 +411,53 @@ mod tests {
     #[test]
     fn capacity_is_reported() {
         let data = [200u8, 0, 200, 0, 200, 0];
+        let plane = Plane::whole(&data, 6, 1);
+        let t = Threshold::global(100);
         let mut l = Labeller::new(2, 10);
-        assert_eq!(l.label(&data, 6, 1, 100, 255), LabelOutcome::TooManyRuns);
+        assert_eq!(l.label(&plane, t, 255), LabelOutcome::TooManyRuns);
         let mut l = Labeller::new(10, 2);
-        assert_eq!(l.label(&data, 6, 1, 100, 255), LabelOutcome::TooManyBlobs);
+        assert_eq!(l.label(&plane, t, 255), LabelOutcome::TooManyBlobs);
+    }
+
+    #[test]
+    fn a_window_labels_in_full_frame_coordinates() {
+        let img = [
+            "..........", //
+            "...##.....", //
+            "..###...#.", //
+            "...#....##", //
+            "..........", //
+        ];
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 0 }))
+            .collect();
+        let t = Threshold::global(100);
+        let mut whole = Labeller::new(100, 10);
+        assert_eq!(
+            whole.label(&Plane::whole(&data, 10, 5), t, 255),
+            LabelOutcome::Complete
+        );
+        // Columns 1..=6, rows 1..=3: the left blob whole, the right one cut off.
+        let plane = Plane {
+            data: &data[10 + 1..],
+            width: 6,
+            height: 3,
+            stride: 10,
+            col0: 1,
+            row0: 1,
+        };
+        let mut win = Labeller::new(100, 10);
+        assert_eq!(win.label(&plane, t, 255), LabelOutcome::Complete);
+        assert_eq!(win.blobs().len(), 1);
+        assert_eq!(win.blobs()[0], whole.blobs()[0]);
+        assert_eq!(
+            (
+                win.blobs()[0].col0,
+                win.blobs()[0].row0,
+                win.blobs()[0].area
+            ),
+            (2, 1, 6)
+        );
     }
 }

@@ -1,16 +1,24 @@
 //! photopose-vision: finds the retro-reflective targets in a frame, measures
 //! their centres to a few hundredths of a pixel and reads coded targets.
 //!
-//! The stages follow section 3.2 of the reference paper:
+//! The [`Detector`] runs on a window of a frame (an
+//! [`ImageView`](photopose_frame::ImageView): the whole frame or a part of
+//! it, up to the detector's capacity) and reports everything in full-frame
+//! pixel coordinates. Its stages follow section 3.2 of the reference paper,
+//! each a function of its own (`detector` module):
 //!
 //! 1. [`threshold`]: grey-value histogram, Otsu's threshold, bounded below by
-//!    a noise floor; degenerate frames end here with a [`FrameStatus`].
+//!    a noise floor; degenerate frames end here with a [`FrameStatus`]. The
+//!    result is one [`Threshold`] value that the later stages ask; a
+//!    threshold found before can be passed in instead
+//!    ([`Detector::detect_with`]).
 //! 2. [`label`]: run-length connected components with union-find, blob
 //!    statistics in the same pass.
-//! 3. Blob discrimination (this module): area, border, saturation, and shape
-//!    from second and fourth moments; rejected blobs are kept with a reason.
+//! 3. Blob tests: area, border, saturation, and shape from second moments;
+//!    rejected blobs are kept with a reason.
 //! 4. [`measure`]: background-subtracted, intensity-weighted centroid and
-//!    ellipse over the bounding box grown by 2 px.
+//!    ellipse over the bounding box grown by 2 px, and the fourth-moment
+//!    shape test.
 //! 5. [`code`]: the 12-sector ring of coded targets; ids the field does not
 //!    carry, and uncertain readings, stay unidentified. Blobs that are parts
 //!    of a ring are suppressed.
@@ -21,48 +29,41 @@
 //! 0.01 px.
 //!
 //! Invariant: no IO, threads or clocks; [`Detector`] allocates every buffer in
-//! [`Detector::new`] and [`Detector::detect`] allocates nothing.
+//! [`Detector::new`] and [`Detector::detect`] allocates nothing, whatever
+//! window (up to the capacity) it is given.
 
 pub mod code;
+mod detector;
 pub mod label;
 pub mod measure;
 pub mod pixel;
 pub mod threshold;
 
 pub use code::{CodeSet, CodeStatus, Uncertainty};
+pub use detector::{DetectStage, Detector};
 pub use photopose_field::TargetKind;
-pub use threshold::{FrameStatus, ThresholdResult};
+pub use threshold::{FrameStatus, Threshold, ThresholdResult};
 
-use code::{CodeParams, Gap, Reading, RingFrame};
-use label::{Blob, LabelOutcome, Labeller};
-use measure::Measurement;
-use photopose_frame::ImageView;
-use pixel::{Pixel, Plane};
+use label::Blob;
 use thiserror::Error;
-use threshold::{ThresholdParams, MAX_BINS};
 
 /// Errors of the detector (a frame without targets is a result, not an error).
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum VisionError {
-    /// The image does not have the size the detector was built for.
-    #[error("image is {got_width}×{got_height} px, the detector expects {width}×{height} px")]
+    /// The window is larger than the detector's capacity.
+    #[error(
+        "window is {got_width}×{got_height} px, larger than the detector's capacity of \
+         {width}×{height} px"
+    )]
     Size {
-        /// Expected width.
+        /// Capacity: width.
         width: u32,
-        /// Expected height.
+        /// Capacity: height.
         height: u32,
-        /// Width of the image.
+        /// Width of the window.
         got_width: u32,
-        /// Height of the image.
+        /// Height of the window.
         got_height: u32,
-    },
-    /// The image buffer is shorter than its size says.
-    #[error("image buffer holds {got} pixels, {need} needed")]
-    Buffer {
-        /// Pixels needed.
-        need: usize,
-        /// Pixels present.
-        got: usize,
     },
     /// The detector was asked for an empty size.
     #[error("detector size {width}×{height} is too small (at least 8×8)")]
@@ -180,7 +181,8 @@ pub struct Detection {
 pub enum RejectReason {
     /// Larger than `max_area`.
     TooLarge,
-    /// Touches the image border, or its window or dark surroundings leave the image.
+    /// Touches the window's border, or its measuring window or dark
+    /// surroundings leave the window.
     Border,
     /// Has saturated pixels.
     Saturated,
@@ -215,7 +217,7 @@ pub struct Rejection {
     pub reason: RejectReason,
 }
 
-/// The result of one frame.
+/// The result of one window (the whole frame or a part of it).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detections {
     /// Targets, in the order their blobs start (row-major).
@@ -235,12 +237,12 @@ pub struct Detections {
 }
 
 impl Detections {
-    fn with_capacity(n: usize) -> Self {
+    pub(crate) fn with_capacity(n: usize) -> Self {
         Detections {
             targets: Vec::with_capacity(n),
             rejected: Vec::with_capacity(n),
             threshold: ThresholdResult {
-                threshold: 0,
+                threshold: Threshold::global(0),
                 otsu: 0,
                 floor: 0,
                 background: 0.0,
@@ -255,7 +257,7 @@ impl Detections {
         }
     }
 
-    fn clear(&mut self) {
+    pub(crate) fn clear(&mut self) {
         self.targets.clear();
         self.rejected.clear();
         self.status = FrameStatus::Empty;
@@ -264,7 +266,7 @@ impl Detections {
         self.n_dropped = 0;
     }
 
-    fn reject(&mut self, blob: &Blob, reason: RejectReason) {
+    pub(crate) fn reject(&mut self, blob: &Blob, reason: RejectReason) {
         if self.rejected.len() >= self.rejected.capacity() {
             self.n_dropped += 1;
             return;
@@ -281,418 +283,7 @@ impl Detections {
     }
 }
 
-/// A blob that passed discrimination, with its measurement and reading.
-#[derive(Debug, Clone, Copy)]
-struct Candidate {
-    blob: u32,
-    m: Measurement,
-    frame: Option<RingFrame>,
-    /// Deblurred moments of the dot.
-    moments: (f64, f64, f64),
-    reading: Reading,
-    suppressed: bool,
-}
-
-/// The stages of [`Detector::detect_probed`]; each is reported when it ends.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum DetectStage {
-    /// Histogram and Otsu threshold.
-    Threshold,
-    /// Connected components with their statistics.
-    Label,
-    /// Blob tests and centroid/moment measurement (of one blob).
-    Measure,
-    /// Code-ring reading (of one blob).
-    Decode,
-    /// Ring-part suppression and output.
-    Finish,
-}
-
-/// The target detector with all its buffers.
-#[derive(Debug)]
-pub struct Detector {
-    width: u32,
-    height: u32,
-    options: DetectorOptions,
-    hist: Vec<u32>,
-    labeller: Labeller,
-    candidates: Vec<Candidate>,
-    order: Vec<u32>,
-    tables: code::RingTables,
-    out: Detections,
-}
-
-impl Detector {
-    /// A detector for `width × height` frames; allocates all buffers.
-    pub fn new(width: u32, height: u32, options: DetectorOptions) -> Result<Self, VisionError> {
-        if width < 8 || height < 8 {
-            return Err(VisionError::TooSmall { width, height });
-        }
-        Ok(Detector {
-            width,
-            height,
-            options,
-            hist: vec![0; MAX_BINS],
-            labeller: Labeller::new(options.max_runs, options.max_blobs),
-            candidates: Vec::with_capacity(options.max_targets),
-            order: Vec::with_capacity(options.max_targets),
-            tables: code::RingTables::default(),
-            out: Detections::with_capacity(options.max_targets),
-        })
-    }
-
-    /// The options.
-    pub fn options(&self) -> &DetectorOptions {
-        &self.options
-    }
-
-    /// Frame width.
-    pub fn width(&self) -> u32 {
-        self.width
-    }
-
-    /// Frame height.
-    pub fn height(&self) -> u32 {
-        self.height
-    }
-
-    /// The result of the last frame.
-    pub fn detections(&self) -> &Detections {
-        &self.out
-    }
-
-    /// Detects the targets of a frame. Allocates nothing.
-    pub fn detect(&mut self, image: ImageView<'_>) -> Result<&Detections, VisionError> {
-        self.detect_probed(image, &mut |_| {})
-    }
-
-    /// [`Detector::detect`], calling `probe` each time a [`DetectStage`]
-    /// ends (per blob for measuring and decoding). The caller may read a
-    /// clock there; this crate reads none.
-    pub fn detect_probed(
-        &mut self,
-        image: ImageView<'_>,
-        probe: &mut dyn FnMut(DetectStage),
-    ) -> Result<&Detections, VisionError> {
-        let (w, h) = (image.width(), image.height());
-        if (w, h) != (self.width, self.height) {
-            return Err(VisionError::Size {
-                width: self.width,
-                height: self.height,
-                got_width: w,
-                got_height: h,
-            });
-        }
-        let need = w as usize * h as usize;
-        let max_value = image.max_value() as u32;
-        match image {
-            ImageView::Mono8 { data, .. } => {
-                if data.len() < need {
-                    return Err(VisionError::Buffer {
-                        need,
-                        got: data.len(),
-                    });
-                }
-                self.run(&data[..need], max_value.min(255), probe);
-            }
-            ImageView::Mono16 { data, .. } => {
-                if data.len() < need {
-                    return Err(VisionError::Buffer {
-                        need,
-                        got: data.len(),
-                    });
-                }
-                self.run(&data[..need], max_value, probe);
-            }
-        }
-        probe(DetectStage::Finish);
-        Ok(&self.out)
-    }
-
-    fn run<P: Pixel>(&mut self, data: &[P], max_value: u32, probe: &mut dyn FnMut(DetectStage)) {
-        let o = self.options;
-        let (w, h) = (self.width as usize, self.height as usize);
-        let plane = Plane {
-            data,
-            width: w,
-            height: h,
-        };
-        self.out.clear();
-        self.candidates.clear();
-        self.order.clear();
-
-        // 1. Threshold.
-        let shift = threshold::bin_shift(max_value);
-        let n = threshold::histogram(
-            data,
-            w,
-            h,
-            o.histogram_step,
-            shift,
-            max_value,
-            &mut self.hist,
-        );
-        let tp = ThresholdParams {
-            step: o.histogram_step,
-            noise_factor: o.noise_factor,
-            min_contrast: o.min_contrast,
-            saturated_median: 0.9,
-        };
-        let t = threshold::threshold(&self.hist, n, shift, max_value, &tp);
-        self.out.threshold = t;
-        self.out.status = t.status;
-        probe(DetectStage::Threshold);
-        if t.status != FrameStatus::Normal {
-            return;
-        }
-
-        // 2. Connected components.
-        match self.labeller.label(data, w, h, t.threshold, max_value) {
-            LabelOutcome::Complete => {}
-            LabelOutcome::TooManyRuns | LabelOutcome::TooManyBlobs => {
-                self.out.status = FrameStatus::Cluttered;
-                return;
-            }
-        }
-        let blobs = self.labeller.blobs();
-        self.out.n_blobs = blobs.len();
-        probe(DetectStage::Label);
-        if blobs.is_empty() {
-            self.out.status = FrameStatus::Empty;
-            return;
-        }
-
-        // 3. Discrimination and 4. measurement.
-        let margin = measure::GROW as u32;
-        let code_params = CodeParams {
-            min_contrast: (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64),
-            sector_margin: o.sector_margin,
-            sample_margin: o.sample_margin,
-            dark_tolerance: o.dark_tolerance,
-        };
-        for (i, blob) in blobs.iter().enumerate() {
-            if blob.area < o.min_area {
-                self.out.n_small += 1;
-                continue;
-            }
-            if blob.area > o.max_area {
-                self.out.reject(blob, RejectReason::TooLarge);
-                continue;
-            }
-            if blob.col0 < margin
-                || blob.row0 < margin
-                || blob.col1 + margin >= self.width
-                || blob.row1 + margin >= self.height
-            {
-                self.out.reject(blob, RejectReason::Border);
-                continue;
-            }
-            if blob.saturated > 0 {
-                self.out.reject(blob, RejectReason::Saturated);
-                continue;
-            }
-            let (cxx, cyy, cxy) = blob.covariance();
-            let (a, b, _) = measure::ellipse(cxx, cyy, cxy);
-            if b.is_nan() || b <= 0.0 || a / b > o.max_axis_ratio {
-                self.out.reject(blob, RejectReason::Elongated);
-                continue;
-            }
-            let fill = blob.area as f64 / (std::f64::consts::PI * a * b);
-            if fill < o.fill_range.0 || fill > o.fill_range.1 {
-                self.out.reject(blob, RejectReason::Shape);
-                continue;
-            }
-            let Some(mut m) = measure::measure(
-                &plane,
-                blob,
-                t.threshold,
-                t.background,
-                measure::GROW,
-                measure::MAX_SCALE,
-            ) else {
-                self.out.reject(blob, RejectReason::NoSignal);
-                continue;
-            };
-            if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
-                self.out.reject(blob, RejectReason::Shape);
-                continue;
-            }
-            if self.candidates.len() >= self.candidates.capacity() {
-                self.out.n_dropped += 1;
-                continue;
-            }
-            probe(DetectStage::Measure);
-            // 5. Code ring, sampled on the dot's ellipse with the blur removed.
-            let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
-            for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-                amplitude += plane.bilinear(m.col + dx, m.row + dy).unwrap_or(0.0);
-            }
-            amplitude = amplitude / 5.0 - m.background;
-            let (cxx, cyy, cxy, _) = measure::deblurred(&m, amplitude);
-            let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
-            let reading = match &frame {
-                Some(f) => code::read(&plane, f, &code_params, &o.codes, &self.tables),
-                None => Reading {
-                    gap: Gap::NotDark,
-                    status: CodeStatus::Uncertain(Uncertainty::LowContrast),
-                    ring_present: false,
-                    raw: 0,
-                    bright: 0.0,
-                    dark: 0.0,
-                },
-            };
-            probe(DetectStage::Decode);
-            if reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage)
-                && !reading.ring_present
-            {
-                // Its ring zone leaves the image and nothing bright is seen
-                // in the part inside: it may be a part of the ring of a
-                // coded target whose dot is outside the frame.
-                self.out.reject(blob, RejectReason::Border);
-                continue;
-            }
-            match reading.gap {
-                Gap::Dark => {}
-                Gap::NotDark => {
-                    self.out.reject(blob, RejectReason::NotIsolated);
-                    continue;
-                }
-                Gap::Outside => {
-                    self.out.reject(blob, RejectReason::Border);
-                    continue;
-                }
-            }
-            if reading.ring_present {
-                // Measure again with a window that keeps clear of the ring.
-                if let Some(m2) = measure::measure(
-                    &plane,
-                    blob,
-                    t.threshold,
-                    t.background,
-                    measure::CODED_GROW,
-                    measure::CODED_MAX_SCALE,
-                ) {
-                    m = m2;
-                }
-                probe(DetectStage::Measure);
-            }
-            self.candidates.push(Candidate {
-                blob: i as u32,
-                m,
-                frame,
-                moments: (cxx, cyy, cxy),
-                reading,
-                suppressed: false,
-            });
-        }
-
-        // Ring parts: blobs in the ring zone of a target with a ring.
-        // Decoded targets come first, then rings with dark surroundings
-        // (whatever their reading), then the rest by decreasing area; the
-        // first two suppress whatever lies in their ring zone (but a decoded
-        // target only yields to a decoded one), the rest only smaller blobs.
-        for k in 0..self.candidates.len() {
-            self.order.push(k as u32);
-        }
-        let cands = &mut self.candidates;
-        let rank = |c: &Candidate| -> u8 {
-            if c.reading.status.id().is_some() {
-                0
-            } else if strong_ring(&c.reading) {
-                1
-            } else {
-                2
-            }
-        };
-        self.order.sort_unstable_by(|&x, &y| {
-            let (cx, cy) = (&cands[x as usize], &cands[y as usize]);
-            let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
-            rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
-        });
-        for oi in 0..self.order.len() {
-            let i = self.order[oi] as usize;
-            let y = cands[i];
-            if y.suppressed || !y.reading.ring_present {
-                continue;
-            }
-            let Some(f) = y.frame else { continue };
-            let y_area = blobs[y.blob as usize].area;
-            let y_rank = rank(&y);
-            for (j, x) in cands.iter_mut().enumerate() {
-                if j == i || x.suppressed {
-                    continue;
-                }
-                if y_rank == 2 && blobs[x.blob as usize].area > y_area {
-                    continue;
-                }
-                if x.reading.status.id().is_some() && y_rank > 0 {
-                    continue;
-                }
-                let rho = f.radius_of(x.m.col, x.m.row);
-                if (1.6..=3.8).contains(&rho) {
-                    x.suppressed = true;
-                }
-            }
-            // Rejected blobs inside a ring zone are ring parts as well.
-            for r in self.out.rejected.iter_mut() {
-                if matches!(r.reason, RejectReason::Shape | RejectReason::Elongated)
-                    && (1.6..=3.8).contains(&f.radius_of(r.col, r.row))
-                {
-                    r.reason = RejectReason::CodeRing;
-                }
-            }
-        }
-
-        // Output.
-        for c in self.candidates.iter() {
-            let blob = &blobs[c.blob as usize];
-            if c.suppressed {
-                self.out.reject(blob, RejectReason::CodeRing);
-                continue;
-            }
-            if self.out.targets.len() >= self.out.targets.capacity() {
-                self.out.n_dropped += 1;
-                continue;
-            }
-            let (a, b, angle) = measure::ellipse(c.moments.0, c.moments.1, c.moments.2);
-            self.out.targets.push(Detection {
-                col: c.m.col,
-                row: c.m.row,
-                semi_major: a,
-                semi_minor: b,
-                angle,
-                area: blob.area,
-                peak: blob.max,
-                signal: c.m.signal,
-                background: c.m.background,
-                kind: if c.reading.ring_present {
-                    TargetKind::Coded
-                } else {
-                    TargetKind::Uncoded
-                },
-                id: c.reading.status.id(),
-                code: c.reading.status,
-            });
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests;
-/// Whether a reading found a ring with dark gap and quiet zone (a coded
-/// target, read or not).
-fn strong_ring(r: &Reading) -> bool {
-    r.ring_present
-        && r.gap == Gap::Dark
-        && !matches!(
-            r.status,
-            CodeStatus::Uncertain(
-                Uncertainty::OutsideImage
-                    | Uncertainty::QuietZoneNotDark
-                    | Uncertainty::LowContrast
-            )
-        )
-}
-
 #[cfg(test)]
 mod testutil;

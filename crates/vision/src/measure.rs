@@ -18,6 +18,7 @@
 
 use crate::label::Blob;
 use crate::pixel::{Pixel, Plane};
+use crate::threshold::Threshold;
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -206,11 +207,12 @@ fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
     q
 }
 
-/// Measures a blob; `None` if the window holds no signal.
+/// Measures a blob (full-frame coordinates, pixels read inside `plane`
+/// only); `None` if the window holds no signal.
 pub fn measure<P: Pixel>(
     plane: &Plane<P>,
     blob: &Blob,
-    threshold: u32,
+    threshold: Threshold,
     fallback_background: f64,
     grow: f64,
     max_scale: f64,
@@ -248,19 +250,21 @@ pub fn measure<P: Pixel>(
 
     // Window: the box grown by GROW (and one more pixel for the background).
     let g = ceil_i64(grow) + 2;
-    let c0 = (blob.col0 as i64 - g).max(0);
-    let r0 = (blob.row0 as i64 - g).max(0) as usize;
-    let c1 = (blob.col1 as i64 + g).min(plane.width as i64 - 1);
-    let r1 = ((blob.row1 as i64 + g) as usize).min(plane.height - 1);
+    let (first_col, first_row) = (plane.col0 as i64, plane.row0 as i64);
+    let (last_col, last_row) = (plane.last_col() as i64, plane.last_row());
+    let c0 = (blob.col0 as i64 - g).max(first_col);
+    let r0 = (blob.row0 as i64 - g).max(first_row) as usize;
+    let c1 = (blob.col1 as i64 + g).min(last_col);
+    let r1 = ((blob.row1 as i64 + g) as usize).min(last_row);
     let (wc0, wr0) = (blob.col0 as f64 - grow, blob.row0 as f64 - grow);
     let (wc1, wr1) = (blob.col1 as f64 + grow, blob.row1 as f64 + grow);
     // Columns of the box proper (`wc0 ≤ col ≤ wc1`), for the background.
     let (bc0, bc1) = (c0.max(ceil_i64(wc0)), c1.min(floor_i64(wc1)));
     // Rows and columns of the weighted window.
-    let wr0i = wr0.max(0.0) as usize;
-    let wr1i = (wr1 as usize).min(plane.height - 1);
-    let wc0i = wc0.max(0.0) as i64;
-    let wc1i = (wc1 as i64).min(plane.width as i64 - 1);
+    let wr0i = wr0.max(first_row as f64) as usize;
+    let wr1i = (wr1 as usize).min(last_row);
+    let wc0i = wc0.max(first_col as f64) as i64;
+    let wc1i = (wc1 as i64).min(last_col);
     let q = Conic {
         qxx,
         qyy,
@@ -300,7 +304,8 @@ pub fn measure<P: Pixel>(
         if oa > ob {
             continue;
         }
-        let line = &plane.data[row * plane.width..(row + 1) * plane.width];
+        // The row's pixels: element `i` is column `first_col + i`.
+        let line = plane.row(row);
         // Background: the outer span minus the window's span inside the box.
         let in_rows = row_f >= wr0 && row_f <= wr1;
         let (xa, xb) = if in_rows {
@@ -317,9 +322,9 @@ pub fn measure<P: Pixel>(
             if a > b {
                 continue;
             }
-            for p in &line[a as usize..=b as usize] {
+            for p in &line[(a - first_col) as usize..=(b - first_col) as usize] {
                 let v = p.value();
-                if v <= threshold {
+                if !threshold.is_foreground(v) {
                     if seen == next {
                         if bg_n < BG_SAMPLES {
                             bg_buf[bg_n] = v;
@@ -339,7 +344,7 @@ pub fn measure<P: Pixel>(
         if a > b {
             continue;
         }
-        let px = &line[a as usize..=b as usize];
+        let px = &line[(a - first_col) as usize..=(b - first_col) as usize];
         let (mut t0, mut t1, mut t2) = (0i64, 0i64, 0i64);
         for (k, p) in (a - cc..).zip(px) {
             let vi = p.value() as i64;
@@ -351,12 +356,12 @@ pub fn measure<P: Pixel>(
         let mut f = [0i64; 5];
         let mut i = 0;
         while i < px.len() {
-            if px[i].value() <= threshold {
+            if !threshold.is_foreground(px[i].value()) {
                 i += 1;
                 continue;
             }
             let start = i;
-            while i < px.len() && px[i].value() > threshold {
+            while i < px.len() && threshold.is_foreground(px[i].value()) {
                 i += 1;
             }
             let (ka, kb) = (a - cc + start as i64, a - cc + i as i64 - 1);
@@ -399,7 +404,7 @@ pub fn measure<P: Pixel>(
         nm[5] += dy * nx;
     }
     let background = if bg_n >= 4 {
-        quantile(&mut bg_buf[..bg_n], bg_n * 3 / 10, threshold) as f64
+        quantile(&mut bg_buf[..bg_n], bg_n * 3 / 10, threshold.level()) as f64
     } else {
         fallback_background
     };

@@ -1,7 +1,10 @@
 //! Pixel access shared by the stages: one generic code path for 8-bit and
-//! 16-bit frames, and bilinear interpolation at sub-pixel positions
-//! (integer coordinates are pixel centres).
+//! 16-bit frames, the window the detector runs on ([`Plane`]: its pixels,
+//! row stride and origin in the full frame) and bilinear interpolation at
+//! sub-pixel positions (integer coordinates are pixel centres). Every
+//! position a [`Plane`] takes is in full-frame pixel coordinates.
 
+use crate::threshold::Threshold;
 use wide::u8x16;
 
 /// A grey value type the detector reads.
@@ -12,13 +15,14 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn value(self) -> u32;
     /// Largest value of a slice (vectorises).
     fn max_of(chunk: &[Self]) -> u32;
-    /// Bit `i` set if `block[i] > threshold`, for a block of at most 64 pixels.
+    /// Bit `i` set if `block[i]` is foreground, for a block of at most 64
+    /// pixels (see [`Threshold::foreground_mask`]).
     #[inline]
-    fn above_mask(block: &[Self], threshold: u32) -> u64 {
+    fn above_mask(block: &[Self], threshold: Threshold) -> u64 {
         debug_assert!(block.len() <= 64);
         let mut m = 0u64;
         for (i, p) in block.iter().enumerate() {
-            m |= ((p.value() > threshold) as u64) << i;
+            m |= (threshold.is_foreground(p.value()) as u64) << i;
         }
         m
     }
@@ -34,14 +38,16 @@ impl Pixel for u8 {
     fn max_of(chunk: &[Self]) -> u32 {
         chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
     }
-    /// Sixteen pixels at a time (SSE2 on x86-64).
+    /// Sixteen pixels at a time (SSE2 on x86-64): a pixel is foreground
+    /// where it is not `≤ level`, i.e. where `v − level` (saturating) is not 0.
     #[inline]
-    fn above_mask(block: &[Self], threshold: u32) -> u64 {
+    fn above_mask(block: &[Self], threshold: Threshold) -> u64 {
         debug_assert!(block.len() <= 64);
-        if threshold >= u8::MAX as u32 {
+        let level = threshold.level();
+        if level >= u8::MAX as u32 {
             return 0;
         }
-        let t = u8x16::splat(threshold as u8);
+        let t = u8x16::splat(level as u8);
         let zero = u8x16::splat(0);
         // 0xffff where all sixteen are `≤ t`, else the lanes `≤ t`.
         let dark = |v: u8x16| v.saturating_sub(t).cmp_eq(zero).move_mask() as u32 & 0xffff;
@@ -71,7 +77,7 @@ impl Pixel for u8 {
             shift += 16;
         }
         for (i, &p) in chunks.remainder().iter().enumerate() {
-            m |= ((p as u32 > threshold) as u64) << (shift + i);
+            m |= (threshold.is_foreground(p as u32) as u64) << (shift + i);
         }
         m
     }
@@ -89,33 +95,77 @@ impl Pixel for u16 {
     }
 }
 
-/// A borrowed grey-value plane.
+/// The window the detector reads: `width × height` pixels whose top-left
+/// pixel is `(col0, row0)` of the full frame, rows `stride` elements apart.
+/// Positions are full-frame pixel coordinates; the window's own offsets
+/// appear only in the index arithmetic (once per row or per sample, never
+/// per pixel of a row).
 #[derive(Debug, Clone, Copy)]
 pub struct Plane<'a, P> {
-    /// Row-major pixels.
+    /// Pixels: the window's first pixel is element 0, its row `r` starts at
+    /// element `r * stride` and holds `width` pixels.
     pub data: &'a [P],
     /// Width.
     pub width: usize,
     /// Height.
     pub height: usize,
+    /// Distance between the starts of two rows, elements.
+    pub stride: usize,
+    /// Full-frame column of the first pixel.
+    pub col0: usize,
+    /// Full-frame row of the first pixel.
+    pub row0: usize,
 }
 
-impl<P: Pixel> Plane<'_, P> {
-    /// Grey value at an integer position (must be inside).
-    #[inline(always)]
-    pub fn at(&self, col: usize, row: usize) -> f64 {
-        self.data[row * self.width + col].value() as f64
+impl<'a, P: Pixel> Plane<'a, P> {
+    /// A whole frame: row-major, unpadded, at the origin.
+    pub fn whole(data: &'a [P], width: usize, height: usize) -> Self {
+        Plane {
+            data,
+            width,
+            height,
+            stride: width,
+            col0: 0,
+            row0: 0,
+        }
     }
 
-    /// Bilinear interpolation at `(col, row)`; `None` outside the pixel
-    /// centres' hull.
+    /// The last column inside the window (full frame).
+    #[inline(always)]
+    pub fn last_col(&self) -> usize {
+        self.col0 + self.width - 1
+    }
+
+    /// The last row inside the window (full frame).
+    #[inline(always)]
+    pub fn last_row(&self) -> usize {
+        self.row0 + self.height - 1
+    }
+
+    /// The `width` pixels of full-frame row `row` (inside the window);
+    /// element `i` is column `col0 + i`.
+    #[inline(always)]
+    pub fn row(&self, row: usize) -> &'a [P] {
+        let start = (row - self.row0) * self.stride;
+        &self.data[start..start + self.width]
+    }
+
+    /// Grey value at a full-frame integer position (must be inside).
+    #[inline(always)]
+    pub fn at(&self, col: usize, row: usize) -> f64 {
+        self.data[(row - self.row0) * self.stride + (col - self.col0)].value() as f64
+    }
+
+    /// Bilinear interpolation at the full-frame position `(col, row)`;
+    /// `None` outside the hull of the window's pixel centres.
     #[inline]
     pub fn bilinear(&self, col: f64, row: f64) -> Option<f64> {
         let (w, h) = (self.width, self.height);
         // Inside the hull of the pixel centres (false for NaN).
         // (Signed conversions: a single instruction each on x86-64.)
-        let (wl, hl) = (w as i64 - 1, h as i64 - 1);
-        if !(col >= 0.0 && row >= 0.0 && col <= wl as f64 && row <= hl as f64) {
+        let (c0, r0) = (self.col0 as i64, self.row0 as i64);
+        let (cl, rl) = (c0 + w as i64 - 1, r0 + h as i64 - 1);
+        if !(col >= c0 as f64 && row >= r0 as f64 && col <= cl as f64 && row <= rl as f64) {
             return None;
         }
         if w < 2 || h < 2 {
@@ -124,25 +174,23 @@ impl<P: Pixel> Plane<'_, P> {
         // Truncation is the floor for non-negative values (and needs no
         // libm call on baseline x86-64). On the last column or row, the
         // cell to the left or above is used with a fraction of exactly 1.
-        let (ci, ri) = ((col as i64).min(wl - 1), (row as i64).min(hl - 1));
+        let (ci, ri) = ((col as i64).min(cl - 1), (row as i64).min(rl - 1));
         let fx = col - ci as f64;
         let fy = row - ri as f64;
-        let i = ri as usize * w + ci as usize;
+        let i = (ri - r0) as usize * self.stride + (ci - c0) as usize;
         let top = &self.data[i..i + 2];
-        let bottom = &self.data[i + w..i + w + 2];
+        let bottom = &self.data[i + self.stride..i + self.stride + 2];
         let (p00, p01) = (top[0].value() as f64, top[1].value() as f64);
         let (p10, p11) = (bottom[0].value() as f64, bottom[1].value() as f64);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         Some(top + fy * (bottom - top))
     }
-}
 
-impl<P: Pixel> Plane<'_, P> {
     /// [`Plane::bilinear`] at a position the caller knows to lie inside the
-    /// pixel centres' hull (`0 ≤ col ≤ width − 1`, `0 ≤ row ≤ height − 1`,
-    /// at least 2 × 2 pixels); outside it, the value is that of a nearby
-    /// position (never a panic for finite positions).
+    /// hull of the window's pixel centres (`col0 ≤ col ≤ col0 + width − 1`,
+    /// likewise for rows, at least 2 × 2 pixels); outside it, the value is
+    /// that of a nearby position (never a panic for finite positions).
     #[inline(always)]
     pub fn bilinear_inside(&self, col: f64, row: f64) -> f64 {
         let (w, h) = (self.width, self.height);
@@ -150,16 +198,22 @@ impl<P: Pixel> Plane<'_, P> {
         // 1.5 · 2⁵² (its low mantissa bits are the integer). That is the
         // floor of `col`, or one less for an integer `col`, where the
         // fraction is then 1 and the interpolation gives the same value.
+        // Clamped to the window's cells (in window offsets).
         const ROUND: f64 = 6_755_399_441_055_744.0;
-        let ci = (((col - 0.5) + ROUND).to_bits() as u32 as usize).min(w - 2);
-        let ri = (((row - 0.5) + ROUND).to_bits() as u32 as usize).min(h - 2);
-        let fx = col - ci as f64;
-        let fy = row - ri as f64;
-        let i = ri * w + ci;
+        let ci = (((col - 0.5) + ROUND).to_bits() as u32 as usize)
+            .saturating_sub(self.col0)
+            .min(w - 2);
+        let ri = (((row - 0.5) + ROUND).to_bits() as u32 as usize)
+            .saturating_sub(self.row0)
+            .min(h - 2);
+        let fx = col - (self.col0 + ci) as f64;
+        let fy = row - (self.row0 + ri) as f64;
+        let s = self.stride;
+        let i = ri * s + ci;
         // One range check for the 2 × 2 cell.
-        let cell = &self.data[i..i + w + 2];
+        let cell = &self.data[i..i + s + 2];
         let (p00, p01) = (cell[0].value() as f64, cell[1].value() as f64);
-        let (p10, p11) = (cell[w].value() as f64, cell[w + 1].value() as f64);
+        let (p10, p11) = (cell[s].value() as f64, cell[s + 1].value() as f64);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
@@ -173,11 +227,7 @@ mod tests {
     #[test]
     fn bilinear_interpolates_between_centres() {
         let data = [0u8, 10, 20, 30, 40, 50];
-        let p = Plane {
-            data: &data,
-            width: 3,
-            height: 2,
-        };
+        let p = Plane::whole(&data, 3, 2);
         assert_eq!(p.bilinear(0.0, 0.0), Some(0.0));
         assert_eq!(p.bilinear(0.5, 0.0), Some(5.0));
         assert_eq!(p.bilinear(1.0, 0.5), Some(25.0));
@@ -200,5 +250,44 @@ mod tests {
         assert_eq!(p.bilinear(2.1, 0.0), None);
         assert_eq!(p.bilinear(-0.1, 0.0), None);
         assert_eq!(u16::max_of(&[3, 900, 7]), 900);
+    }
+
+    #[test]
+    fn a_window_interpolates_like_its_frame() {
+        // 5 × 4 frame, value = 7·col + 13·row + (col·row) % 5.
+        let data: Vec<u16> = (0..4)
+            .flat_map(|r| (0..5).map(move |c| 7 * c + 13 * r + (c * r) % 5))
+            .collect();
+        let whole = Plane::whole(&data, 5, 4);
+        // The window 3 × 2 at (1, 2), rows 5 apart.
+        let win = Plane {
+            data: &data[2 * 5 + 1..],
+            width: 3,
+            height: 2,
+            stride: 5,
+            col0: 1,
+            row0: 2,
+        };
+        assert_eq!(win.row(3), &data[16..19]);
+        assert_eq!(win.at(3, 2), whole.at(3, 2));
+        for (c, r) in [
+            (1.0, 2.0),
+            (1.5, 2.25),
+            (2.9, 3.0),
+            (3.0, 2.5),
+            (2.0, 2.0),
+            (1.0, 3.0),
+        ] {
+            assert_eq!(win.bilinear(c, r), whole.bilinear(c, r), "{c} {r}");
+            assert_eq!(
+                Some(win.bilinear_inside(c, r)),
+                whole.bilinear(c, r),
+                "{c} {r}"
+            );
+        }
+        for (c, r) in [(0.9, 2.5), (1.5, 1.9), (3.1, 2.5), (2.0, 3.1)] {
+            assert_eq!(win.bilinear(c, r), None, "{c} {r}");
+        }
+        assert!(whole.bilinear(0.9, 2.5).is_some());
     }
 }

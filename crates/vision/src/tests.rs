@@ -397,3 +397,69 @@ fn wrong_size_is_an_error() {
     );
     assert!(Detector::new(4, 4, DetectorOptions::default()).is_err());
 }
+
+#[test]
+fn windows_up_to_the_capacity_are_served_in_full_frame_coordinates() {
+    let mut s = Scene::new(300, 200, 20.0);
+    let mut rng = Rng::new(3);
+    for (c, r) in [(40.3, 50.6), (150.2, 100.7), (250.9, 150.1), (120.5, 40.2)] {
+        s.draw(&dot(c, r, 5.0), 180.0);
+    }
+    s.draw(&coded(200.4, 60.3, 4.0, View::frontal(1.0), 17, 0.3), 180.0);
+    s.blur(0.6);
+    s.noise(2.0, &mut rng);
+    let img = s.to_mono8();
+    let mut whole = Detector::new(300, 200, DetectorOptions::default()).unwrap();
+    let all = whole.detect(img.view()).unwrap().clone();
+    assert_eq!(all.targets.len(), 5, "{:?}", all.rejected);
+    // A detector with a capacity of 160 × 120 serves a window of the frame.
+    let mut small = Detector::new(160, 120, DetectorOptions::default()).unwrap();
+    assert_eq!(small.capacity(), (160, 120));
+    assert!(matches!(
+        small.detect(img.view()),
+        Err(VisionError::Size {
+            got_width: 300,
+            got_height: 200,
+            ..
+        })
+    ));
+    let view = img.view().window(131, 31, 159, 111).unwrap();
+    let d = small.detect_with(view, &all.threshold).unwrap();
+    let want: Vec<_> = all
+        .targets
+        .iter()
+        .filter(|t| t.col > 140.0 && t.row < 130.0)
+        .cloned()
+        .collect();
+    assert_eq!(d.targets, want);
+    // With its own threshold: the same targets, within a hair.
+    let d = small.detect(view).unwrap();
+    assert_eq!(d.targets.len(), want.len());
+    for (a, b) in d.targets.iter().zip(&want) {
+        assert!((a.col - b.col).hypot(a.row - b.row) < 0.02, "{a:?} {b:?}");
+        assert_eq!(a.id, b.id);
+    }
+    // A threshold that is not normal ends the window with its status.
+    let mut t = all.threshold;
+    t.status = FrameStatus::Saturated;
+    let d = small.detect_with(view, &t).unwrap();
+    assert_eq!((d.status, d.targets.len()), (FrameStatus::Saturated, 0));
+    // Tiny windows, over a dot and elsewhere: results, never a panic.
+    for (x, y, w, h) in [
+        (145, 95, 1, 1),
+        (145, 95, 2, 2),
+        (140, 100, 20, 1),
+        (150, 90, 1, 20),
+        (146, 96, 9, 9),
+        (299, 199, 1, 1),
+        (0, 0, 3, 120),
+    ] {
+        let view = img.view().window(x, y, w, h).unwrap();
+        for d in [
+            small.detect(view).unwrap().clone(),
+            small.detect_with(view, &all.threshold).unwrap().clone(),
+        ] {
+            assert!(d.targets.is_empty(), "{x} {y} {w} {h}: {d:?}");
+        }
+    }
+}

@@ -1,13 +1,58 @@
-//! Grey-value histogram and the global threshold: Otsu's method, bounded
-//! below by a noise floor estimated from the same histogram, with explicit
-//! outcomes for degenerate frames (all dark, saturated, nearly uniform).
+//! The threshold: the [`Threshold`] type every stage asks whether a grey
+//! value is a target's (the one place of that comparison), the grey-value
+//! histogram and the global level: Otsu's method, bounded below by a noise
+//! floor estimated from the same histogram, with explicit outcomes for
+//! degenerate frames (all dark, saturated, nearly uniform).
 //!
 //! The histogram is taken on a sub-sampled grid (every `step`-th row and
-//! column): the threshold is a property of the grey-value distribution, and a
-//! quarter of the pixels estimate it as well as all of them. 16-bit values
-//! are binned down to at most [`MAX_BINS`] bins.
+//! column, fixed in full-frame coordinates so that a window samples the
+//! same pixels as its frame): the threshold is a property of the grey-value
+//! distribution, and a quarter of the pixels estimate it as well as all of
+//! them. 16-bit values are binned down to at most [`MAX_BINS`] bins.
 
-use crate::pixel::Pixel;
+use crate::pixel::{Pixel, Plane};
+
+/// What separates a target's pixels from the background: a pixel is
+/// foreground when its grey value lies strictly above the level. One
+/// global level per frame today; the stages only ever ask this type (per
+/// value, or per block of a row), so a local (per-tile) level can replace
+/// the global one here without touching them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Threshold {
+    level: u32,
+}
+
+impl Threshold {
+    /// One level for the whole frame.
+    pub const fn global(level: u32) -> Self {
+        Threshold { level }
+    }
+
+    /// The level: values strictly above it are foreground.
+    #[inline(always)]
+    pub const fn level(self) -> u32 {
+        self.level
+    }
+
+    /// Whether a grey value belongs to a target.
+    #[inline(always)]
+    pub fn is_foreground(self, value: u32) -> bool {
+        value > self.level
+    }
+
+    /// Bit `i` set where `block[i]` is foreground, for a block of a row of
+    /// at most 64 pixels (vectorised per pixel type).
+    #[inline(always)]
+    pub fn foreground_mask<P: Pixel>(self, block: &[P]) -> u64 {
+        P::above_mask(block, self)
+    }
+
+    /// Whether no pixel of a block of a row is foreground.
+    #[inline(always)]
+    pub fn all_background<P: Pixel>(self, block: &[P]) -> bool {
+        !self.is_foreground(P::max_of(block))
+    }
+}
 
 /// Most bins of the histogram (12 bits).
 pub const MAX_BINS: usize = 4096;
@@ -29,8 +74,8 @@ pub enum FrameStatus {
 /// Result of the threshold stage.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThresholdResult {
-    /// Pixels strictly above this value are foreground.
-    pub threshold: u32,
+    /// The threshold found (meaningful when `status` is normal).
+    pub threshold: Threshold,
     /// Otsu's threshold before the floor was applied (grey value).
     pub otsu: u32,
     /// The noise floor (grey value).
@@ -65,12 +110,16 @@ pub fn bin_shift(max_value: u32) -> u32 {
     bits.saturating_sub(12)
 }
 
+/// The first offset from `origin` of the sampling grid: full-frame rows
+/// (columns) `≡ step / 2 (mod step)`.
+fn grid_start(origin: usize, step: usize) -> usize {
+    (step / 2 + step - origin % step) % step
+}
+
 /// Fills `hist` (length ≥ `(max_value >> shift) + 1`) with the sub-sampled
-/// histogram of `data` and returns the number of samples.
+/// histogram of the window `plane` and returns the number of samples.
 pub fn histogram<P: Pixel>(
-    data: &[P],
-    width: usize,
-    height: usize,
+    plane: &Plane<'_, P>,
     step: usize,
     shift: u32,
     max_value: u32,
@@ -80,14 +129,15 @@ pub fn histogram<P: Pixel>(
     let top = (max_value >> shift) as usize;
     hist.iter_mut().for_each(|h| *h = 0);
     if shift == 0 && P::MAX <= 255 && top >= 255 && step == 2 {
-        return histogram_8bit_step2(data, width, height, hist);
+        return histogram_8bit_step2(plane, hist);
     }
     let mut n = 0u32;
-    let mut row = step / 2;
-    while row < height {
-        let line = &data[row * width..(row + 1) * width];
-        let mut col = step / 2;
-        while col < width {
+    let mut row = plane.row0 + grid_start(plane.row0, step);
+    let col_start = grid_start(plane.col0, step);
+    while row <= plane.last_row() {
+        let line = plane.row(row);
+        let mut col = col_start;
+        while col < line.len() {
             let b = ((line[col].value().min(max_value)) >> shift) as usize;
             hist[b.min(top)] += 1;
             n += 1;
@@ -102,18 +152,14 @@ pub fn histogram<P: Pixel>(
 /// second row and column: four interleaved partial histograms, so that
 /// runs of equal grey values (the background) do not wait on each other's
 /// increments.
-fn histogram_8bit_step2<P: Pixel>(
-    data: &[P],
-    width: usize,
-    height: usize,
-    hist: &mut [u32],
-) -> u32 {
+fn histogram_8bit_step2<P: Pixel>(plane: &Plane<'_, P>, hist: &mut [u32]) -> u32 {
     let mut part = [[0u32; 256]; 4];
     let mut n = 0u32;
     let bin = |p: P| p.value() as u8 as usize;
-    let mut row = 1;
-    while row < height {
-        let line = &data[row * width + 1..(row + 1) * width];
+    let mut row = plane.row0 + grid_start(plane.row0, 2);
+    let col_start = grid_start(plane.col0, 2);
+    while row <= plane.last_row() {
+        let line = &plane.row(row)[col_start.min(plane.width)..];
         let mut chunks = line.chunks_exact(8);
         for c in &mut chunks {
             part[0][bin(c[0])] += 1;
@@ -193,7 +239,7 @@ pub fn threshold(
     let scale = (1u32 << shift) as f64;
     let centre = |bin: usize| (bin as f64 + 0.5) * scale - 0.5;
     let mut r = ThresholdResult {
-        threshold: max_value,
+        threshold: Threshold::global(max_value),
         otsu: max_value,
         floor: max_value,
         background: 0.0,
@@ -227,9 +273,8 @@ pub fn threshold(
         .map(|t| (((t as u32 + 1) << shift) - 1).min(max_value))
         .unwrap_or(max_value);
     r.otsu = otsu_value;
-    r.threshold = otsu_value.max(floor);
     // A saturated target pixel is foreground even if the floor is at the top.
-    r.threshold = r.threshold.min(max_value.saturating_sub(1));
+    r.threshold = Threshold::global(otsu_value.max(floor).min(max_value.saturating_sub(1)));
     r.status = FrameStatus::Normal;
     r
 }
@@ -247,7 +292,7 @@ mod tests {
 
     fn hist_of(values: &[u8]) -> (Vec<u32>, u32) {
         let mut h = vec![0u32; 256];
-        let n = histogram(values, values.len(), 1, 1, 0, 255, &mut h);
+        let n = histogram(&Plane::whole(values, values.len(), 1), 1, 0, 255, &mut h);
         (h, n)
     }
 
@@ -258,7 +303,10 @@ mod tests {
         let (h, n) = hist_of(&v);
         let t = threshold(&h, n, 0, 255, &P);
         assert_eq!(t.status, FrameStatus::Normal);
-        assert!(t.threshold >= 20 && t.threshold < 200, "{t:?}");
+        assert!(
+            t.threshold.level() >= 20 && t.threshold.level() < 200,
+            "{t:?}"
+        );
         assert_eq!(t.background, 20.0);
     }
 
@@ -269,19 +317,68 @@ mod tests {
         v.extend([40u8; 5]);
         let (h, n) = hist_of(&v);
         let t = threshold(&h, n, 0, 255, &P);
-        assert!(t.threshold > 40, "{t:?}");
+        assert!(t.threshold.level() > 40, "{t:?}");
     }
 
     #[test]
     fn degenerate_histograms() {
         let (h, n) = hist_of(&[0u8; 500]);
         let t = threshold(&h, n, 0, 255, &P);
-        assert!(t.threshold >= 10, "all dark: {t:?}");
+        assert!(t.threshold.level() >= 10, "all dark: {t:?}");
         let (h, n) = hist_of(&[255u8; 500]);
         assert_eq!(threshold(&h, n, 0, 255, &P).status, FrameStatus::Saturated);
         let (h, n) = hist_of(&[120u8; 500]);
         let t = threshold(&h, n, 0, 255, &P);
-        assert!(t.threshold > 120, "uniform: {t:?}");
+        assert!(t.threshold.level() > 120, "uniform: {t:?}");
+    }
+
+    #[test]
+    fn a_window_samples_the_grid_of_its_frame() {
+        // 9 × 7 frame of distinct values; windows at even and odd origins.
+        let w = 9;
+        let data: Vec<u16> = (0..63u16).map(|v| 1000 + 37 * v).collect();
+        for step in [2usize, 3] {
+            for (c0, r0, ww, hh) in [(0, 0, 9, 7), (1, 2, 5, 4), (2, 1, 6, 5), (3, 3, 1, 1)] {
+                let plane = Plane {
+                    data: &data[r0 * w + c0..],
+                    width: ww,
+                    height: hh,
+                    stride: w,
+                    col0: c0,
+                    row0: r0,
+                };
+                let mut h = vec![0u32; MAX_BINS];
+                let n = histogram(&plane, step, 4, 65535, &mut h);
+                // The frame's grid: rows and columns ≡ step / 2 (mod step).
+                let mut want = vec![0u32; MAX_BINS];
+                let mut m = 0;
+                for r in (r0..r0 + hh).filter(|r| r % step == step / 2) {
+                    for c in (c0..c0 + ww).filter(|c| c % step == step / 2) {
+                        want[(data[r * w + c] >> 4) as usize] += 1;
+                        m += 1;
+                    }
+                }
+                assert_eq!((n, &h), (m, &want), "step {step}, window at ({c0}, {r0})");
+            }
+        }
+        // The 8-bit path (step 2, no binning) likewise.
+        let data8: Vec<u8> = (0..63u8).map(|v| 3 * v).collect();
+        let plane = Plane {
+            data: &data8[w + 2..],
+            width: 6,
+            height: 5,
+            stride: w,
+            col0: 2,
+            row0: 1,
+        };
+        let mut h = vec![0u32; MAX_BINS];
+        let n = histogram(&plane, 2, 0, 255, &mut h);
+        let odd: Vec<usize> = (1..6)
+            .step_by(2)
+            .flat_map(|r| (3..8).step_by(2).map(move |c| r * w + c))
+            .collect();
+        assert_eq!(n as usize, odd.len());
+        assert!(odd.iter().all(|&i| h[data8[i] as usize] == 1));
     }
 
     #[test]
@@ -292,8 +389,11 @@ mod tests {
         let mut v = vec![1000u16; 900];
         v.extend(std::iter::repeat_n(50_000u16, 100));
         let mut h = vec![0u32; MAX_BINS];
-        let n = histogram(&v, v.len(), 1, 1, 4, 65535, &mut h);
+        let n = histogram(&Plane::whole(&v, v.len(), 1), 1, 4, 65535, &mut h);
         let t = threshold(&h, n, 4, 65535, &P);
-        assert!(t.threshold > 1000 && t.threshold < 50_000, "{t:?}");
+        assert!(
+            t.threshold.level() > 1000 && t.threshold.level() < 50_000,
+            "{t:?}"
+        );
     }
 }

@@ -1,12 +1,14 @@
 //! Once warm, `Detector::detect` allocates nothing: a counting global
 //! allocator watches a run over frames with dots, coded targets, noise,
-//! rejections and degenerate content, in 8 and 16 bits.
+//! rejections and degenerate content, in 8 and 16 bits, whole and through
+//! windows of varying size below the capacity (of the frames and of a
+//! larger frame), with the window's own threshold or a given one.
 
 // A global allocator needs `unsafe impl`; it only forwards to `System`.
 #![allow(unsafe_code)]
 
 use photopose_field::codes;
-use photopose_frame::{Image, Pixels};
+use photopose_frame::{Image, ImageView, Pixels};
 use photopose_vision::{CodeSet, Detector, DetectorOptions, TargetKind};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -155,4 +157,62 @@ fn detect_allocates_nothing_once_warm() {
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert_eq!(after - before, 0, "allocations during detection");
     assert_eq!(found, 3 * 6 * 16);
+
+    // Windows of varying size below the capacity, with their own threshold
+    // and with the whole frame's; then windows of a frame twice as wide
+    // (a padded buffer), which is larger than the capacity.
+    let thresholds: Vec<_> = frames
+        .iter()
+        .map(|f| detector.threshold(f.view()).unwrap())
+        .collect();
+    let wide = {
+        let Pixels::Mono8(p) = frames[0].pixels() else {
+            panic!("8-bit")
+        };
+        let mut buf = vec![15u8; 2 * W * H];
+        for (row, line) in p.chunks_exact(W).enumerate() {
+            buf[2 * W * row + W..2 * W * (row + 1)].copy_from_slice(line);
+        }
+        buf
+    };
+    let windows = [
+        (0, 0, W as u32, H as u32),
+        (10, 7, 250, 180),
+        (133, 41, 31, 200),
+        (1, 1, 398, 298),
+        (200, 150, 200, 150),
+        (57, 3, 8, 8),
+        (390, 290, 10, 10),
+    ];
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut n_windows = 0;
+    for (f, t) in frames.iter().zip(&thresholds) {
+        for &(x, y, w, h) in &windows {
+            let view = f.view().window(x, y, w, h).unwrap();
+            found += detector.detect(view).unwrap().targets.len();
+            found += detector.detect_with(view, t).unwrap().targets.len();
+            n_windows += 1;
+        }
+    }
+    let padded = ImageView::mono8(&wide, 2 * W as u32, H as u32, 2 * W).unwrap();
+    for &(x, y, w, h) in &windows {
+        let view = padded.window(x + W as u32, y, w, h).unwrap();
+        found += detector.detect(view).unwrap().targets.len();
+        found += detector
+            .detect_with(view, &thresholds[0])
+            .unwrap()
+            .targets
+            .len();
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "allocations during detection in windows");
+    assert!(n_windows == frames.len() * windows.len() && found > 3 * 6 * 16);
+    // The whole frame placed in the larger one is still the same frame.
+    let view = padded.window(W as u32, 0, W as u32, H as u32).unwrap();
+    let d = detector.detect(view).unwrap().clone();
+    let first = detector.detect(frames[0].view()).unwrap();
+    assert_eq!(d.targets.len(), first.targets.len());
+    for (a, b) in d.targets.iter().zip(&first.targets) {
+        assert!((a.col - W as f64 - b.col).abs() < 1e-9 && a.row == b.row);
+    }
 }

@@ -1,0 +1,586 @@
+//! The [`Detector`]: its buffers, sized once for the largest window it
+//! serves (its capacity), and the detection of one window as a sequence of
+//! stages, each a function of its own: threshold → labelling → blob tests →
+//! centroid → code ring, then the suppression of ring parts and the output.
+//!
+//! A window is any [`ImageView`] no larger than the capacity: the whole
+//! frame, a part of it, or a region of a larger frame. Everything the
+//! stages compute is in full-frame pixel coordinates, so a target fully
+//! inside a window is measured exactly as in the whole frame when the same
+//! threshold is used ([`Detector::detect_with`]).
+
+use crate::code::{self, CodeParams, Gap, Reading, RingFrame, RingTables};
+use crate::label::{Blob, LabelOutcome, Labeller};
+use crate::measure::{self, Measurement};
+use crate::pixel::{Pixel, Plane};
+use crate::threshold::{self, FrameStatus, Threshold, ThresholdParams, ThresholdResult, MAX_BINS};
+use crate::{
+    CodeStatus, Detection, Detections, DetectorOptions, RejectReason, TargetKind, Uncertainty,
+    VisionError,
+};
+use photopose_frame::{ImageView, ViewPixels};
+
+/// The stages of [`Detector::detect_probed`]; each is reported when it ends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DetectStage {
+    /// Histogram and Otsu threshold.
+    Threshold,
+    /// Connected components with their statistics.
+    Label,
+    /// Blob tests and centroid/moment measurement (of one blob).
+    Measure,
+    /// Code-ring reading (of one blob).
+    Decode,
+    /// Ring-part suppression and output.
+    Finish,
+}
+
+/// A blob that passed discrimination, with its measurement and reading.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    blob: u32,
+    m: Measurement,
+    frame: Option<RingFrame>,
+    /// Deblurred moments of the dot.
+    moments: (f64, f64, f64),
+    reading: Reading,
+    suppressed: bool,
+}
+
+/// The target detector with all its buffers.
+#[derive(Debug)]
+pub struct Detector {
+    max_width: u32,
+    max_height: u32,
+    options: DetectorOptions,
+    hist: Vec<u32>,
+    labeller: Labeller,
+    candidates: Vec<Candidate>,
+    order: Vec<u32>,
+    tables: RingTables,
+    out: Detections,
+}
+
+/// The window of `image` as the stages read it.
+fn plane<'a, P>(image: &ImageView<'_>, data: &'a [P]) -> Plane<'a, P> {
+    let (col0, row0) = image.origin();
+    Plane {
+        data,
+        width: image.width() as usize,
+        height: image.height() as usize,
+        stride: image.stride(),
+        col0: col0 as usize,
+        row0: row0 as usize,
+    }
+}
+
+impl Detector {
+    /// A detector for windows of up to `max_width × max_height` pixels
+    /// (its capacity; at least 8 × 8); allocates all buffers.
+    pub fn new(
+        max_width: u32,
+        max_height: u32,
+        options: DetectorOptions,
+    ) -> Result<Self, VisionError> {
+        if max_width < 8 || max_height < 8 {
+            return Err(VisionError::TooSmall {
+                width: max_width,
+                height: max_height,
+            });
+        }
+        Ok(Detector {
+            max_width,
+            max_height,
+            options,
+            hist: vec![0; MAX_BINS],
+            labeller: Labeller::new(options.max_runs, options.max_blobs),
+            candidates: Vec::with_capacity(options.max_targets),
+            order: Vec::with_capacity(options.max_targets),
+            tables: RingTables::default(),
+            out: Detections::with_capacity(options.max_targets),
+        })
+    }
+
+    /// The options.
+    pub fn options(&self) -> &DetectorOptions {
+        &self.options
+    }
+
+    /// The largest window `(width, height)` the detector serves.
+    pub fn capacity(&self) -> (u32, u32) {
+        (self.max_width, self.max_height)
+    }
+
+    /// The result of the last window.
+    pub fn detections(&self) -> &Detections {
+        &self.out
+    }
+
+    /// Detects the targets of a window (threshold from the window itself).
+    /// Allocates nothing.
+    pub fn detect(&mut self, image: ImageView<'_>) -> Result<&Detections, VisionError> {
+        self.detect_probed(image, &mut |_| {})
+    }
+
+    /// [`Detector::detect`], calling `probe` each time a [`DetectStage`]
+    /// ends (per blob for measuring and decoding). The caller may read a
+    /// clock there; this crate reads none.
+    pub fn detect_probed(
+        &mut self,
+        image: ImageView<'_>,
+        probe: &mut dyn FnMut(DetectStage),
+    ) -> Result<&Detections, VisionError> {
+        self.dispatch(image, None, probe)
+    }
+
+    /// The threshold stage alone: the threshold of a window (for instance
+    /// of a whole frame, to detect in windows of it with
+    /// [`Detector::detect_with`]). Allocates nothing.
+    pub fn threshold(&mut self, image: ImageView<'_>) -> Result<ThresholdResult, VisionError> {
+        self.check(&image)?;
+        let max_value = image.max_value() as u32;
+        Ok(match image.pixels() {
+            ViewPixels::Mono8(data) => {
+                self.find_threshold(&plane(&image, data), max_value.min(255))
+            }
+            ViewPixels::Mono16(data) => self.find_threshold(&plane(&image, data), max_value),
+        })
+    }
+
+    /// Detects the targets of a window with a threshold found before (on
+    /// the whole frame, or on an earlier frame), skipping the threshold
+    /// stage: a target fully inside the window is then reported exactly as
+    /// in the frame the threshold came from. A threshold whose status is
+    /// not normal ends the window with that status. Allocates nothing.
+    pub fn detect_with(
+        &mut self,
+        image: ImageView<'_>,
+        threshold: &ThresholdResult,
+    ) -> Result<&Detections, VisionError> {
+        self.detect_with_probed(image, threshold, &mut |_| {})
+    }
+
+    /// [`Detector::detect_with`] with a probe as in [`Detector::detect_probed`].
+    pub fn detect_with_probed(
+        &mut self,
+        image: ImageView<'_>,
+        threshold: &ThresholdResult,
+        probe: &mut dyn FnMut(DetectStage),
+    ) -> Result<&Detections, VisionError> {
+        self.dispatch(image, Some(threshold), probe)
+    }
+
+    /// Refuses a window larger than the capacity.
+    fn check(&self, image: &ImageView<'_>) -> Result<(), VisionError> {
+        let (w, h) = (image.width(), image.height());
+        if w > self.max_width || h > self.max_height {
+            return Err(VisionError::Size {
+                width: self.max_width,
+                height: self.max_height,
+                got_width: w,
+                got_height: h,
+            });
+        }
+        Ok(())
+    }
+
+    fn dispatch(
+        &mut self,
+        image: ImageView<'_>,
+        given: Option<&ThresholdResult>,
+        probe: &mut dyn FnMut(DetectStage),
+    ) -> Result<&Detections, VisionError> {
+        self.check(&image)?;
+        let max_value = image.max_value() as u32;
+        match image.pixels() {
+            ViewPixels::Mono8(data) => {
+                self.run(&plane(&image, data), max_value.min(255), given, probe)
+            }
+            ViewPixels::Mono16(data) => self.run(&plane(&image, data), max_value, given, probe),
+        }
+        probe(DetectStage::Finish);
+        Ok(&self.out)
+    }
+
+    /// All stages on one window.
+    fn run<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        max_value: u32,
+        given: Option<&ThresholdResult>,
+        probe: &mut dyn FnMut(DetectStage),
+    ) {
+        self.out.clear();
+        self.candidates.clear();
+        self.order.clear();
+        // 1. Threshold.
+        let t = match given {
+            Some(t) => *t,
+            None => self.find_threshold(plane, max_value),
+        };
+        self.out.threshold = t;
+        self.out.status = t.status;
+        probe(DetectStage::Threshold);
+        if t.status != FrameStatus::Normal {
+            return;
+        }
+        // 2. Connected components.
+        if !self.label(plane, t.threshold, max_value) {
+            return;
+        }
+        probe(DetectStage::Label);
+        if self.out.n_blobs == 0 {
+            self.out.status = FrameStatus::Empty;
+            return;
+        }
+        // 3.–5. Each blob: tests, centroid, code ring.
+        self.examine_blobs(plane, &t, max_value, probe);
+        // Parts of rings, then the output.
+        self.suppress_ring_parts();
+        self.emit();
+    }
+
+    /// Stage 1: the sub-sampled histogram of the window and its threshold.
+    fn find_threshold<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        max_value: u32,
+    ) -> ThresholdResult {
+        let o = &self.options;
+        let shift = threshold::bin_shift(max_value);
+        let n = threshold::histogram(plane, o.histogram_step, shift, max_value, &mut self.hist);
+        let params = ThresholdParams {
+            step: o.histogram_step,
+            noise_factor: o.noise_factor,
+            min_contrast: o.min_contrast,
+            saturated_median: 0.9,
+        };
+        threshold::threshold(&self.hist, n, shift, max_value, &params)
+    }
+
+    /// Stage 2: connected components; false (with the frame's status set)
+    /// if the window has more runs or blobs than the capacity.
+    fn label<P: Pixel>(&mut self, plane: &Plane<'_, P>, t: Threshold, max_value: u32) -> bool {
+        match self.labeller.label(plane, t, max_value) {
+            LabelOutcome::Complete => {
+                self.out.n_blobs = self.labeller.blobs().len();
+                true
+            }
+            LabelOutcome::TooManyRuns | LabelOutcome::TooManyBlobs => {
+                self.out.status = FrameStatus::Cluttered;
+                false
+            }
+        }
+    }
+
+    /// Stages 3 to 5 for every blob, in the order the blobs start: the
+    /// blob tests, the centroid, the code ring; blobs that pass become
+    /// candidates, the others rejections (with their reason).
+    fn examine_blobs<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        t: &ThresholdResult,
+        max_value: u32,
+        probe: &mut dyn FnMut(DetectStage),
+    ) {
+        let Detector {
+            options: o,
+            labeller,
+            candidates,
+            tables,
+            out,
+            ..
+        } = self;
+        let code_params = CodeParams {
+            min_contrast: (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64),
+            sector_margin: o.sector_margin,
+            sample_margin: o.sample_margin,
+            dark_tolerance: o.dark_tolerance,
+        };
+        for (i, blob) in labeller.blobs().iter().enumerate() {
+            if blob.area < o.min_area {
+                out.n_small += 1;
+                continue;
+            }
+            // 3. Tests on the binary statistics.
+            if let Err(reason) = blob_tests(plane, blob, o) {
+                out.reject(blob, reason);
+                continue;
+            }
+            // 4. Centroid and moments.
+            let m = match centroid(plane, blob, t, o) {
+                Ok(m) => m,
+                Err(reason) => {
+                    out.reject(blob, reason);
+                    continue;
+                }
+            };
+            if candidates.len() >= candidates.capacity() {
+                out.n_dropped += 1;
+                continue;
+            }
+            probe(DetectStage::Measure);
+            // 5. Code ring, sampled on the dot's ellipse with the blur removed.
+            let ring = read_ring(plane, &m, &code_params, o, tables);
+            probe(DetectStage::Decode);
+            if let Err(reason) = ring_verdict(&ring.reading) {
+                out.reject(blob, reason);
+                continue;
+            }
+            let m = if ring.reading.ring_present {
+                // Measure again with a window that keeps clear of the ring.
+                let m2 = measure::measure(
+                    plane,
+                    blob,
+                    t.threshold,
+                    t.background,
+                    measure::CODED_GROW,
+                    measure::CODED_MAX_SCALE,
+                );
+                probe(DetectStage::Measure);
+                m2.unwrap_or(m)
+            } else {
+                m
+            };
+            candidates.push(Candidate {
+                blob: i as u32,
+                m,
+                frame: ring.frame,
+                moments: ring.moments,
+                reading: ring.reading,
+                suppressed: false,
+            });
+        }
+    }
+
+    /// Ring parts: blobs in the ring zone of a target with a ring.
+    /// Decoded targets come first, then rings with dark surroundings
+    /// (whatever their reading), then the rest by decreasing area; the
+    /// first two suppress whatever lies in their ring zone (but a decoded
+    /// target only yields to a decoded one), the rest only smaller blobs.
+    fn suppress_ring_parts(&mut self) {
+        let Detector {
+            labeller,
+            candidates: cands,
+            order,
+            out,
+            ..
+        } = self;
+        let blobs = labeller.blobs();
+        order.extend(0..cands.len() as u32);
+        let rank = |c: &Candidate| -> u8 {
+            if c.reading.status.id().is_some() {
+                0
+            } else if strong_ring(&c.reading) {
+                1
+            } else {
+                2
+            }
+        };
+        order.sort_unstable_by(|&x, &y| {
+            let (cx, cy) = (&cands[x as usize], &cands[y as usize]);
+            let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
+            rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
+        });
+        for &i in order.iter() {
+            let i = i as usize;
+            let y = cands[i];
+            if y.suppressed || !y.reading.ring_present {
+                continue;
+            }
+            let Some(f) = y.frame else { continue };
+            let y_area = blobs[y.blob as usize].area;
+            let y_rank = rank(&y);
+            for (j, x) in cands.iter_mut().enumerate() {
+                if j == i || x.suppressed {
+                    continue;
+                }
+                if y_rank == 2 && blobs[x.blob as usize].area > y_area {
+                    continue;
+                }
+                if x.reading.status.id().is_some() && y_rank > 0 {
+                    continue;
+                }
+                let rho = f.radius_of(x.m.col, x.m.row);
+                if (1.6..=3.8).contains(&rho) {
+                    x.suppressed = true;
+                }
+            }
+            // Rejected blobs inside a ring zone are ring parts as well.
+            for r in out.rejected.iter_mut() {
+                if matches!(r.reason, RejectReason::Shape | RejectReason::Elongated)
+                    && (1.6..=3.8).contains(&f.radius_of(r.col, r.row))
+                {
+                    r.reason = RejectReason::CodeRing;
+                }
+            }
+        }
+    }
+
+    /// The output: every candidate not suppressed becomes a target.
+    fn emit(&mut self) {
+        let blobs = self.labeller.blobs();
+        for c in self.candidates.iter() {
+            let blob = &blobs[c.blob as usize];
+            if c.suppressed {
+                self.out.reject(blob, RejectReason::CodeRing);
+                continue;
+            }
+            if self.out.targets.len() >= self.out.targets.capacity() {
+                self.out.n_dropped += 1;
+                continue;
+            }
+            let (a, b, angle) = measure::ellipse(c.moments.0, c.moments.1, c.moments.2);
+            self.out.targets.push(Detection {
+                col: c.m.col,
+                row: c.m.row,
+                semi_major: a,
+                semi_minor: b,
+                angle,
+                area: blob.area,
+                peak: blob.max,
+                signal: c.m.signal,
+                background: c.m.background,
+                kind: if c.reading.ring_present {
+                    TargetKind::Coded
+                } else {
+                    TargetKind::Uncoded
+                },
+                id: c.reading.status.id(),
+                code: c.reading.status,
+            });
+        }
+    }
+}
+
+/// Stage 3: the tests on a blob's binary statistics (area, distance from
+/// the window's edge, saturation, elongation, fill of its ellipse).
+fn blob_tests<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    o: &DetectorOptions,
+) -> Result<(), RejectReason> {
+    if blob.area > o.max_area {
+        return Err(RejectReason::TooLarge);
+    }
+    // The measuring window (the box grown by `GROW`) must lie inside.
+    let margin = measure::GROW as u32;
+    let (col0, row0) = (plane.col0 as u32, plane.row0 as u32);
+    if blob.col0 < col0 + margin
+        || blob.row0 < row0 + margin
+        || blob.col1 + margin > plane.last_col() as u32
+        || blob.row1 + margin > plane.last_row() as u32
+    {
+        return Err(RejectReason::Border);
+    }
+    if blob.saturated > 0 {
+        return Err(RejectReason::Saturated);
+    }
+    let (cxx, cyy, cxy) = blob.covariance();
+    let (a, b, _) = measure::ellipse(cxx, cyy, cxy);
+    if b.is_nan() || b <= 0.0 || a / b > o.max_axis_ratio {
+        return Err(RejectReason::Elongated);
+    }
+    let fill = blob.area as f64 / (std::f64::consts::PI * a * b);
+    if fill < o.fill_range.0 || fill > o.fill_range.1 {
+        return Err(RejectReason::Shape);
+    }
+    Ok(())
+}
+
+/// Stage 4: the background-subtracted centroid and moments of a blob, and
+/// the test of its fourth moment (a filled ellipse's).
+fn centroid<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    o: &DetectorOptions,
+) -> Result<Measurement, RejectReason> {
+    let m = measure::measure(
+        plane,
+        blob,
+        t.threshold,
+        t.background,
+        measure::GROW,
+        measure::MAX_SCALE,
+    )
+    .ok_or(RejectReason::NoSignal)?;
+    if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
+        return Err(RejectReason::Shape);
+    }
+    Ok(m)
+}
+
+/// What stage 5 found around a dot.
+struct Ring {
+    /// The sampling frame of the ring (from the deblurred moments).
+    frame: Option<RingFrame>,
+    /// The dot's deblurred moments `(cxx, cyy, cxy)`.
+    moments: (f64, f64, f64),
+    reading: Reading,
+}
+
+/// Stage 5: the code ring around a measured dot, sampled on the dot's
+/// ellipse with the blur removed.
+fn read_ring<P: Pixel>(
+    plane: &Plane<'_, P>,
+    m: &Measurement,
+    params: &CodeParams,
+    o: &DetectorOptions,
+    tables: &RingTables,
+) -> Ring {
+    let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
+    for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+        amplitude += plane.bilinear(m.col + dx, m.row + dy).unwrap_or(0.0);
+    }
+    amplitude = amplitude / 5.0 - m.background;
+    let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
+    let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
+    let reading = match &frame {
+        Some(f) => code::read(plane, f, params, &o.codes, tables),
+        None => Reading {
+            gap: Gap::NotDark,
+            status: CodeStatus::Uncertain(Uncertainty::LowContrast),
+            ring_present: false,
+            raw: 0,
+            bright: 0.0,
+            dark: 0.0,
+        },
+    };
+    Ring {
+        frame,
+        moments: (cxx, cyy, cxy),
+        reading,
+    }
+}
+
+/// Whether a ring's reading leaves the dot a target: its dark gap must be
+/// seen all round.
+fn ring_verdict(reading: &Reading) -> Result<(), RejectReason> {
+    if reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage) && !reading.ring_present {
+        // Its ring zone leaves the window and nothing bright is seen in the
+        // part inside: it may be a part of the ring of a coded target whose
+        // dot is outside the window.
+        return Err(RejectReason::Border);
+    }
+    match reading.gap {
+        Gap::Dark => Ok(()),
+        Gap::NotDark => Err(RejectReason::NotIsolated),
+        Gap::Outside => Err(RejectReason::Border),
+    }
+}
+
+/// Whether a reading found a ring with dark gap and quiet zone (a coded
+/// target, read or not).
+fn strong_ring(r: &Reading) -> bool {
+    r.ring_present
+        && r.gap == Gap::Dark
+        && !matches!(
+            r.status,
+            CodeStatus::Uncertain(
+                Uncertainty::OutsideImage
+                    | Uncertainty::QuietZoneNotDark
+                    | Uncertainty::LowContrast
+            )
+        )
+}
