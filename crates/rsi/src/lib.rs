@@ -16,7 +16,9 @@ pub mod ethernet_config;
 pub mod law;
 pub mod monitor;
 pub mod server;
+pub mod session;
 pub mod slot;
+pub mod warning;
 pub mod xml;
 
 pub use codec::{parse_rob, CodecError, Ipoc, Pose6, RobFrame, SenFormat};
@@ -25,3 +27,4 @@ pub use law::{
     CorrFrame, CorrectionLaw, CorrectionMode, HandEye, LawConfig, LawStatus, Measurement,
 };
 pub use slot::{latest_slot, SlotPublisher, SlotReader};
+pub use warning::RsiWarning;

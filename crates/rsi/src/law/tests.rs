@@ -149,21 +149,26 @@ fn pose_conversions_round_trip() {
 
 #[test]
 fn converges_in_every_mode_and_frame() {
-    for mode in [CorrectionMode::Relative, CorrectionMode::Absolute] {
-        for frame in [CorrFrame::Base, CorrFrame::Tool] {
-            for includes in [false, true] {
-                let cfg = LawConfig {
-                    mode,
-                    frame,
-                    rsol_includes_correction: includes,
-                    ..LawConfig::default()
-                };
-                let (dt, dr, law) = run_loop(cfg, includes, 1500);
-                assert!(
-                    dt < 1e-4 && dr < 1e-5,
-                    "{mode:?} {frame:?} {includes}: {dt} mm {dr}°, total {:?}",
-                    law.total()
-                );
+    // The total lives on the printed grid: the loop settles within a unit
+    // or two of it (an integrator on a grid has that dead band).
+    for (decimals, tol_mm, tol_deg) in [(6, 1e-4, 1e-5), (4, 4e-4, 4e-4)] {
+        for mode in [CorrectionMode::Relative, CorrectionMode::Absolute] {
+            for frame in [CorrFrame::Base, CorrFrame::Tool] {
+                for includes in [false, true] {
+                    let cfg = LawConfig {
+                        mode,
+                        frame,
+                        rsol_includes_correction: includes,
+                        decimals,
+                        ..LawConfig::default()
+                    };
+                    let (dt, dr, law) = run_loop(cfg, includes, 1500);
+                    assert!(
+                        dt < tol_mm && dr < tol_deg,
+                        "{decimals} {mode:?} {frame:?} {includes}: {dt} mm {dr}°, total {:?}",
+                        law.total()
+                    );
+                }
             }
         }
     }
@@ -263,7 +268,7 @@ fn quality_gates() {
         law.cycle(0.0, Some(NOMINAL), Some(&good)).status,
         LawStatus::Tracking
     );
-    for code in 0..7 {
+    for code in 0..8 {
         assert_eq!(LawStatus::from_code(code).unwrap().code(), code);
     }
 }
