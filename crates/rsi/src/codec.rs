@@ -785,6 +785,90 @@ mod tests {
     }
 
     #[test]
+    fn malformed_numbers_and_ipocs_are_refused() {
+        let bad_ipoc = |d: &[u8]| matches!(parse_rob(d), Err(CodecError::BadIpoc { .. }));
+        // Text split by a comment, a comment alone, an element, CDATA.
+        assert!(bad_ipoc(b"<Rob><IPOC>12<!---->99</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC><!-- -->99</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC>9<b/>9</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC><![CDATA[99]]></IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC></IPOC></Rob>"));
+        assert!(matches!(
+            parse_rob(b"<Rob><IPOC>1</IPOC><IPOC>2</IPOC></Rob>"),
+            Err(CodecError::Duplicate {
+                element: "IPOC",
+                ..
+            })
+        ));
+        let p = "X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"";
+        let twice = format!("<Rob><RSol {p}/><RSol {p}/><IPOC>1</IPOC></Rob>");
+        assert!(matches!(
+            parse_rob(twice.as_bytes()),
+            Err(CodecError::Duplicate {
+                element: "RSol",
+                ..
+            })
+        ));
+        assert!(matches!(
+            parse_rob(b"<Rob><RIst X=\"1\" X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"/><IPOC>1</IPOC></Rob>"),
+            Err(CodecError::Duplicate { element: "RIst", .. })
+        ));
+        for (d, attr) in [("1e300", "D"), ("4294967296", "D")] {
+            let doc = format!("<Rob><Delay D=\"{d}\"/><IPOC>1</IPOC></Rob>");
+            assert!(
+                matches!(parse_rob(doc.as_bytes()), Err(CodecError::OutOfRange { element: "Delay", attr: a, .. }) if a == attr),
+                "{doc}"
+            );
+        }
+        for d in ["NaN", "-1", "1.5", "inf"] {
+            let doc = format!("<Rob><Delay D=\"{d}\"/><IPOC>1</IPOC></Rob>");
+            assert!(
+                matches!(parse_rob(doc.as_bytes()), Err(CodecError::BadNumber { .. })),
+                "{doc}"
+            );
+        }
+        let huge =
+            "<Rob><RSol X=\"1e300\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"/><IPOC>1</IPOC></Rob>";
+        assert!(matches!(
+            parse_rob(huge.as_bytes()),
+            Err(CodecError::OutOfRange {
+                element: "RSol",
+                attr: "X",
+                ..
+            })
+        ));
+        let angle =
+            "<Rob><RIst X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"720\" C=\"6\"/><IPOC>1</IPOC></Rob>";
+        assert!(matches!(
+            parse_rob(angle.as_bytes()),
+            Err(CodecError::OutOfRange { attr: "B", .. })
+        ));
+        // The largest valid values still pass.
+        let d = format!("<Rob><Delay D=\"{MAX_DELAY}\"/><IPOC> 18446744073709551615 </IPOC></Rob>");
+        let f = parse_rob(d.as_bytes()).unwrap();
+        assert_eq!((f.delay, f.ipoc.value()), (Some(MAX_DELAY), u64::MAX));
+    }
+
+    #[test]
+    fn non_finite_values_are_never_written() {
+        let fmt = SenFormat::default();
+        let mut buf = [0u8; 256];
+        let ipoc = Ipoc::from_value(1);
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                fmt.write(&[0.0, 0.0, bad, 0.0, 0.0, 0.0], &ipoc, &mut buf),
+                Err(CodecError::NonFinite { index: 2 })
+            );
+        }
+        let bound = fmt.reply_len_bound(4.0);
+        let n = fmt
+            .write(&[-4.0; 6], &Ipoc::from_value(u64::MAX), &mut buf)
+            .unwrap();
+        assert_eq!(n, bound);
+        assert!(fmt.reply_len_bound(1234.5) > bound);
+    }
+
+    #[test]
     fn writes_the_spec_reply() {
         let fmt = SenFormat::default();
         let mut buf = [0u8; 256];

@@ -626,4 +626,152 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn absurd_values_are_refused_naming_the_key() {
+        let base = RsiConfig {
+            port: Some(49152),
+            ..RsiConfig::default()
+        };
+        let edits: Vec<(&str, fn(&mut RsiConfig))> = vec![
+            ("poscorr_limit_mm", |c| c.poscorr_limit_mm = 1.7e308),
+            ("poscorr_limit_deg", |c| c.poscorr_limit_deg = f64::INFINITY),
+            ("gain", |c| c.gain = f64::NAN),
+            ("gain", |c| c.gain = 1.5),
+            ("max_step_mm", |c| c.max_step_mm = f64::NAN),
+            ("max_step_deg", |c| c.max_step_deg = 0.00001),
+            ("clamp_mm", |c| c.clamp_mm = -1.0),
+            ("cycle_ms", |c| c.cycle_ms = 1e308),
+            ("max_age_ms", |c| c.max_age_ms = f64::INFINITY),
+            ("max_std_mm", |c| c.max_std_mm = 0.0),
+            ("max_std_deg", |c| c.max_std_deg = f64::NAN),
+            ("session_idle_ms", |c| c.session_idle_ms = 5.0),
+            ("session_idle_ms", |c| c.session_idle_ms = f64::NAN),
+            ("sentype", |c| c.sentype = Some("Im\"Free".into())),
+            ("sentype", |c| c.sentype = Some("1st".into())),
+            ("correction_element", |c| {
+                c.correction_element = Some("R Korr".into())
+            }),
+            ("controllers", |c| {
+                c.bind = "127.0.0.1".into();
+                c.controllers = vec!["fe80::1".into()];
+            }),
+            ("controllers", |c| {
+                c.bind = "::1".into();
+                c.controllers = vec!["10.0.0.2".into()];
+            }),
+        ];
+        for (key, edit) in edits {
+            let mut c = base.clone();
+            edit(&mut c);
+            match c.settings(None) {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn v4_mapped_controllers_and_dual_stack_binds() {
+        let c = RsiConfig {
+            enabled: true,
+            bind: "::".into(),
+            port: Some(49152),
+            controllers: vec!["::ffff:10.0.0.2".into(), "10.0.0.3".into()],
+            ..RsiConfig::default()
+        };
+        let s = c.settings(None).unwrap();
+        assert_eq!(
+            s.controllers,
+            vec![
+                "10.0.0.2".parse::<IpAddr>().unwrap(),
+                "10.0.0.3".parse().unwrap()
+            ]
+        );
+        let w = c.warnings(None).unwrap();
+        assert_eq!(w, s.warnings);
+        assert!(matches!(w[..], [RsiWarning::DualStackBind { .. }]), "{w:?}");
+        assert!(w[0].to_string().contains("bindv6only"), "{}", w[0]);
+        // An IPv4 bind with a v4-mapped controller is fine.
+        let c = RsiConfig {
+            bind: "0.0.0.0".into(),
+            ..c
+        };
+        assert!(c.settings(None).unwrap().warnings.is_empty());
+    }
+
+    #[test]
+    fn the_reply_buffer_follows_the_receive_list() {
+        let mut xml = XML.replace("</ELEMENTS></RECEIVE>", "");
+        for k in 0..5000 {
+            xml.push_str(&format!("<ELEMENT TAG=\"Out{k}\" HOLDON=\"0\"/>"));
+        }
+        xml.push_str("</ELEMENTS></RECEIVE></ROOT>");
+        let xml = xml.replacen("</ROOT>", "", 1);
+        let c = RsiConfig {
+            enabled: true,
+            controllers: vec!["10.0.0.2".into()],
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            ..RsiConfig::default()
+        };
+        match c.settings(Some(&xml)) {
+            Err(ConfigError::ReplyTooLarge { len, limit }) => {
+                assert!(len > limit && limit == MAX_DATAGRAM, "{len} {limit}")
+            }
+            other => panic!("{other:?}"),
+        }
+        // The spec's reply fits its bound exactly at the clamp.
+        let s = c.settings(Some(XML)).unwrap();
+        let mut buf = vec![0u8; s.reply_capacity()];
+        let v = -s.law.clamp_mm;
+        let n = s
+            .sen
+            .write(&[v; 6], &crate::codec::Ipoc::from_value(u64::MAX), &mut buf)
+            .unwrap();
+        assert_eq!(n, buf.len());
+    }
+
+    #[test]
+    fn holdon_warnings_are_data_for_check_config_and_run() {
+        let c = RsiConfig {
+            enabled: true,
+            controllers: vec!["10.0.0.2".into()],
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            mode: CorrectionMode::Absolute,
+            ..RsiConfig::default()
+        };
+        let w = c.warnings(Some(XML)).unwrap();
+        assert_eq!(w.len(), 6);
+        assert!(matches!(
+            &w[0],
+            RsiWarning::Holdon {
+                holdon: Some(false),
+                mode: CorrectionMode::Absolute,
+                ..
+            }
+        ));
+        assert!(
+            w[0].to_string().contains("RKorr.X has HOLDON=0"),
+            "{}",
+            w[0]
+        );
+        let no_rsol = XML.replace("DEF_RSol", "DEF_RIst");
+        let c = RsiConfig {
+            mode: CorrectionMode::Relative,
+            ..c
+        };
+        assert_eq!(
+            c.warnings(Some(&no_rsol)).unwrap(),
+            vec![RsiWarning::NoRsol]
+        );
+        // A SENTYPE with a quote is refused at load.
+        let quoted = XML.replace("<SENTYPE>Cam", "<SENTYPE>Ca\"m");
+        assert!(matches!(
+            c.settings(Some(&quoted)),
+            Err(ConfigError::Ethernet(EthernetConfigError::NotAName {
+                key: "SENTYPE",
+                ..
+            }))
+        ));
+    }
 }

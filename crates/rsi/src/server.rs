@@ -635,3 +635,35 @@ impl Worker {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_line_per_reason_per_interval() {
+        let mut log = RateLog::new(Duration::from_secs(10));
+        let t0 = Instant::now();
+        let mut lines = Vec::new();
+        for k in 0..30_000u64 {
+            let t = t0 + Duration::from_millis(k);
+            for reason in ["unlisted", "syntax", "bad_ipoc"] {
+                if let Some(more) = log.due(reason, t) {
+                    lines.push((reason, k, more));
+                }
+            }
+        }
+        // At 0, 10 and 20 s, each with the repeats since the last line.
+        assert_eq!(lines.len(), 9, "{lines:?}");
+        assert_eq!(lines[0], ("unlisted", 0, 0));
+        assert_eq!(lines[3], ("unlisted", 10_000, 9_999));
+        assert_eq!(lines[8], ("bad_ipoc", 20_000, 9_999));
+        // More reasons than the table holds share its last entry.
+        let mut log = RateLog::new(Duration::from_secs(10));
+        let names: Vec<&'static str> = (0..40)
+            .map(|k| &*Box::leak(format!("r{k}").into_boxed_str()))
+            .collect();
+        let due = names.iter().filter(|n| log.due(n, t0).is_some()).count();
+        assert_eq!(due, LOG_REASONS);
+    }
+}
