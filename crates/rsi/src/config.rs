@@ -633,7 +633,8 @@ mod tests {
             port: Some(49152),
             ..RsiConfig::default()
         };
-        let edits: Vec<(&str, fn(&mut RsiConfig))> = vec![
+        type Edit = fn(&mut RsiConfig);
+        let edits: Vec<(&str, Edit)> = vec![
             ("poscorr_limit_mm", |c| c.poscorr_limit_mm = 1.7e308),
             ("poscorr_limit_deg", |c| c.poscorr_limit_deg = f64::INFINITY),
             ("gain", |c| c.gain = f64::NAN),

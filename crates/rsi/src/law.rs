@@ -576,7 +576,7 @@ impl CorrectionLaw {
         // One step towards the target on the grid: the rounding remainder
         // stays in the distance to the target and is taken in later cycles.
         let mut units = self.units;
-        for i in 0..6 {
+        for (i, u) in units.iter_mut().enumerate() {
             let want = (self.target[i] * self.scale).round();
             if !want.is_finite() {
                 out.status = LawStatus::FrozenInvalid;
@@ -587,7 +587,7 @@ impl CorrectionLaw {
             let d = want - self.units[i];
             let step = d.clamp(-self.step_units[i], self.step_units[i]);
             out.slew_limited |= step != d;
-            units[i] = self.units[i] + step;
+            *u = self.units[i] + step;
         }
         let total = units.map(|u| u as f64 / self.scale);
         let send = match self.cfg.mode {
