@@ -6,8 +6,9 @@
 //! simulated controller for tests and demos.
 //!
 //! Pure modules (no IO, no clocks, no threads): [`xml`], [`codec`],
-//! [`ethernet_config`], [`config`], [`law`]. Concurrency: [`slot`]. IO:
-//! [`server`], [`monitor`] (its counters), [`controller`].
+//! [`ethernet_config`], [`config`], [`warning`], [`law`], [`session`].
+//! Concurrency: [`slot`]. IO: [`server`], [`monitor`] (its counters),
+//! [`controller`].
 
 pub mod codec;
 pub mod config;
