@@ -299,8 +299,10 @@ fn run(mode: CorrectionMode, seed: u64, cycles: u64, per_cycle: u64) -> u64 {
         // controller's port sends nothing that could open it.
         let n = if k == 0 { 0 } else { per_cycle };
         // Part 1: most of the hostile datagrams, read by the server before
-        // the cycle (large ones one at a time, so no socket buffer fills).
+        // the cycle (at most 16 KiB queued at once, so no socket buffer
+        // fills and the kernel drops nothing).
         let before = n - n.min(20);
+        let mut queued = 0;
         for i in 0..before {
             let from = match rng.below(10) {
                 0..=3 => From::Unlisted,
@@ -309,8 +311,10 @@ fn run(mode: CorrectionMode, seed: u64, cycles: u64, per_cycle: u64) -> u64 {
             };
             let d = hostile(&mut rng, from, last, &nominal);
             rig.send(from, i as usize, &d);
-            if d.len() > 4096 {
+            queued += d.len();
+            if queued > 16_384 {
                 rig.settle();
+                queued = 0;
             }
         }
         hostile_sent += before;
