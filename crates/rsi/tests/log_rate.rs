@@ -84,7 +84,9 @@ fn twenty_thousand_hostile_datagrams_give_a_handful_of_warnings() {
         "{st:?}"
     );
     // One line per reason (unlisted, foreign port, syntax, bad IPOC, old
-    // IPOC, out of range) in this run of well under 10 s.
-    assert!(lines <= 6, "{lines} warnings for {n} datagrams: {st:?}");
+    // IPOC, out of range) in this run of well under 10 s, plus perhaps the
+    // law's "correction frozen" line of the first cycle (logged after its
+    // reply, so it may be counted here).
+    assert!(lines <= 7, "{lines} warnings for {n} datagrams: {st:?}");
     assert!(lines >= 1);
 }
