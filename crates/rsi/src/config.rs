@@ -432,6 +432,13 @@ impl RsiConfig {
             3_600_000.0,
             "must be at most one hour",
         )?;
+        if self.min_targets < 4 {
+            return Err(bad(
+                "min_targets",
+                self.min_targets.to_string(),
+                "must be at least 4 (a pose needs four targets)",
+            ));
+        }
         let max_std_mm = positive("max_std_mm", self.max_std_mm)?;
         let max_std_deg = positive("max_std_deg", self.max_std_deg)?;
         if let Some(p) = self.realtime_priority {
@@ -645,6 +652,7 @@ mod tests {
             ("cycle_ms", |c| c.cycle_ms = 1e308),
             ("max_age_ms", |c| c.max_age_ms = f64::INFINITY),
             ("max_std_mm", |c| c.max_std_mm = 0.0),
+            ("min_targets", |c| c.min_targets = 3),
             ("max_std_deg", |c| c.max_std_deg = f64::NAN),
             ("session_idle_ms", |c| c.session_idle_ms = 5.0),
             ("session_idle_ms", |c| c.session_idle_ms = f64::NAN),
