@@ -4,7 +4,6 @@
 //! caller-owned buffer. Pure: no IO.
 
 use crate::xml::{Token, Tokenizer, XmlError};
-use std::fmt::Write as _;
 use thiserror::Error;
 
 /// Largest datagram accepted (64 KiB, `docs/rsi.md`).
@@ -16,6 +15,18 @@ pub type Pose6 = [f64; 6];
 
 /// The attribute names of a Cartesian pose element, in [`Pose6`] order.
 pub const POSE_ATTRS: [&str; 6] = ["X", "Y", "Z", "A", "B", "C"];
+
+/// Largest plausible magnitude of a position in `RIst`/`RSol`, mm (100 m:
+/// any robot, with a linear track, stays far inside it). Larger values
+/// reject the datagram.
+pub const MAX_POSITION_MM: f64 = 1.0e5;
+
+/// Largest plausible magnitude of an angle in `RIst`/`RSol`, degrees.
+pub const MAX_ANGLE_DEG: f64 = 360.0;
+
+/// Largest `Delay D` accepted (the controller's late-reply count; it stops
+/// RSI after its `Timeout`, which is far smaller).
+pub const MAX_DELAY: u64 = u32::MAX as u64;
 
 /// Why a datagram was rejected or a reply could not be written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
@@ -61,6 +72,32 @@ pub enum CodecError {
         /// Byte offset of the element.
         at: usize,
     },
+    /// A number that parses but lies outside the plausible range
+    /// ([`MAX_POSITION_MM`], [`MAX_ANGLE_DEG`], [`MAX_DELAY`]).
+    #[error("<{element}> attribute {attr} at byte {at} is out of range")]
+    OutOfRange {
+        /// The element.
+        element: &'static str,
+        /// The attribute.
+        attr: &'static str,
+        /// Byte offset of the element.
+        at: usize,
+    },
+    /// An element the sensor reads (`RIst`, `RSol`, `Delay`, `IPOC`) appears
+    /// twice.
+    #[error("<{element}> at byte {at} appears twice")]
+    Duplicate {
+        /// The element.
+        element: &'static str,
+        /// Byte offset of the second one.
+        at: usize,
+    },
+    /// A correction value to be written is not finite (never sent).
+    #[error("correction value {index} is not finite")]
+    NonFinite {
+        /// Index in `X Y Z A B C`.
+        index: usize,
+    },
     /// A pose element lacks one of `X Y Z A B C`.
     #[error("<{element}> at byte {at} lacks attribute {attr}")]
     MissingAttribute {
@@ -74,7 +111,9 @@ pub enum CodecError {
     /// The `<IPOC>` element is missing.
     #[error("no <IPOC> element")]
     MissingIpoc,
-    /// The `<IPOC>` text is not an unsigned integer of at most 20 digits.
+    /// The `<IPOC>` content is not exactly one unsigned integer of at most
+    /// 20 digits fitting 64 bits (no comments, elements or further text
+    /// inside).
     #[error("<IPOC> at byte {at} is not an unsigned integer")]
     BadIpoc {
         /// Byte offset.
@@ -98,6 +137,9 @@ impl CodecError {
             CodecError::Syntax { .. } => "syntax",
             CodecError::NotRob { .. } => "not_rob",
             CodecError::BadNumber { .. } => "bad_number",
+            CodecError::OutOfRange { .. } => "out_of_range",
+            CodecError::Duplicate { .. } => "duplicate",
+            CodecError::NonFinite { .. } => "non_finite",
             CodecError::MissingAttribute { .. } => "missing_attribute",
             CodecError::MissingIpoc => "missing_ipoc",
             CodecError::BadIpoc { .. } => "bad_ipoc",
@@ -226,11 +268,20 @@ fn pose(
     for a in attrs.iter() {
         let (n, v) = a.map_err(from_xml)?;
         if let Some(i) = POSE_ATTRS.iter().position(|p| p.as_bytes() == n) {
-            out[i] = number(v).ok_or(CodecError::BadNumber {
-                element,
-                attr: POSE_ATTRS[i],
-                at,
-            })?;
+            let attr = POSE_ATTRS[i];
+            if seen[i] {
+                return Err(CodecError::Duplicate { element, at });
+            }
+            let x = number(v).ok_or(CodecError::BadNumber { element, attr, at })?;
+            let limit = if i < 3 {
+                MAX_POSITION_MM
+            } else {
+                MAX_ANGLE_DEG
+            };
+            if x.abs() > limit {
+                return Err(CodecError::OutOfRange { element, attr, at });
+            }
+            out[i] = x;
             seen[i] = true;
         }
     }
@@ -247,7 +298,10 @@ fn pose(
 /// Parses one `<Rob>` datagram. Elements are found by name at any depth
 /// below the root, in any order; unknown elements and attributes are
 /// skipped; the root's `Type`/`TYPE` is not checked (the controller names
-/// itself). Never allocates.
+/// itself). The elements the sensor reads must appear at most once, hold
+/// plausible finite numbers, and `<IPOC>` must hold nothing but its digits:
+/// anything else rejects the whole datagram (it is never answered as if
+/// valid). Never allocates.
 pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
     if datagram.len() > MAX_DATAGRAM {
         return Err(CodecError::Oversize {
@@ -261,8 +315,10 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
     let mut depth = 0usize;
     let mut root_seen = false;
     let mut root_closed = false;
-    let mut in_ipoc: Option<usize> = None;
+    // (offset of the <IPOC> tag, offset of its content, depth inside it)
+    let mut in_ipoc: Option<(usize, usize)> = None;
     let mut ipoc: Option<Ipoc> = None;
+    let mut ipoc_seen = false;
     let mut rist = None;
     let mut rsol = None;
     let mut delay = None;
@@ -273,9 +329,7 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
         };
         match tok {
             Token::Text(txt) => {
-                if let Some(ip_at) = in_ipoc {
-                    ipoc = Some(Ipoc::parse(txt).ok_or(CodecError::BadIpoc { at: ip_at })?);
-                } else if !txt.trim_ascii().is_empty() && (depth == 0) {
+                if in_ipoc.is_none() && !txt.trim_ascii().is_empty() && depth == 0 {
                     return Err(CodecError::Syntax {
                         at,
                         what: "text outside the root element",
@@ -289,6 +343,10 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
                         what: "content after the root element",
                     });
                 }
+                if let Some((ip_at, _)) = in_ipoc {
+                    // No element inside <IPOC>.
+                    return Err(CodecError::BadIpoc { at: ip_at });
+                }
                 if !root_seen {
                     if name != b"Rob" {
                         return Err(CodecError::NotRob { at });
@@ -296,27 +354,46 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
                     root_seen = true;
                 } else {
                     match name {
-                        b"RIst" => rist = Some(pose(attrs, "RIst", at)?),
-                        b"RSol" => rsol = Some(pose(attrs, "RSol", at)?),
-                        b"Delay" => {
-                            let d = attrs.get(b"D").map_err(from_xml)?.ok_or(
-                                CodecError::MissingAttribute {
-                                    element: "Delay",
-                                    attr: "D",
+                        b"RIst" => {
+                            if rist.is_some() {
+                                return Err(CodecError::Duplicate {
+                                    element: "RIst",
                                     at,
-                                },
-                            )?;
-                            let d = number(d).filter(|x| *x >= 0.0 && x.fract() == 0.0).ok_or(
-                                CodecError::BadNumber {
-                                    element: "Delay",
-                                    attr: "D",
-                                    at,
-                                },
-                            )?;
-                            delay = Some(d as u64);
+                                });
+                            }
+                            rist = Some(pose(attrs, "RIst", at)?);
                         }
-                        b"IPOC" if !empty => in_ipoc = Some(at),
-                        b"IPOC" => return Err(CodecError::BadIpoc { at }),
+                        b"RSol" => {
+                            if rsol.is_some() {
+                                return Err(CodecError::Duplicate {
+                                    element: "RSol",
+                                    at,
+                                });
+                            }
+                            rsol = Some(pose(attrs, "RSol", at)?);
+                        }
+                        b"Delay" => {
+                            if delay.is_some() {
+                                return Err(CodecError::Duplicate {
+                                    element: "Delay",
+                                    at,
+                                });
+                            }
+                            delay = Some(delay_value(attrs, at)?);
+                        }
+                        b"IPOC" => {
+                            if ipoc_seen {
+                                return Err(CodecError::Duplicate {
+                                    element: "IPOC",
+                                    at,
+                                });
+                            }
+                            ipoc_seen = true;
+                            if empty {
+                                return Err(CodecError::BadIpoc { at });
+                            }
+                            in_ipoc = Some((at, t.position()));
+                        }
                         _ => {}
                     }
                 }
@@ -333,11 +410,17 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
                         what: "end tag without a start tag",
                     });
                 }
-                if name == b"IPOC" {
-                    if in_ipoc.is_some() && ipoc.is_none() {
-                        return Err(CodecError::BadIpoc { at });
+                if let Some((ip_at, content)) = in_ipoc.take() {
+                    // The raw bytes between <IPOC> and this end tag: a
+                    // comment, a declaration or a second text run makes
+                    // them more than the digits and is refused.
+                    if name != b"IPOC" {
+                        return Err(CodecError::BadIpoc { at: ip_at });
                     }
-                    in_ipoc = None;
+                    ipoc = Some(
+                        Ipoc::parse(&datagram[content..at])
+                            .ok_or(CodecError::BadIpoc { at: ip_at })?,
+                    );
                 }
                 depth -= 1;
                 if depth == 0 {
@@ -371,6 +454,33 @@ pub fn parse_rob(datagram: &[u8]) -> Result<RobFrame, CodecError> {
         delay,
         ipoc,
     })
+}
+
+/// `<Delay D="k"/>`: a non-negative integer up to [`MAX_DELAY`].
+fn delay_value(attrs: crate::xml::Attrs<'_>, at: usize) -> Result<u64, CodecError> {
+    let d = attrs
+        .get(b"D")
+        .map_err(from_xml)?
+        .ok_or(CodecError::MissingAttribute {
+            element: "Delay",
+            attr: "D",
+            at,
+        })?;
+    let d = number(d)
+        .filter(|x| *x >= 0.0 && x.fract() == 0.0)
+        .ok_or(CodecError::BadNumber {
+            element: "Delay",
+            attr: "D",
+            at,
+        })?;
+    if d > MAX_DELAY as f64 {
+        return Err(CodecError::OutOfRange {
+            element: "Delay",
+            attr: "D",
+            at,
+        });
+    }
+    Ok(d as u64)
 }
 
 /// How the `<Sen>` reply is spelled: the root's `Type` (SENTYPE), the
@@ -420,15 +530,30 @@ impl std::fmt::Write for Cursor<'_> {
     }
 }
 
+/// Counts the bytes a reply would take.
+struct Counter(usize);
+
+impl std::fmt::Write for Counter {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        self.0 += s.len();
+        Ok(())
+    }
+}
+
 impl SenFormat {
     /// Writes `<Sen Type="..."><RKorr X=".." .../>...<IPOC>..</IPOC></Sen>`
-    /// into `out`, returning the number of bytes written. Never allocates.
+    /// into `out`, returning the number of bytes written. A non-finite
+    /// correction value is refused ([`CodecError::NonFinite`]), never
+    /// printed. Never allocates.
     pub fn write(
         &self,
         correction: &Pose6,
         ipoc: &Ipoc,
         out: &mut [u8],
     ) -> Result<usize, CodecError> {
+        if let Some(index) = correction.iter().position(|v| !v.is_finite()) {
+            return Err(CodecError::NonFinite { index });
+        }
         let capacity = out.len();
         let mut c = Cursor { buf: out, len: 0 };
         self.write_to(&mut c, correction, ipoc)
@@ -436,7 +561,24 @@ impl SenFormat {
         Ok(c.len)
     }
 
-    fn write_to(&self, c: &mut Cursor<'_>, corr: &Pose6, ipoc: &Ipoc) -> std::fmt::Result {
+    /// The longest reply this format can produce when every correction
+    /// value's magnitude is at most `max_abs` (and the IPOC has its 20
+    /// digits): the size of the reply buffer.
+    pub fn reply_len_bound(&self, max_abs: f64) -> usize {
+        let mut n = Counter(0);
+        let v = -max_abs.abs();
+        let ipoc = Ipoc::from_value(u64::MAX);
+        // Writing into a counter never fails.
+        let _ = self.write_to(&mut n, &[v; 6], &ipoc);
+        n.0
+    }
+
+    fn write_to(
+        &self,
+        c: &mut impl std::fmt::Write,
+        corr: &Pose6,
+        ipoc: &Ipoc,
+    ) -> std::fmt::Result {
         let d = self.decimals;
         write!(
             c,
@@ -640,6 +782,90 @@ mod tests {
             parse_rob(b"<Rob><IPOC>1</IPOC></Rob><Rob>"),
             Err(CodecError::Syntax { .. })
         ));
+    }
+
+    #[test]
+    fn malformed_numbers_and_ipocs_are_refused() {
+        let bad_ipoc = |d: &[u8]| matches!(parse_rob(d), Err(CodecError::BadIpoc { .. }));
+        // Text split by a comment, a comment alone, an element, CDATA.
+        assert!(bad_ipoc(b"<Rob><IPOC>12<!---->99</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC><!-- -->99</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC>9<b/>9</IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC><![CDATA[99]]></IPOC></Rob>"));
+        assert!(bad_ipoc(b"<Rob><IPOC></IPOC></Rob>"));
+        assert!(matches!(
+            parse_rob(b"<Rob><IPOC>1</IPOC><IPOC>2</IPOC></Rob>"),
+            Err(CodecError::Duplicate {
+                element: "IPOC",
+                ..
+            })
+        ));
+        let p = "X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"";
+        let twice = format!("<Rob><RSol {p}/><RSol {p}/><IPOC>1</IPOC></Rob>");
+        assert!(matches!(
+            parse_rob(twice.as_bytes()),
+            Err(CodecError::Duplicate {
+                element: "RSol",
+                ..
+            })
+        ));
+        assert!(matches!(
+            parse_rob(b"<Rob><RIst X=\"1\" X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"/><IPOC>1</IPOC></Rob>"),
+            Err(CodecError::Duplicate { element: "RIst", .. })
+        ));
+        for (d, attr) in [("1e300", "D"), ("4294967296", "D")] {
+            let doc = format!("<Rob><Delay D=\"{d}\"/><IPOC>1</IPOC></Rob>");
+            assert!(
+                matches!(parse_rob(doc.as_bytes()), Err(CodecError::OutOfRange { element: "Delay", attr: a, .. }) if a == attr),
+                "{doc}"
+            );
+        }
+        for d in ["NaN", "-1", "1.5", "inf"] {
+            let doc = format!("<Rob><Delay D=\"{d}\"/><IPOC>1</IPOC></Rob>");
+            assert!(
+                matches!(parse_rob(doc.as_bytes()), Err(CodecError::BadNumber { .. })),
+                "{doc}"
+            );
+        }
+        let huge =
+            "<Rob><RSol X=\"1e300\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"6\"/><IPOC>1</IPOC></Rob>";
+        assert!(matches!(
+            parse_rob(huge.as_bytes()),
+            Err(CodecError::OutOfRange {
+                element: "RSol",
+                attr: "X",
+                ..
+            })
+        ));
+        let angle =
+            "<Rob><RIst X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"720\" C=\"6\"/><IPOC>1</IPOC></Rob>";
+        assert!(matches!(
+            parse_rob(angle.as_bytes()),
+            Err(CodecError::OutOfRange { attr: "B", .. })
+        ));
+        // The largest valid values still pass.
+        let d = format!("<Rob><Delay D=\"{MAX_DELAY}\"/><IPOC> 18446744073709551615 </IPOC></Rob>");
+        let f = parse_rob(d.as_bytes()).unwrap();
+        assert_eq!((f.delay, f.ipoc.value()), (Some(MAX_DELAY), u64::MAX));
+    }
+
+    #[test]
+    fn non_finite_values_are_never_written() {
+        let fmt = SenFormat::default();
+        let mut buf = [0u8; 256];
+        let ipoc = Ipoc::from_value(1);
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(
+                fmt.write(&[0.0, 0.0, bad, 0.0, 0.0, 0.0], &ipoc, &mut buf),
+                Err(CodecError::NonFinite { index: 2 })
+            );
+        }
+        let bound = fmt.reply_len_bound(4.0);
+        let n = fmt
+            .write(&[-4.0; 6], &Ipoc::from_value(u64::MAX), &mut buf)
+            .unwrap();
+        assert_eq!(n, bound);
+        assert!(fmt.reply_len_bound(1234.5) > bound);
     }
 
     #[test]

@@ -3,9 +3,11 @@
 //! ([`RsiSettings`]), optionally merged with the controller's own
 //! `RSI_EthernetConfig.xml` (its text handed in). Pure.
 
-use crate::codec::{SenFormat, POSE_ATTRS};
+use crate::codec::{SenFormat, MAX_DATAGRAM, POSE_ATTRS};
 use crate::ethernet_config::{EthernetConfig, EthernetConfigError};
 use crate::law::{CorrFrame, CorrectionMode, LawConfig};
+use crate::warning::RsiWarning;
+use crate::xml::is_xml_name;
 use serde::{Deserialize, Serialize};
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
@@ -40,6 +42,15 @@ pub enum ConfigError {
     /// The controller's file is invalid.
     #[error(transparent)]
     Ethernet(#[from] EthernetConfigError),
+    /// The reply the controller's RECEIVE list asks for is larger than a
+    /// datagram may be.
+    #[error("the reply for this RECEIVE list takes up to {len} bytes, more than the {limit}-byte datagram limit: remove RECEIVE elements")]
+    ReplyTooLarge {
+        /// The longest reply, bytes.
+        len: usize,
+        /// The limit, bytes.
+        limit: usize,
+    },
 }
 
 /// The `[rsi]` section. Every key has a default; unknown keys are errors.
@@ -97,6 +108,11 @@ pub struct RsiConfig {
     /// The controller's cycle, ms (4 with `#IPO_FAST`, 12 with `#IPO`): the
     /// reference of the jitter statistics.
     pub cycle_ms: f64,
+    /// Silence after which the controller session may restart, ms: a
+    /// datagram from another port of a listed address, or a smaller IPOC,
+    /// opens a new session only after the current one has not advanced for
+    /// this long (RSI restarted on the controller).
+    pub session_idle_ms: f64,
     /// SCHED_FIFO priority (1–99) of the RSI thread; failing to get it is a
     /// warning.
     pub realtime_priority: Option<u8>,
@@ -135,6 +151,7 @@ impl Default for RsiConfig {
             max_std_mm: law.max_std_mm,
             max_std_deg: law.max_std_deg,
             cycle_ms: 4.0,
+            session_idle_ms: 100.0,
             realtime_priority: None,
             cpu: None,
             hand_eye: None,
@@ -155,12 +172,24 @@ pub struct RsiSettings {
     pub law: LawConfig,
     /// The controller's cycle.
     pub cycle: Duration,
+    /// Silence after which the controller session may restart.
+    pub session_idle: Duration,
     /// SCHED_FIFO priority.
     pub realtime_priority: Option<u8>,
     /// CPU core to pin to.
     pub cpu: Option<usize>,
-    /// Consistency warnings to log (HOLDON pairing, ...).
-    pub warnings: Vec<String>,
+    /// Consistency warnings to report (HOLDON pairing, ...): the same list
+    /// for `check-config` and `run`.
+    pub warnings: Vec<RsiWarning>,
+}
+
+impl RsiSettings {
+    /// The size of the reply buffer: the longest reply this format writes
+    /// for corrections inside the clamp.
+    pub fn reply_capacity(&self) -> usize {
+        self.sen
+            .reply_len_bound(self.law.clamp_mm.max(self.law.clamp_deg))
+    }
 }
 
 fn positive(key: &'static str, v: f64) -> Result<f64, ConfigError> {
@@ -174,6 +203,29 @@ fn positive(key: &'static str, v: f64) -> Result<f64, ConfigError> {
         })
     }
 }
+
+/// A positive number at most `max`.
+fn positive_up_to(
+    key: &'static str,
+    v: f64,
+    max: f64,
+    why: &'static str,
+) -> Result<f64, ConfigError> {
+    let v = positive(key, v)?;
+    if v > max {
+        return Err(ConfigError::Invalid {
+            key,
+            value: v.to_string(),
+            why,
+        });
+    }
+    Ok(v)
+}
+
+/// Largest POSCORR translation limit accepted, mm.
+pub const MAX_POSCORR_MM: f64 = 1000.0;
+/// Largest POSCORR rotation limit accepted, degrees.
+pub const MAX_POSCORR_DEG: f64 = 180.0;
 
 impl RsiConfig {
     /// Parses a TOML document whose `[rsi]` table is this section (other
@@ -203,10 +255,33 @@ impl RsiConfig {
             .map_err(|_| bad("bind", format!("{:?}", self.bind), "not an IP address"))?;
         let mut controllers = Vec::new();
         for c in &self.controllers {
+            // An IPv4-mapped IPv6 address is its IPv4 address.
             controllers.push(
                 c.parse::<IpAddr>()
-                    .map_err(|_| bad("controllers", format!("{c:?}"), "not an IP address"))?,
+                    .map_err(|_| bad("controllers", format!("{c:?}"), "not an IP address"))?
+                    .to_canonical(),
             );
+        }
+        let mut warnings = Vec::new();
+        let bind_ip = ip.to_canonical();
+        for c in &controllers {
+            let unreachable = match (bind_ip, c) {
+                (IpAddr::V4(_), IpAddr::V6(_)) => {
+                    Some("an IPv6 controller never reaches an IPv4 bind address")
+                }
+                (IpAddr::V6(b), IpAddr::V4(_)) if !b.is_unspecified() => Some(
+                    "an IPv4 controller never reaches a specific IPv6 bind address (bind \"::\" or an IPv4 address)",
+                ),
+                _ => None,
+            };
+            if let Some(why) = unreachable {
+                return Err(bad("controllers", c.to_string(), why));
+            }
+        }
+        if matches!(bind_ip, IpAddr::V6(b) if b.is_unspecified())
+            && controllers.iter().any(IpAddr::is_ipv4)
+        {
+            warnings.push(RsiWarning::DualStackBind { bind: ip });
         }
         if self.enabled && controllers.is_empty() {
             return Err(bad(
@@ -222,7 +297,6 @@ impl RsiConfig {
                 "must be 4, 5 or 6",
             ));
         }
-        let mut warnings = Vec::new();
         let (port, sen) = match (&self.ethernet_config, ethernet_xml) {
             (Some(_), None) => return Err(ConfigError::EthernetNotRead),
             (Some(_), Some(xml)) => {
@@ -255,8 +329,12 @@ impl RsiConfig {
                     .clone()
                     .unwrap_or_else(|| "RKorr".into());
                 for (key, v) in [("sentype", &sentype), ("correction_element", &element)] {
-                    if v.is_empty() || !v.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
-                        return Err(bad(key, format!("{v:?}"), "must be a non-empty XML name"));
+                    if !is_xml_name(v.as_bytes()) {
+                        return Err(bad(
+                            key,
+                            format!("{v:?}"),
+                            "must be an XML name (a letter or '_', then letters, digits, '_', '-', '.')",
+                        ));
                     }
                 }
                 (
@@ -274,8 +352,18 @@ impl RsiConfig {
         if !(self.gain.is_finite() && self.gain > 0.0 && self.gain <= 1.0) {
             return Err(bad("gain", self.gain.to_string(), "must be in (0, 1]"));
         }
-        let poscorr_mm = positive("poscorr_limit_mm", self.poscorr_limit_mm)?;
-        let poscorr_deg = positive("poscorr_limit_deg", self.poscorr_limit_deg)?;
+        let poscorr_mm = positive_up_to(
+            "poscorr_limit_mm",
+            self.poscorr_limit_mm,
+            MAX_POSCORR_MM,
+            "must be at most 1000 mm",
+        )?;
+        let poscorr_deg = positive_up_to(
+            "poscorr_limit_deg",
+            self.poscorr_limit_deg,
+            MAX_POSCORR_DEG,
+            "must be at most 180 degrees",
+        )?;
         let clamp_mm = positive("clamp_mm", self.clamp_mm)?;
         let clamp_deg = positive("clamp_deg", self.clamp_deg)?;
         if clamp_mm >= poscorr_mm {
@@ -308,8 +396,49 @@ impl RsiConfig {
                 "must not exceed clamp_deg",
             ));
         }
-        let cycle_ms = positive("cycle_ms", self.cycle_ms)?;
-        let max_age_ms = positive("max_age_ms", self.max_age_ms)?;
+        // A step below one printed digit would never move the robot.
+        let quantum = 10f64.powi(-(self.decimals as i32));
+        for (key, v) in [("max_step_mm", max_step_mm), ("max_step_deg", max_step_deg)] {
+            if v < quantum {
+                return Err(bad(
+                    key,
+                    v.to_string(),
+                    "must be at least one printed digit (10^-decimals)",
+                ));
+            }
+        }
+        let cycle_ms = positive_up_to(
+            "cycle_ms",
+            self.cycle_ms,
+            1000.0,
+            "must be at most 1000 ms (4 with #IPO_FAST, 12 with #IPO)",
+        )?;
+        let session_idle_ms = positive_up_to(
+            "session_idle_ms",
+            self.session_idle_ms,
+            60_000.0,
+            "must be at most 60000 ms",
+        )?;
+        if session_idle_ms < 2.0 * cycle_ms {
+            return Err(bad(
+                "session_idle_ms",
+                session_idle_ms.to_string(),
+                "must be at least two cycles (2 x cycle_ms)",
+            ));
+        }
+        let max_age_ms = positive_up_to(
+            "max_age_ms",
+            self.max_age_ms,
+            3_600_000.0,
+            "must be at most one hour",
+        )?;
+        if self.min_targets < 4 {
+            return Err(bad(
+                "min_targets",
+                self.min_targets.to_string(),
+                "must be at least 4 (a pose needs four targets)",
+            ));
+        }
         let max_std_mm = positive("max_std_mm", self.max_std_mm)?;
         let max_std_deg = positive("max_std_deg", self.max_std_deg)?;
         if let Some(p) = self.realtime_priority {
@@ -317,7 +446,7 @@ impl RsiConfig {
                 return Err(bad("realtime_priority", p.to_string(), "must be 1..=99"));
             }
         }
-        Ok(RsiSettings {
+        let settings = RsiSettings {
             bind: SocketAddr::new(ip, port),
             controllers,
             sen,
@@ -335,12 +464,29 @@ impl RsiConfig {
                 max_std_deg,
                 measure_only: self.measure_only,
                 rsol_includes_correction: self.rsol_includes_correction,
+                decimals: self.decimals as u32,
             },
             cycle: Duration::from_secs_f64(cycle_ms * 1e-3),
+            session_idle: Duration::from_secs_f64(session_idle_ms * 1e-3),
             realtime_priority: self.realtime_priority,
             cpu: self.cpu,
             warnings,
-        })
+        };
+        let len = settings.reply_capacity();
+        if len > MAX_DATAGRAM {
+            return Err(ConfigError::ReplyTooLarge {
+                len,
+                limit: MAX_DATAGRAM,
+            });
+        }
+        Ok(settings)
+    }
+
+    /// The consistency warnings of a valid section (HOLDON against the
+    /// mode, no `RSol` sent, dual-stack bind), as data: what `run` logs and
+    /// `check-config` prints. `ethernet_xml` as for [`RsiConfig::settings`].
+    pub fn warnings(&self, ethernet_xml: Option<&str>) -> Result<Vec<RsiWarning>, ConfigError> {
+        self.settings(ethernet_xml).map(|s| s.warnings)
     }
 }
 
@@ -486,5 +632,155 @@ mod tests {
                 other => panic!("{key}: {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn absurd_values_are_refused_naming_the_key() {
+        let base = RsiConfig {
+            port: Some(49152),
+            ..RsiConfig::default()
+        };
+        type Edit = fn(&mut RsiConfig);
+        let edits: Vec<(&str, Edit)> = vec![
+            ("poscorr_limit_mm", |c| c.poscorr_limit_mm = 1.7e308),
+            ("poscorr_limit_deg", |c| c.poscorr_limit_deg = f64::INFINITY),
+            ("gain", |c| c.gain = f64::NAN),
+            ("gain", |c| c.gain = 1.5),
+            ("max_step_mm", |c| c.max_step_mm = f64::NAN),
+            ("max_step_deg", |c| c.max_step_deg = 0.00001),
+            ("clamp_mm", |c| c.clamp_mm = -1.0),
+            ("cycle_ms", |c| c.cycle_ms = 1e308),
+            ("max_age_ms", |c| c.max_age_ms = f64::INFINITY),
+            ("max_std_mm", |c| c.max_std_mm = 0.0),
+            ("min_targets", |c| c.min_targets = 3),
+            ("max_std_deg", |c| c.max_std_deg = f64::NAN),
+            ("session_idle_ms", |c| c.session_idle_ms = 5.0),
+            ("session_idle_ms", |c| c.session_idle_ms = f64::NAN),
+            ("sentype", |c| c.sentype = Some("Im\"Free".into())),
+            ("sentype", |c| c.sentype = Some("1st".into())),
+            ("correction_element", |c| {
+                c.correction_element = Some("R Korr".into())
+            }),
+            ("controllers", |c| {
+                c.bind = "127.0.0.1".into();
+                c.controllers = vec!["fe80::1".into()];
+            }),
+            ("controllers", |c| {
+                c.bind = "::1".into();
+                c.controllers = vec!["10.0.0.2".into()];
+            }),
+        ];
+        for (key, edit) in edits {
+            let mut c = base.clone();
+            edit(&mut c);
+            match c.settings(None) {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn v4_mapped_controllers_and_dual_stack_binds() {
+        let c = RsiConfig {
+            enabled: true,
+            bind: "::".into(),
+            port: Some(49152),
+            controllers: vec!["::ffff:10.0.0.2".into(), "10.0.0.3".into()],
+            ..RsiConfig::default()
+        };
+        let s = c.settings(None).unwrap();
+        assert_eq!(
+            s.controllers,
+            vec![
+                "10.0.0.2".parse::<IpAddr>().unwrap(),
+                "10.0.0.3".parse().unwrap()
+            ]
+        );
+        let w = c.warnings(None).unwrap();
+        assert_eq!(w, s.warnings);
+        assert!(matches!(w[..], [RsiWarning::DualStackBind { .. }]), "{w:?}");
+        assert!(w[0].to_string().contains("bindv6only"), "{}", w[0]);
+        // An IPv4 bind with a v4-mapped controller is fine.
+        let c = RsiConfig {
+            bind: "0.0.0.0".into(),
+            ..c
+        };
+        assert!(c.settings(None).unwrap().warnings.is_empty());
+    }
+
+    #[test]
+    fn the_reply_buffer_follows_the_receive_list() {
+        let mut xml = XML.replace("</ELEMENTS></RECEIVE>", "");
+        for k in 0..5000 {
+            xml.push_str(&format!("<ELEMENT TAG=\"Out{k}\" HOLDON=\"0\"/>"));
+        }
+        xml.push_str("</ELEMENTS></RECEIVE></ROOT>");
+        let xml = xml.replacen("</ROOT>", "", 1);
+        let c = RsiConfig {
+            enabled: true,
+            controllers: vec!["10.0.0.2".into()],
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            ..RsiConfig::default()
+        };
+        match c.settings(Some(&xml)) {
+            Err(ConfigError::ReplyTooLarge { len, limit }) => {
+                assert!(len > limit && limit == MAX_DATAGRAM, "{len} {limit}")
+            }
+            other => panic!("{other:?}"),
+        }
+        // The spec's reply fits its bound exactly at the clamp.
+        let s = c.settings(Some(XML)).unwrap();
+        let mut buf = vec![0u8; s.reply_capacity()];
+        let v = -s.law.clamp_mm;
+        let n = s
+            .sen
+            .write(&[v; 6], &crate::codec::Ipoc::from_value(u64::MAX), &mut buf)
+            .unwrap();
+        assert_eq!(n, buf.len());
+    }
+
+    #[test]
+    fn holdon_warnings_are_data_for_check_config_and_run() {
+        let c = RsiConfig {
+            enabled: true,
+            controllers: vec!["10.0.0.2".into()],
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            mode: CorrectionMode::Absolute,
+            ..RsiConfig::default()
+        };
+        let w = c.warnings(Some(XML)).unwrap();
+        assert_eq!(w.len(), 6);
+        assert!(matches!(
+            &w[0],
+            RsiWarning::Holdon {
+                holdon: Some(false),
+                mode: CorrectionMode::Absolute,
+                ..
+            }
+        ));
+        assert!(
+            w[0].to_string().contains("RKorr.X has HOLDON=0"),
+            "{}",
+            w[0]
+        );
+        let no_rsol = XML.replace("DEF_RSol", "DEF_RIst");
+        let c = RsiConfig {
+            mode: CorrectionMode::Relative,
+            ..c
+        };
+        assert_eq!(
+            c.warnings(Some(&no_rsol)).unwrap(),
+            vec![RsiWarning::NoRsol]
+        );
+        // A SENTYPE with a quote is refused at load.
+        let quoted = XML.replace("<SENTYPE>Cam", "<SENTYPE>Ca\"m");
+        assert!(matches!(
+            c.settings(Some(&quoted)),
+            Err(ConfigError::Ethernet(EthernetConfigError::NotAName {
+                key: "SENTYPE",
+                ..
+            }))
+        ));
     }
 }

@@ -1,11 +1,15 @@
 //! The controller-side `RSI_EthernetConfig.xml`: its CONFIG values (port,
 //! SENTYPE, ONLYSEND) and SEND/RECEIVE element lists, turned into the
 //! reply's spelling ([`SenFormat`]) so both sides agree, and checked against
-//! the correction mode (HOLDON pairing). Pure: parses text handed in.
+//! the correction mode (HOLDON pairing). Pure: parses text handed in, in
+//! time linear in its length (one pass of the tokenizer, lines counted
+//! incrementally, element lists indexed by hash maps).
 
 use crate::codec::{SenFormat, POSE_ATTRS};
 use crate::law::CorrectionMode;
-use crate::xml::{Token, Tokenizer};
+use crate::warning::RsiWarning;
+use crate::xml::{is_xml_name, Attrs, Token, Tokenizer, XmlError};
+use std::collections::HashMap;
 use thiserror::Error;
 
 /// Why an `RSI_EthernetConfig.xml` was rejected.
@@ -29,6 +33,17 @@ pub enum EthernetConfigError {
     #[error("RSI_EthernetConfig.xml line {line}: bad {key} {value:?}")]
     BadValue {
         /// The key or attribute.
+        key: &'static str,
+        /// The value found.
+        value: String,
+        /// 1-based line.
+        line: usize,
+    },
+    /// A name the reply would carry (SENTYPE, a RECEIVE element or
+    /// attribute) that is not an XML name.
+    #[error("RSI_EthernetConfig.xml line {line}: {key} {value:?} is not an XML name (a letter or '_', then letters, digits, '_', '-', '.')")]
+    NotAName {
+        /// The key or attribute (`SENTYPE`, `TAG`).
         key: &'static str,
         /// The value found.
         value: String,
@@ -73,12 +88,32 @@ pub struct EthernetConfig {
     pub receive: Vec<ReceiveTag>,
 }
 
-fn line_of(text: &str, at: usize) -> usize {
-    text.as_bytes()[..at.min(text.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
-        + 1
+/// 1-based line numbers of byte offsets that never decrease: each byte is
+/// counted once (an offset before the last one is counted from the start,
+/// which only an error report can ask for).
+struct Lines<'a> {
+    text: &'a [u8],
+    pos: usize,
+    line: usize,
+    work: u64,
+}
+
+impl Lines<'_> {
+    fn at(&mut self, at: usize) -> usize {
+        let at = at.min(self.text.len());
+        if at < self.pos {
+            self.pos = 0;
+            self.line = 1;
+        }
+        let newlines = self.text[self.pos..at]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        self.work += (at - self.pos) as u64;
+        self.line += newlines;
+        self.pos = at;
+        self.line
+    }
 }
 
 fn holdon(v: &[u8], line: usize) -> Result<bool, EthernetConfigError> {
@@ -93,92 +128,155 @@ fn holdon(v: &[u8], line: usize) -> Result<bool, EthernetConfigError> {
     }
 }
 
+/// Where an open element sits, as far as the file's meaning goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Open {
+    Config,
+    Send,
+    Receive,
+    /// A key directly inside `<CONFIG>`.
+    Key(Key),
+    Other,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Key {
+    IpNumber,
+    Port,
+    Sentype,
+    OnlySend,
+    Unused,
+}
+
+fn classify(name: &[u8], parent: Option<Open>) -> Open {
+    let is = |n: &str| name.eq_ignore_ascii_case(n.as_bytes());
+    if parent == Some(Open::Config) {
+        return Open::Key(if is("IP_NUMBER") {
+            Key::IpNumber
+        } else if is("PORT") {
+            Key::Port
+        } else if is("SENTYPE") {
+            Key::Sentype
+        } else if is("ONLYSEND") {
+            Key::OnlySend
+        } else {
+            Key::Unused
+        });
+    }
+    if is("CONFIG") {
+        Open::Config
+    } else if is("SEND") {
+        Open::Send
+    } else if is("RECEIVE") {
+        Open::Receive
+    } else {
+        Open::Other
+    }
+}
+
 impl EthernetConfig {
     /// Parses the file's text.
     pub fn parse(text: &str) -> Result<EthernetConfig, EthernetConfigError> {
+        Self::parse_with_work(text).0
+    }
+
+    /// [`EthernetConfig::parse`], also returning the work done: the bytes
+    /// scanned by every pass over the text (tokens, attribute lookups, line
+    /// counting) plus one per element-list operation. Linear in the text's
+    /// length; tests hold it to a small multiple of it.
+    pub fn parse_with_work(text: &str) -> (Result<EthernetConfig, EthernetConfigError>, u64) {
+        let mut lines = Lines {
+            text: text.as_bytes(),
+            pos: 0,
+            line: 1,
+            work: 0,
+        };
+        let mut work = 0u64;
+        let r = Self::parse_inner(text, &mut lines, &mut work);
+        (r, work + lines.work)
+    }
+
+    fn parse_inner(
+        text: &str,
+        lines: &mut Lines<'_>,
+        work: &mut u64,
+    ) -> Result<EthernetConfig, EthernetConfigError> {
         let mut t = Tokenizer::new(text.as_bytes());
-        let mut path: Vec<String> = Vec::new();
-        let mut ip = None;
+        let mut path: Vec<Open> = Vec::new();
+        // Depth (path length) at which the outermost SEND or RECEIVE opened.
+        let mut section: Option<(Open, usize)> = None;
+        let mut ip: Option<String> = None;
         let mut port: Option<(String, usize)> = None;
-        let mut sentype = None;
+        let mut sentype: Option<(String, usize)> = None;
         let mut only_send: Option<(String, usize)> = None;
         let mut send = Vec::new();
         let mut receive = Vec::new();
         loop {
             let at = t.position();
-            let tok = t.next().map_err(|e| EthernetConfigError::Xml {
-                line: line_of(text, e.at),
-                what: e.what.to_string(),
-            })?;
+            let tok = match t.next() {
+                Ok(tok) => tok,
+                Err(e) => {
+                    return Err(EthernetConfigError::Xml {
+                        line: lines.at(e.at),
+                        what: e.what.to_string(),
+                    })
+                }
+            };
             let Some(tok) = tok else { break };
-            let line = line_of(text, at);
+            *work += (t.position() - at) as u64;
+            let line = lines.at(at);
             match tok {
                 Token::Start { name, attrs, empty } => {
-                    let name = String::from_utf8_lossy(name).into_owned();
-                    if name.eq_ignore_ascii_case("ELEMENT") {
-                        let section = path.iter().find(|p| {
-                            p.eq_ignore_ascii_case("SEND") || p.eq_ignore_ascii_case("RECEIVE")
-                        });
-                        let xml_err = |e: crate::xml::XmlError| EthernetConfigError::Xml {
-                            line: line_of(text, e.at),
-                            what: e.what.to_string(),
-                        };
-                        let tag = attrs.get(b"TAG").map_err(xml_err)?.ok_or(
-                            EthernetConfigError::BadValue {
-                                key: "TAG",
-                                value: String::new(),
-                                line,
-                            },
-                        )?;
-                        let tag = String::from_utf8_lossy(tag).trim().to_string();
-                        match section.map(|s| s.to_ascii_uppercase()).as_deref() {
-                            Some("SEND") => send.push(tag),
-                            Some("RECEIVE") => {
-                                let h = match attrs.get(b"HOLDON").map_err(xml_err)? {
-                                    Some(v) => Some(holdon(v, line)?),
-                                    None => None,
-                                };
-                                let (element, attribute) = match tag.split_once('.') {
-                                    Some((e, a)) => (e.to_string(), Some(a.to_string())),
-                                    None => (tag.clone(), None),
-                                };
-                                if element.is_empty() || attribute.as_deref() == Some("") {
-                                    return Err(EthernetConfigError::BadValue {
-                                        key: "TAG",
-                                        value: tag,
-                                        line,
-                                    });
-                                }
-                                receive.push(ReceiveTag {
-                                    element,
-                                    attribute,
-                                    holdon: h,
-                                    line,
-                                });
+                    let open = classify(name, path.last().copied());
+                    if name.eq_ignore_ascii_case(b"ELEMENT") {
+                        match section {
+                            Some((Open::Send, _)) => {
+                                let tag = tag_of(attrs, line, lines, work)?;
+                                send.push(tag);
+                            }
+                            Some((Open::Receive, _)) => {
+                                receive.push(receive_tag(attrs, line, lines, work)?);
                             }
                             _ => {}
                         }
                     }
                     if !empty {
-                        path.push(name);
+                        if section.is_none() && matches!(open, Open::Send | Open::Receive) {
+                            section = Some((open, path.len()));
+                        }
+                        path.push(open);
                     }
                 }
                 Token::End { .. } => {
                     path.pop();
+                    if section.is_some_and(|(_, d)| path.len() <= d) {
+                        section = None;
+                    }
                 }
                 Token::Text(txt) => {
-                    let in_config =
-                        path.len() >= 2 && path[path.len() - 2].eq_ignore_ascii_case("CONFIG");
-                    if !in_config {
+                    let Some(Open::Key(key)) = path.last() else {
                         continue;
-                    }
-                    let v = String::from_utf8_lossy(txt).trim().to_string();
-                    match path.last().map(|s| s.to_ascii_uppercase()).as_deref() {
-                        Some("IP_NUMBER") => ip = Some(v),
-                        Some("PORT") => port = Some((v, line)),
-                        Some("SENTYPE") => sentype = Some(v),
-                        Some("ONLYSEND") => only_send = Some((v, line)),
-                        _ => {}
+                    };
+                    let slot = match key {
+                        Key::IpNumber => {
+                            let v = String::from_utf8_lossy(txt);
+                            let v = v.trim();
+                            if !v.is_empty() {
+                                ip = Some(v.to_string());
+                            }
+                            continue;
+                        }
+                        Key::Port => &mut port,
+                        Key::Sentype => &mut sentype,
+                        Key::OnlySend => &mut only_send,
+                        Key::Unused => continue,
+                    };
+                    let v = String::from_utf8_lossy(txt);
+                    let v = v.trim();
+                    // Text split by a comment is joined.
+                    match slot {
+                        Some((s, _)) => s.push_str(v),
+                        None => *slot = Some((v.to_string(), line)),
                     }
                 }
             }
@@ -193,9 +291,16 @@ impl EthernetConfig {
                     value: pv.clone(),
                     line: pl,
                 })?;
-        let sentype = sentype
-            .filter(|s| !s.is_empty())
+        let (sentype, sl) = sentype
+            .filter(|(s, _)| !s.is_empty())
             .ok_or(EthernetConfigError::Missing { key: "SENTYPE" })?;
+        if !is_xml_name(sentype.as_bytes()) {
+            return Err(EthernetConfigError::NotAName {
+                key: "SENTYPE",
+                value: sentype,
+                line: sl,
+            });
+        }
         let only_send = match only_send {
             None => false,
             Some((v, l)) => match v.to_ascii_uppercase().as_str() {
@@ -221,21 +326,29 @@ impl EthernetConfig {
     }
 
     /// The RECEIVE element that carries the Cartesian correction: the one
-    /// with all of `X Y Z A B C` (`RKorr` preferred if several).
+    /// with all of `X Y Z A B C` (`RKorr` preferred if several, else the
+    /// first complete one in file order).
     pub fn correction_element(&self) -> Option<&str> {
-        let mut found: Option<&str> = None;
+        let mut seen: HashMap<&str, u8> = HashMap::new();
+        let mut order: Vec<&str> = Vec::new();
         for r in &self.receive {
-            let e = r.element.as_str();
-            let full = POSE_ATTRS.iter().all(|a| {
-                self.receive
-                    .iter()
-                    .any(|q| q.element == e && q.attribute.as_deref() == Some(a))
+            let bits = seen.entry(r.element.as_str()).or_insert_with(|| {
+                order.push(r.element.as_str());
+                0
             });
-            if full && (found.is_none() || e == "RKorr") {
-                found = Some(e);
+            if let Some(i) = r
+                .attribute
+                .as_deref()
+                .and_then(|a| POSE_ATTRS.iter().position(|p| *p == a))
+            {
+                *bits |= 1 << i;
             }
         }
-        found
+        let full = |e: &&str| seen.get(e) == Some(&0b11_1111);
+        if full(&"RKorr") {
+            return Some("RKorr");
+        }
+        order.into_iter().find(full)
     }
 
     /// The reply's spelling: SENTYPE, the correction element, the other
@@ -248,10 +361,14 @@ impl EthernetConfig {
             .correction_element()
             .ok_or(EthernetConfigError::NoCorrection)?;
         let mut zero: Vec<(String, Vec<String>)> = Vec::new();
+        let mut index: HashMap<&str, usize> = HashMap::new();
         for r in self.receive.iter().filter(|r| r.element != corr) {
-            match zero.iter_mut().find(|(e, _)| *e == r.element) {
-                Some((_, attrs)) => attrs.extend(r.attribute.clone()),
-                None => zero.push((r.element.clone(), r.attribute.clone().into_iter().collect())),
+            match index.get(r.element.as_str()) {
+                Some(&k) => zero[k].1.extend(r.attribute.clone()),
+                None => {
+                    index.insert(r.element.as_str(), zero.len());
+                    zero.push((r.element.clone(), r.attribute.clone().into_iter().collect()));
+                }
             }
         }
         Ok(SenFormat {
@@ -265,7 +382,7 @@ impl EthernetConfig {
 
     /// Consistency warnings for running in `mode`: HOLDON pairing (absolute
     /// needs `HOLDON="1"`, relative `HOLDON="0"`), `RSol` missing from SEND.
-    pub fn warnings(&self, mode: CorrectionMode) -> Vec<String> {
+    pub fn warnings(&self, mode: CorrectionMode) -> Vec<RsiWarning> {
         let mut w = Vec::new();
         let corr = self.correction_element();
         for r in self
@@ -273,29 +390,100 @@ impl EthernetConfig {
             .iter()
             .filter(|r| Some(r.element.as_str()) == corr)
         {
-            let tag = format!("{}.{}", r.element, r.attribute.as_deref().unwrap_or(""));
-            match (mode, r.holdon) {
-                (CorrectionMode::Absolute, Some(true)) | (CorrectionMode::Relative, Some(false)) => {}
-                (CorrectionMode::Absolute, h) => w.push(format!(
-                    "line {}: {tag} has HOLDON={}; absolute mode needs HOLDON=\"1\" (one late packet would snap the robot back)",
-                    r.line,
-                    if h == Some(false) { "0" } else { "unset" }
-                )),
-                (CorrectionMode::Relative, h) => w.push(format!(
-                    "line {}: {tag} has HOLDON={}; relative mode needs HOLDON=\"0\" (a held increment keeps moving the robot)",
-                    r.line,
-                    if h == Some(true) { "1" } else { "unset" }
-                )),
+            let fits = matches!(
+                (mode, r.holdon),
+                (CorrectionMode::Absolute, Some(true)) | (CorrectionMode::Relative, Some(false))
+            );
+            if !fits {
+                w.push(RsiWarning::Holdon {
+                    line: r.line,
+                    tag: format!("{}.{}", r.element, r.attribute.as_deref().unwrap_or("")),
+                    holdon: r.holdon,
+                    mode,
+                });
             }
         }
         if !self.send.iter().any(|s| s.ends_with("RSol")) {
-            w.push(
-                "SEND list has no DEF_RSol: the commanded pose is unknown, corrections stay frozen"
-                    .into(),
-            );
+            w.push(RsiWarning::NoRsol);
         }
         w
     }
+}
+
+fn xml_err<'l, 't>(
+    lines: &'l mut Lines<'t>,
+) -> impl FnMut(XmlError) -> EthernetConfigError + use<'l, 't> {
+    move |e| EthernetConfigError::Xml {
+        line: lines.at(e.at),
+        what: e.what.to_string(),
+    }
+}
+
+/// An attribute of an `<ELEMENT>`, counting the bytes looked at.
+fn attr<'a>(
+    attrs: Attrs<'a>,
+    name: &[u8],
+    lines: &mut Lines<'_>,
+    work: &mut u64,
+) -> Result<Option<&'a [u8]>, EthernetConfigError> {
+    *work += attrs.raw_len() as u64;
+    attrs.get(name).map_err(xml_err(lines))
+}
+
+fn tag_of(
+    attrs: Attrs<'_>,
+    line: usize,
+    lines: &mut Lines<'_>,
+    work: &mut u64,
+) -> Result<String, EthernetConfigError> {
+    let tag = attr(attrs, b"TAG", lines, work)?.ok_or(EthernetConfigError::BadValue {
+        key: "TAG",
+        value: String::new(),
+        line,
+    })?;
+    Ok(String::from_utf8_lossy(tag).trim().to_string())
+}
+
+fn receive_tag(
+    attrs: Attrs<'_>,
+    line: usize,
+    lines: &mut Lines<'_>,
+    work: &mut u64,
+) -> Result<ReceiveTag, EthernetConfigError> {
+    let tag = tag_of(attrs, line, lines, work)?;
+    let h = match attr(attrs, b"HOLDON", lines, work)? {
+        Some(v) => Some(holdon(v, line)?),
+        None => None,
+    };
+    let (element, attribute) = match tag.split_once('.') {
+        Some((e, a)) => (e.to_string(), Some(a.to_string())),
+        None => (tag.clone(), None),
+    };
+    if element.is_empty() || attribute.as_deref() == Some("") {
+        return Err(EthernetConfigError::BadValue {
+            key: "TAG",
+            value: tag,
+            line,
+        });
+    }
+    if !is_xml_name(element.as_bytes())
+        || !attribute
+            .as_deref()
+            .is_none_or(|a| is_xml_name(a.as_bytes()))
+    {
+        return Err(EthernetConfigError::NotAName {
+            key: "TAG",
+            value: tag,
+            line,
+        });
+    }
+    *work += 1;
+    Ok(ReceiveTag {
+        element,
+        attribute,
+        holdon: h,
+        line,
+    })
 }
 
 #[cfg(test)]
@@ -344,10 +532,10 @@ mod tests {
         assert!(c.warnings(CorrectionMode::Absolute).is_empty());
         let w = c.warnings(CorrectionMode::Relative);
         assert_eq!(w.len(), 6, "{w:?}");
+        let line = w[0].to_string();
         assert!(
-            w[0].contains("line 14") && w[0].contains("RKorr.X"),
-            "{}",
-            w[0]
+            line.contains("line 14") && line.contains("RKorr.X"),
+            "{line}"
         );
     }
 

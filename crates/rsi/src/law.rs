@@ -19,6 +19,17 @@
 //!    smoothly, and resuming after a freeze never jumps);
 //! 5. relative mode sends the increment of this cycle, absolute mode the total.
 //!
+//! The total lives on the grid of the printed decimals (integer units of
+//! `10^-decimals`): a step is rounded onto the grid and the remainder stays
+//! in the distance to the target, so the sum of the increments a relative
+//! controller integrates is exactly the law's total, and neither a printed
+//! step nor a printed total ever exceeds the slew limit or the clamp.
+//!
+//! Every candidate correction is checked before it enters the total: a
+//! non-finite or implausible error (a broken hand-eye or measurement), or a
+//! value outside the clamp or slew limit, freezes the correction
+//! ([`LawStatus::FrozenInvalid`]) and leaves the total as it was.
+//!
 //! Corrections are 6-vectors `X, Y, Z` (mm), `A, B, C` (degrees, KUKA
 //! `Rz(A)·Ry(B)·Rx(C)` of the correction rotation).
 
@@ -79,6 +90,8 @@ pub struct LawConfig {
     /// The controller's `RSol` already contains the RSI correction (the law
     /// then removes its own total to get the programmed pose).
     pub rsol_includes_correction: bool,
+    /// Decimals printed in the reply (the grid of the total), 4–6.
+    pub decimals: u32,
 }
 
 impl Default for LawConfig {
@@ -97,9 +110,15 @@ impl Default for LawConfig {
             max_std_deg: 0.02,
             measure_only: false,
             rsol_includes_correction: false,
+            decimals: 4,
         }
     }
 }
+
+/// Largest plausible magnitude of a translation error, mm: a larger error
+/// comes from a broken hand-eye or measurement, never from a robot, and
+/// freezes the correction ([`LawStatus::FrozenInvalid`]).
+pub const MAX_ERROR_MM: f64 = 1.0e5;
 
 /// The two calibrated transforms that take a camera pose to a TCP pose.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -250,6 +269,10 @@ pub enum LawStatus {
     Stale(StaleReason),
     /// Measure-only mode: zero correction.
     MeasureOnly,
+    /// Frozen because the computed correction was not finite or outside the
+    /// limits (e.g. a broken hand-eye file): absolute holds, relative sends
+    /// zero, and the value never enters the total.
+    FrozenInvalid,
 }
 
 impl LawStatus {
@@ -258,6 +281,7 @@ impl LawStatus {
         match self {
             LawStatus::Tracking => "tracking",
             LawStatus::MeasureOnly => "measure_only",
+            LawStatus::FrozenInvalid => "frozen_invalid",
             LawStatus::Stale(StaleReason::NoMeasurement) => "stale_no_measurement",
             LawStatus::Stale(StaleReason::TooOld) => "stale_too_old",
             LawStatus::Stale(StaleReason::TooFewTargets) => "stale_too_few_targets",
@@ -266,8 +290,8 @@ impl LawStatus {
         }
     }
 
-    /// A small integer code (0 tracking, 1 measure only, 2.. stale reasons),
-    /// for an atomic status flag.
+    /// A small integer code (0 tracking, 1 measure only, 2..=6 stale
+    /// reasons, 7 frozen invalid), for an atomic status flag.
     pub fn code(&self) -> u8 {
         match self {
             LawStatus::Tracking => 0,
@@ -277,6 +301,7 @@ impl LawStatus {
             LawStatus::Stale(StaleReason::TooFewTargets) => 4,
             LawStatus::Stale(StaleReason::TooUncertain) => 5,
             LawStatus::Stale(StaleReason::NoCommand) => 6,
+            LawStatus::FrozenInvalid => 7,
         }
     }
 
@@ -290,6 +315,7 @@ impl LawStatus {
             4 => LawStatus::Stale(StaleReason::TooFewTargets),
             5 => LawStatus::Stale(StaleReason::TooUncertain),
             6 => LawStatus::Stale(StaleReason::NoCommand),
+            7 => LawStatus::FrozenInvalid,
             _ => return None,
         })
     }
@@ -329,7 +355,14 @@ pub const HISTORY: usize = 512;
 pub struct CorrectionLaw {
     cfg: LawConfig,
     hand_eye: HandEye,
-    total: Pose6,
+    /// The total in units of `1 / scale` (the printed grid).
+    units: [i64; 6],
+    /// `10^decimals`.
+    scale: f64,
+    /// Per-cycle slew limit in units.
+    step_units: [i64; 6],
+    /// Clamp in units.
+    clamp_units: [i64; 6],
     target: Pose6,
     last_seq: Option<u64>,
     history: Vec<Past>,
@@ -347,13 +380,28 @@ fn clamp_limits(cfg: &LawConfig) -> Pose6 {
     [t, t, t, r, r, r]
 }
 
+/// A limit in units of the grid, rounded down (never above the limit; a
+/// non-finite or negative limit gives 0: nothing moves).
+fn to_units(limit: f64, scale: f64) -> i64 {
+    let u = (limit * scale * (1.0 + 1e-12)).floor();
+    if u.is_finite() && u > 0.0 {
+        u.min(1e15) as i64
+    } else {
+        0
+    }
+}
+
 impl CorrectionLaw {
     /// A law with zero correction.
     pub fn new(cfg: LawConfig, hand_eye: HandEye) -> CorrectionLaw {
+        let scale = 10f64.powi(cfg.decimals.min(9) as i32);
         CorrectionLaw {
             cfg,
             hand_eye,
-            total: [0.0; 6],
+            units: [0; 6],
+            scale,
+            step_units: step_limits(&cfg).map(|l| to_units(l, scale)),
+            clamp_units: clamp_limits(&cfg).map(|l| to_units(l, scale)),
             target: [0.0; 6],
             last_seq: None,
             history: vec![
@@ -376,7 +424,39 @@ impl CorrectionLaw {
 
     /// The total correction in effect.
     pub fn total(&self) -> Pose6 {
-        self.total
+        self.units.map(|u| u as f64 / self.scale)
+    }
+
+    /// Back to zero correction with no history: a new controller session
+    /// (RSI restarted, its corrections start from zero).
+    pub fn reset(&mut self) {
+        self.units = [0; 6];
+        self.target = [0.0; 6];
+        self.last_seq = None;
+        self.head = 0;
+        self.filled = 0;
+    }
+
+    /// What a frozen cycle sends: the held total (absolute) or zero
+    /// (relative).
+    pub fn hold(&self) -> Pose6 {
+        match self.cfg.mode {
+            CorrectionMode::Absolute => self.total(),
+            CorrectionMode::Relative => [0.0; 6],
+        }
+    }
+
+    /// Whether `send` may be written into a reply: every value finite and
+    /// inside the clamp (absolute) or the slew limit (relative). The server
+    /// checks it immediately before writing.
+    pub fn admissible(&self, send: &Pose6) -> bool {
+        let lim = match self.cfg.mode {
+            CorrectionMode::Absolute => self.clamp_units,
+            CorrectionMode::Relative => self.step_units,
+        };
+        send.iter()
+            .zip(lim)
+            .all(|(v, l)| v.is_finite() && v.abs() <= (l as f64 + 1e-6) / self.scale)
     }
 
     /// The past cycle at or just before `t` (or the oldest kept).
@@ -424,7 +504,7 @@ impl CorrectionLaw {
     ) -> CycleOutput {
         let mut out = CycleOutput {
             send: [0.0; 6],
-            total: self.total,
+            total: self.total(),
             status: LawStatus::Tracking,
             error: None,
             slew_limited: false,
@@ -451,19 +531,14 @@ impl CorrectionLaw {
         } else {
             self.stale_reason(now_s, latest)
         };
-        if let Some(reason) = stale {
-            out.status = LawStatus::Stale(reason);
-            self.target = self.total;
-            out.send = match self.cfg.mode {
-                CorrectionMode::Absolute => self.total,
-                CorrectionMode::Relative => [0.0; 6],
+        let (Some(m), Some(rsol_now), None) = (latest, rsol, stale) else {
+            out.status = match stale {
+                Some(reason) => LawStatus::Stale(reason),
+                None => LawStatus::FrozenInvalid,
             };
-            self.record(now_s, rsol);
-            return out;
-        }
-        let m = latest.expect("not stale");
+            return self.freeze(now_s, rsol, out);
+        };
         if self.last_seq != Some(m.seq) {
-            self.last_seq = Some(m.seq);
             let past = self.at(m.time_s);
             let (rsol_then, total_then) = match past {
                 Some(Past {
@@ -471,33 +546,78 @@ impl CorrectionLaw {
                     total,
                     ..
                 }) => (r, total),
-                _ => (rsol.expect("checked"), self.total),
+                _ => (rsol_now, self.total()),
             };
             let measured = self.hand_eye.tcp_in_base(&m.plate_from_camera);
             let commanded = self.programmed(&rsol_then, &total_then);
             let e = pose_error(&commanded, &measured, self.cfg.frame);
             out.error = Some(e);
             let lim = clamp_limits(&self.cfg);
+            let mut target = [0.0; 6];
+            let mut clamped = false;
             for i in 0..6 {
                 let t = total_then[i] + self.cfg.gain * e[i];
                 let c = t.clamp(-lim[i], lim[i]);
-                out.clamped |= c != t;
-                self.target[i] = c;
+                clamped |= c != t;
+                target[i] = c;
             }
+            let plausible = e[..3].iter().all(|v| v.abs() <= MAX_ERROR_MM)
+                && e[3..].iter().all(|v| v.abs() <= 360.0);
+            if !plausible || target.iter().any(|v| !v.is_finite()) {
+                // Not committed: the next cycle looks at it again (and
+                // stays frozen while it is the latest measurement).
+                out.status = LawStatus::FrozenInvalid;
+                return self.freeze(now_s, rsol, out);
+            }
+            out.clamped = clamped;
+            self.last_seq = Some(m.seq);
+            self.target = target;
         }
-        let step_lim = step_limits(&self.cfg);
-        let mut step = [0.0; 6];
-        for i in 0..6 {
-            let d = self.target[i] - self.total[i];
-            step[i] = d.clamp(-step_lim[i], step_lim[i]);
-            out.slew_limited |= step[i] != d;
-            self.total[i] += step[i];
+        // One step towards the target on the grid: the rounding remainder
+        // stays in the distance to the target and is taken in later cycles.
+        let mut units = self.units;
+        for (i, u) in units.iter_mut().enumerate() {
+            let want = (self.target[i] * self.scale).round();
+            if !want.is_finite() {
+                out.status = LawStatus::FrozenInvalid;
+                return self.freeze(now_s, rsol, out);
+            }
+            let want = want.clamp(-1e15, 1e15) as i64;
+            let want = want.clamp(-self.clamp_units[i], self.clamp_units[i]);
+            let d = want - self.units[i];
+            let step = d.clamp(-self.step_units[i], self.step_units[i]);
+            out.slew_limited |= step != d;
+            *u = self.units[i] + step;
         }
-        out.total = self.total;
-        out.send = match self.cfg.mode {
-            CorrectionMode::Absolute => self.total,
-            CorrectionMode::Relative => step,
+        let total = units.map(|u| u as f64 / self.scale);
+        let send = match self.cfg.mode {
+            CorrectionMode::Absolute => total,
+            CorrectionMode::Relative => {
+                std::array::from_fn(|i| (units[i] - self.units[i]) as f64 / self.scale)
+            }
         };
+        let inside = (0..6).all(|i| {
+            units[i].abs() <= self.clamp_units[i]
+                && (units[i] - self.units[i]).abs() <= self.step_units[i]
+        });
+        if !inside || !self.admissible(&send) {
+            out.status = LawStatus::FrozenInvalid;
+            return self.freeze(now_s, rsol, out);
+        }
+        self.units = units;
+        out.total = total;
+        out.send = send;
+        self.record(now_s, rsol);
+        out
+    }
+
+    /// A frozen cycle: the target is the total, the reply holds.
+    fn freeze(&mut self, now_s: f64, rsol: Option<Pose6>, mut out: CycleOutput) -> CycleOutput {
+        self.target = self.total();
+        out.send = self.hold();
+        out.total = self.total();
+        out.clamped = false;
+        out.slew_limited = false;
         self.record(now_s, rsol);
         out
     }
@@ -516,7 +636,7 @@ impl CorrectionLaw {
         self.history[self.head] = Past {
             time_s: now_s,
             rsol,
-            total: self.total,
+            total: self.total(),
         };
         self.head = (self.head + 1) % HISTORY;
         self.filled = (self.filled + 1).min(HISTORY);

@@ -6,8 +6,9 @@
 //! simulated controller for tests and demos.
 //!
 //! Pure modules (no IO, no clocks, no threads): [`xml`], [`codec`],
-//! [`ethernet_config`], [`config`], [`law`]. Concurrency: [`slot`]. IO:
-//! [`server`], [`monitor`] (its counters), [`controller`].
+//! [`ethernet_config`], [`config`], [`warning`], [`law`], [`session`].
+//! Concurrency: [`slot`]. IO: [`server`], [`monitor`] (its counters),
+//! [`controller`].
 
 pub mod codec;
 pub mod config;
@@ -16,7 +17,9 @@ pub mod ethernet_config;
 pub mod law;
 pub mod monitor;
 pub mod server;
+pub mod session;
 pub mod slot;
+pub mod warning;
 pub mod xml;
 
 pub use codec::{parse_rob, CodecError, Ipoc, Pose6, RobFrame, SenFormat};
@@ -25,3 +28,4 @@ pub use law::{
     CorrFrame, CorrectionLaw, CorrectionMode, HandEye, LawConfig, LawStatus, Measurement,
 };
 pub use slot::{latest_slot, SlotPublisher, SlotReader};
+pub use warning::RsiWarning;

@@ -1,6 +1,7 @@
 //! The RSI server's counters and histograms: reply latency (datagram
 //! received → reply sent), inter-arrival times, IPOC steps, the controller's
-//! `Delay`, corrections applied, clamp and slew hits, dropped datagrams.
+//! `Delay`, corrections applied, clamp and slew hits, dropped datagrams by
+//! reason, the controller session's restarts, frozen-invalid cycles.
 //! Atomics written by the RSI thread and read from any other thread
 //! (metrics, logs) without locking; one naming scheme
 //! (`photopose_rsi_*`) for export.
@@ -108,7 +109,9 @@ impl Histogram {
 /// The server's live counters.
 #[derive(Debug, Default)]
 pub struct Stats {
-    /// Datagrams answered (one per cycle seen).
+    /// Datagrams read from the socket, whatever they held.
+    pub received: AtomicU64,
+    /// Controller cycles answered (new, larger IPOCs of the session).
     pub cycles: AtomicU64,
     /// Replies sent.
     pub replies: AtomicU64,
@@ -119,6 +122,18 @@ pub struct Stats {
     pub unlisted: AtomicU64,
     /// Older queued datagrams skipped in favour of a newer one.
     pub drained: AtomicU64,
+    /// Datagrams from a listed address but not the session's port, dropped.
+    pub foreign_port: AtomicU64,
+    /// Datagrams of the session with an IPOC older than the last, dropped.
+    pub stale_ipoc: AtomicU64,
+    /// Datagrams of the session repeating the last IPOC (answered with the
+    /// same reply, never a new step).
+    pub repeated: AtomicU64,
+    /// Controller sessions opened after the first (RSI restarted).
+    pub session_restarts: AtomicU64,
+    /// Cycles frozen because the correction was not finite or outside the
+    /// limits (`frozen_invalid`).
+    pub invalid_cycles: AtomicU64,
     /// Replies the socket refused to send.
     pub send_errors: AtomicU64,
     /// Last `Delay D` the controller reported.
@@ -183,11 +198,17 @@ impl Stats {
     pub fn snapshot(&self) -> StatsSnapshot {
         let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
         StatsSnapshot {
+            received: g(&self.received),
             cycles: g(&self.cycles),
             replies: g(&self.replies),
             garbage: g(&self.garbage),
             unlisted: g(&self.unlisted),
             drained: g(&self.drained),
+            foreign_port: g(&self.foreign_port),
+            stale_ipoc: g(&self.stale_ipoc),
+            repeated: g(&self.repeated),
+            session_restarts: g(&self.session_restarts),
+            invalid_cycles: g(&self.invalid_cycles),
             send_errors: g(&self.send_errors),
             delay_last: g(&self.delay_last),
             delay_max: g(&self.delay_max),
@@ -212,11 +233,17 @@ impl Stats {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[allow(missing_docs)] // the fields mirror [`Stats`]
 pub struct StatsSnapshot {
+    pub received: u64,
     pub cycles: u64,
     pub replies: u64,
     pub garbage: u64,
     pub unlisted: u64,
     pub drained: u64,
+    pub foreign_port: u64,
+    pub stale_ipoc: u64,
+    pub repeated: u64,
+    pub session_restarts: u64,
+    pub invalid_cycles: u64,
     pub send_errors: u64,
     pub delay_last: u64,
     pub delay_max: u64,
@@ -244,7 +271,25 @@ impl StatsSnapshot {
             ("photopose_rsi_replies_total", self.replies as f64),
             ("photopose_rsi_garbage_dropped_total", self.garbage as f64),
             ("photopose_rsi_unlisted_dropped_total", self.unlisted as f64),
+            ("photopose_rsi_received_total", self.received as f64),
             ("photopose_rsi_drained_total", self.drained as f64),
+            (
+                "photopose_rsi_foreign_port_dropped_total",
+                self.foreign_port as f64,
+            ),
+            (
+                "photopose_rsi_stale_ipoc_dropped_total",
+                self.stale_ipoc as f64,
+            ),
+            ("photopose_rsi_repeated_ipoc_total", self.repeated as f64),
+            (
+                "photopose_rsi_session_restarts_total",
+                self.session_restarts as f64,
+            ),
+            (
+                "photopose_rsi_invalid_cycles_total",
+                self.invalid_cycles as f64,
+            ),
             ("photopose_rsi_send_errors_total", self.send_errors as f64),
             ("photopose_rsi_controller_delay", self.delay_last as f64),
             ("photopose_rsi_controller_delay_max", self.delay_max as f64),

@@ -2,14 +2,17 @@
 //! address that only receives `<Rob>`, drains the socket and answers the
 //! newest datagram to its source, reads the latest measurement from the
 //! [`crate::slot`] (never waiting), runs the [`CorrectionLaw`] and writes
-//! `<Sen>`. Datagrams from addresses that are not configured controllers,
-//! and datagrams that do not parse, are dropped with a log line and a
-//! counter. Logs are one line per change of event kind, never per cycle.
+//! `<Sen>`. Only the controller session's new cycles move the correction
+//! ([`crate::session`]); datagrams from addresses that are not configured
+//! controllers, from other ports, with old IPOCs or that do not parse are
+//! dropped and counted. Logs are at most one line per reason per
+//! [`LOG_INTERVAL`] (with the count of the repeats), never per cycle.
 
 use crate::codec::{parse_rob, CodecError, RobFrame, MAX_DATAGRAM};
 use crate::config::RsiSettings;
 use crate::law::{CorrectionLaw, CorrectionMode, HandEye, LawStatus, Measurement};
 use crate::monitor::{Stats, StatsSnapshot};
+use crate::session::{Session, Verdict};
 use crate::slot::SlotReader;
 use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
@@ -221,28 +224,85 @@ fn set_fifo(_p: u8) -> Result<(), String> {
     Err("SCHED_FIFO is only available on unix".into())
 }
 
-/// Logs one line when the kind of a recurring event changes, counting the
-/// repeats in between instead of logging each.
-#[derive(Debug, Default)]
-struct EventLog {
-    last: Option<&'static str>,
-    repeats: u64,
+/// How often one reason of a recurring event (a dropped datagram, a failed
+/// send) is logged at most; the repeats in between are counted in the next
+/// line and in the counters.
+pub const LOG_INTERVAL: Duration = Duration::from_secs(10);
+
+/// Reasons tracked by one [`RateLog`] (more share the last entry).
+const LOG_REASONS: usize = 32;
+
+/// One log line per reason per [`LOG_INTERVAL`], with the count of the
+/// repeats since the last line. Fixed-size, allocation-free bookkeeping;
+/// time passed in.
+#[derive(Debug)]
+pub struct RateLog {
+    reasons: [(&'static str, Option<Instant>, u64); LOG_REASONS],
+    used: usize,
+    interval: Duration,
 }
 
-impl EventLog {
-    fn event(&mut self, kind: &'static str, line: impl FnOnce() -> String) {
-        if self.last == Some(kind) {
-            self.repeats += 1;
-            return;
+impl RateLog {
+    /// An empty log limiting each reason to one line per `interval`.
+    pub fn new(interval: Duration) -> RateLog {
+        RateLog {
+            reasons: [("", None, 0); LOG_REASONS],
+            used: 0,
+            interval,
         }
-        let rep = std::mem::take(&mut self.repeats);
-        if rep > 0 {
-            tracing::warn!(target: "photopose::rsi", "{} more {} datagram(s) dropped", rep, self.last.unwrap_or("?"));
+    }
+
+    /// An event of `reason` at `now`: `Some(repeats suppressed since the
+    /// last line)` when a line is due, `None` when it is only counted.
+    pub fn due(&mut self, reason: &'static str, now: Instant) -> Option<u64> {
+        let k = match self.reasons[..self.used].iter().position(|r| r.0 == reason) {
+            Some(k) => k,
+            None if self.used < LOG_REASONS => {
+                self.used += 1;
+                self.reasons[self.used - 1] = (reason, None, 0);
+                self.used - 1
+            }
+            None => LOG_REASONS - 1,
+        };
+        let entry = &mut self.reasons[k];
+        match entry.1 {
+            Some(last) if now.saturating_duration_since(last) < self.interval => {
+                entry.2 += 1;
+                None
+            }
+            _ => {
+                entry.1 = Some(now);
+                Some(std::mem::take(&mut entry.2))
+            }
         }
-        self.last = Some(kind);
-        tracing::warn!(target: "photopose::rsi", "{}", line());
+    }
+
+    /// Logs a warning for `reason` if one is due.
+    fn warn(&mut self, reason: &'static str, now: Instant, line: impl FnOnce() -> String) {
+        if let Some(more) = self.due(reason, now) {
+            if more > 0 {
+                tracing::warn!(target: "photopose::rsi", "{} ({more} more {reason} since the last report)", line());
+            } else {
+                tracing::warn!(target: "photopose::rsi", "{}", line());
+            }
+        }
     }
 }
+
+/// The datagram chosen to be answered after a drain.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    frame: RobFrame,
+    /// The sender as received (the reply goes there).
+    to: SocketAddr,
+    t_rx: Instant,
+    /// It restarted the session: the law starts again from zero.
+    restart: bool,
+}
+
+/// Most datagrams read in one drain before the newest cycle is answered:
+/// a flood cannot hold the reply back for longer than this many reads.
+pub const DRAIN_MAX: usize = 256;
 
 struct Worker {
     settings: RsiSettings,
@@ -253,8 +313,11 @@ struct Worker {
     stats: Arc<Stats>,
     rx: Vec<u8>,
     tx: Vec<u8>,
+    /// Length of the last reply in `tx` and where it went.
+    last_reply: Option<(usize, SocketAddr)>,
+    session: Session,
     latest: Option<Measurement>,
-    drops: EventLog,
+    log: RateLog,
     last_status: Option<LawStatus>,
     last_rx: Option<Instant>,
     last_ipoc: Option<u64>,
@@ -270,8 +333,10 @@ impl Worker {
         socket: UdpSocket,
         stats: Arc<Stats>,
     ) -> Worker {
+        let tx = vec![0; settings.reply_capacity()];
         Worker {
             law: CorrectionLaw::new(settings.law, hand_eye),
+            session: Session::new(settings.session_idle.as_secs_f64()),
             settings,
             slot,
             clock,
@@ -279,9 +344,10 @@ impl Worker {
             stats,
             // One byte more than the limit, so an oversized datagram shows.
             rx: vec![0; MAX_DATAGRAM + 1],
-            tx: vec![0; 4096],
+            tx,
+            last_reply: None,
             latest: None,
-            drops: EventLog::default(),
+            log: RateLog::new(LOG_INTERVAL),
             last_status: None,
             last_rx: None,
             last_ipoc: None,
@@ -290,32 +356,100 @@ impl Worker {
     }
 
     fn allowed(&self, ip: IpAddr) -> bool {
-        self.settings.controllers.contains(&ip)
+        // An IPv4-mapped sender (a dual-stack socket) is its IPv4 address.
+        self.settings.controllers.contains(&ip.to_canonical())
     }
 
-    /// Parses a received datagram, dropping (with a log) what is not an
-    /// answerable `<Rob>` from a configured controller.
-    fn accept(&mut self, n: usize, from: SocketAddr) -> Option<RobFrame> {
+    /// Sorts one received datagram: counts and drops what is not from the
+    /// session or does not parse, keeps the newest cycle in `pending`, and
+    /// notes a repeat of the last answered IPOC.
+    fn sort(
+        &mut self,
+        n: usize,
+        from: SocketAddr,
+        t: Instant,
+        pending: &mut Option<Pending>,
+        repeat: &mut bool,
+    ) {
+        let s = &self.stats;
+        s.received.fetch_add(1, Ordering::Relaxed);
         if !self.allowed(from.ip()) {
-            self.stats.unlisted.fetch_add(1, Ordering::Relaxed);
-            self.drops.event("unlisted", || {
+            s.unlisted.fetch_add(1, Ordering::Relaxed);
+            self.log.warn("unlisted", t, || {
                 format!("dropped a datagram from {from}: not a configured controller")
             });
-            return None;
+            return;
         }
-        let r = if n > MAX_DATAGRAM {
+        let now_s = self.clock.at(t);
+        if self.session.is_foreign(from, now_s) {
+            s.foreign_port.fetch_add(1, Ordering::Relaxed);
+            let peer = self.session.peer();
+            self.log.warn("foreign_port", t, || {
+                format!(
+                    "dropped a datagram from {from}: the controller session is {}",
+                    peer.map_or_else(|| "-".to_string(), |p| p.to_string())
+                )
+            });
+            return;
+        }
+        let frame = if n > MAX_DATAGRAM {
             Err(CodecError::Oversize { len: n })
         } else {
             parse_rob(&self.rx[..n])
         };
-        match r {
-            Ok(f) => Some(f),
+        let frame = match frame {
+            Ok(f) => f,
             Err(e) => {
-                self.stats.garbage.fetch_add(1, Ordering::Relaxed);
-                self.drops.event(e.kind(), || {
+                s.garbage.fetch_add(1, Ordering::Relaxed);
+                self.log.warn(e.kind(), t, || {
                     format!("dropped a datagram of {n} bytes from {from}: {e}")
                 });
-                None
+                return;
+            }
+        };
+        let ipoc = frame.ipoc.value();
+        let verdict = self.session.classify(from, ipoc, now_s);
+        match verdict {
+            Verdict::Open | Verdict::Advance | Verdict::Restart => {
+                if pending.is_some() {
+                    s.drained.fetch_add(1, Ordering::Relaxed);
+                }
+                // A restart earlier in this drain still applies.
+                let restart =
+                    verdict == Verdict::Restart || pending.as_ref().is_some_and(|p| p.restart);
+                if verdict == Verdict::Restart {
+                    let old = self.session.peer();
+                    tracing::warn!(
+                        target: "photopose::rsi",
+                        "controller session restarts at {from} IPOC {ipoc} (was {}, silent for the idle time): correction back to zero",
+                        old.map_or_else(|| "-".to_string(), |p| p.to_string())
+                    );
+                } else if verdict == Verdict::Open {
+                    tracing::info!(target: "photopose::rsi", "controller session opened by {from} at IPOC {ipoc}");
+                }
+                self.session.commit(from, ipoc, now_s);
+                *pending = Some(Pending {
+                    frame,
+                    to: from,
+                    t_rx: t,
+                    restart,
+                });
+                *repeat = false;
+            }
+            Verdict::Repeat => {
+                s.repeated.fetch_add(1, Ordering::Relaxed);
+                if pending.is_none() {
+                    *repeat = true;
+                }
+            }
+            Verdict::Older => {
+                s.stale_ipoc.fetch_add(1, Ordering::Relaxed);
+                self.log.warn("stale_ipoc", t, || {
+                    format!("dropped a datagram from {from}: IPOC {ipoc} is older than the session's last")
+                });
+            }
+            Verdict::Foreign => {
+                s.foreign_port.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
@@ -341,52 +475,82 @@ impl Worker {
                     continue;
                 }
             };
-            let mut t_rx = Instant::now();
-            let mut newest = self.accept(n, from).map(|f| (f, from));
-            // Drain: only the newest queued datagram is still answerable.
+            let mut pending = None;
+            let mut repeat = false;
+            self.sort(n, from, Instant::now(), &mut pending, &mut repeat);
+            // Drain: only the newest queued cycle is still answerable. A
+            // flood is read at most DRAIN_MAX datagrams deep before the
+            // newest cycle found is answered.
             if self.socket.set_nonblocking(true).is_ok() {
-                while let Ok((n, from)) = self.socket.recv_from(&mut self.rx) {
-                    let t = Instant::now();
-                    if let Some(f) = self.accept(n, from) {
-                        if newest.is_some() {
-                            self.stats.drained.fetch_add(1, Ordering::Relaxed);
-                        }
-                        newest = Some((f, from));
-                        t_rx = t;
-                    }
+                for _ in 1..DRAIN_MAX {
+                    let Ok((n, from)) = self.socket.recv_from(&mut self.rx) else {
+                        break;
+                    };
+                    self.sort(n, from, Instant::now(), &mut pending, &mut repeat);
                 }
                 if let Err(e) = self.socket.set_nonblocking(false) {
                     tracing::error!(target: "photopose::rsi", "socket mode: {e}");
                 }
             }
-            if let Some((frame, from)) = newest {
-                self.answer(&frame, from, t_rx);
+            if let Some(p) = pending {
+                self.answer(&p);
+            } else if repeat {
+                self.repeat_reply();
             }
         }
         tracing::info!(target: "photopose::rsi", "RSI server stopped after {} cycles", self.stats.cycles.load(Ordering::Relaxed));
     }
 
-    fn answer(&mut self, frame: &RobFrame, to: SocketAddr, t_rx: Instant) {
-        if let Some(p) = &frame.rist {
-            self.stats.record_rist(p);
+    /// The session's last IPOC came again: the same reply, unchanged.
+    fn repeat_reply(&mut self) {
+        if let Some((n, to)) = self.last_reply {
+            if let Err(e) = self.socket.send_to(&self.tx[..n], to) {
+                self.stats.send_errors.fetch_add(1, Ordering::Relaxed);
+                self.log.warn("send_error", Instant::now(), || {
+                    format!("reply to {to}: {e}")
+                });
+            }
+        }
+    }
+
+    fn answer(&mut self, p: &Pending) {
+        let (frame, to, t_rx) = (&p.frame, p.to, p.t_rx);
+        if p.restart {
+            self.stats.session_restarts.fetch_add(1, Ordering::Relaxed);
+            self.law.reset();
+            self.last_ipoc = None;
+            self.first_step = None;
+        }
+        if let Some(r) = &frame.rist {
+            self.stats.record_rist(r);
         }
         if let Some(m) = self.slot.read() {
             self.latest = Some(m);
         }
         let now = self.clock.at(t_rx);
         let before = self.law.total();
-        let out = self.law.cycle(now, frame.rsol, self.latest.as_ref());
-        let n = match self
+        let mut out = self.law.cycle(now, frame.rsol, self.latest.as_ref());
+        // The last check before the numbers are written: finite and inside
+        // the clamp / slew limit, else the held value.
+        if !self.law.admissible(&out.send) {
+            out.status = LawStatus::FrozenInvalid;
+            out.send = self.law.hold();
+        }
+        let written = self
             .settings
             .sen
-            .write(&out.send, &frame.ipoc, &mut self.tx)
-        {
+            .write(&out.send, &frame.ipoc, &mut self.tx);
+        let n = match written {
             Ok(n) => n,
             Err(e) => {
-                tracing::error!(target: "photopose::rsi", "cannot write the reply: {e}");
+                self.last_reply = None;
+                self.log.warn("write_error", t_rx, || {
+                    format!("cannot write the reply: {e}")
+                });
                 return;
             }
         };
+        self.last_reply = Some((n, to));
         let sent = self.socket.send_to(&self.tx[..n], to);
         let t_tx = Instant::now();
         let s = &self.stats;
@@ -397,7 +561,8 @@ impl Worker {
             }
             Err(e) => {
                 s.send_errors.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(target: "photopose::rsi", "reply to {to}: {e}");
+                self.log
+                    .warn("send_error", t_tx, || format!("reply to {to}: {e}"));
             }
         }
         s.cycles.fetch_add(1, Ordering::Relaxed);
@@ -451,10 +616,13 @@ impl Worker {
         if matches!(out.status, LawStatus::Stale(_)) {
             s.stale_cycles.fetch_add(1, Ordering::Relaxed);
         }
+        if out.status == LawStatus::FrozenInvalid {
+            s.invalid_cycles.fetch_add(1, Ordering::Relaxed);
+        }
         s.status.store(out.status.code(), Ordering::Relaxed);
         if self.last_status != Some(out.status) {
             match out.status {
-                LawStatus::Stale(_) => {
+                LawStatus::Stale(_) | LawStatus::FrozenInvalid => {
                     tracing::warn!(target: "photopose::rsi", "correction frozen: {}", out.status.name())
                 }
                 _ => {
@@ -466,5 +634,37 @@ impl Worker {
         if out.clamped {
             tracing::debug!(target: "photopose::rsi", "total correction clamped");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_line_per_reason_per_interval() {
+        let mut log = RateLog::new(Duration::from_secs(10));
+        let t0 = Instant::now();
+        let mut lines = Vec::new();
+        for k in 0..30_000u64 {
+            let t = t0 + Duration::from_millis(k);
+            for reason in ["unlisted", "syntax", "bad_ipoc"] {
+                if let Some(more) = log.due(reason, t) {
+                    lines.push((reason, k, more));
+                }
+            }
+        }
+        // At 0, 10 and 20 s, each with the repeats since the last line.
+        assert_eq!(lines.len(), 9, "{lines:?}");
+        assert_eq!(lines[0], ("unlisted", 0, 0));
+        assert_eq!(lines[3], ("unlisted", 10_000, 9_999));
+        assert_eq!(lines[8], ("bad_ipoc", 20_000, 9_999));
+        // More reasons than the table holds share its last entry.
+        let mut log = RateLog::new(Duration::from_secs(10));
+        let names: Vec<&'static str> = (0..40)
+            .map(|k| &*Box::leak(format!("r{k}").into_boxed_str()))
+            .collect();
+        let due = names.iter().filter(|n| log.due(n, t0).is_some()).count();
+        assert_eq!(due, LOG_REASONS);
     }
 }

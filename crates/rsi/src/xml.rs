@@ -2,6 +2,8 @@
 //! exchanges (`<Rob>` datagrams, `RSI_EthernetConfig.xml`): start and end
 //! tags with their attributes, text, comments and declarations skipped.
 //! It borrows the input and never copies; errors carry the byte offset.
+//! Every byte is consumed once (a token's scan ends where the next begins),
+//! so a document costs time linear in its length.
 
 /// One token of the document.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -180,6 +182,21 @@ fn is_name_byte(b: u8) -> bool {
     b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.' | b':')
 }
 
+/// Whether `name` is an XML name this crate writes into replies: an ASCII
+/// letter or `_`, then ASCII letters, digits, `_`, `-` or `.` (no `:`, no
+/// quotes, no markup; the subset of XML's Name that KUKA's tags use).
+pub fn is_xml_name(name: &[u8]) -> bool {
+    match name.split_first() {
+        Some((first, rest)) => {
+            (first.is_ascii_alphabetic() || *first == b'_')
+                && rest
+                    .iter()
+                    .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
+        }
+        None => false,
+    }
+}
+
 /// The attributes of a start tag, parsed on demand.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Attrs<'a> {
@@ -188,6 +205,11 @@ pub struct Attrs<'a> {
 }
 
 impl<'a> Attrs<'a> {
+    /// Length of the raw attribute text, bytes.
+    pub fn raw_len(&self) -> usize {
+        self.raw.len()
+    }
+
     /// Iterates `(name, value)` pairs; a malformed attribute gives an error.
     pub fn iter(&self) -> AttrIter<'a> {
         AttrIter {

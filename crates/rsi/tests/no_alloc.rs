@@ -1,11 +1,18 @@
-//! The per-cycle path of the RSI thread — parse `<Rob>`, read the slot, run
-//! the correction law, write `<Sen>` — allocates nothing: a counting global
-//! allocator watches (the socket calls around it are system calls).
+//! The per-cycle path of the RSI thread — parse `<Rob>` (and reject hostile
+//! ones), classify it against the controller session, read the slot, run
+//! the correction law with its checks (including a frozen-invalid cycle),
+//! check the values once more, write `<Sen>`, decide whether a drop is
+//! logged — allocates nothing: a counting global allocator watches (the
+//! socket calls around it are system calls).
 
 use photopose_rsi::codec::{parse_rob, SenFormat};
-use photopose_rsi::law::{pose_to_isometry, LawConfig};
+use photopose_rsi::law::{pose_to_isometry, LawConfig, LawStatus};
+use photopose_rsi::server::RateLog;
+use photopose_rsi::session::Session;
 use photopose_rsi::{latest_slot, CorrectionLaw, HandEye, Measurement};
 use photopose_testkit::{allocations, CountingAllocator};
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
@@ -38,16 +45,57 @@ fn a_cycle_allocates_nothing() {
         time_s: k as f64 * 0.004,
         seq: k,
     };
+    let hostile: Vec<Vec<u8>> = vec![
+        b"<Rob><IPOC>12<!---->99</IPOC></Rob>".to_vec(),
+        b"<Rob><Delay D=\"1e300\"/><IPOC>1</IPOC></Rob>".to_vec(),
+        b"<Rob><RSol X=\"NaN\" Y=\"0\" Z=\"0\" A=\"0\" B=\"0\" C=\"0\"/><IPOC>1</IPOC></Rob>"
+            .to_vec(),
+        b"<Rob><IPOC>1</IPOC><IPOC>2</IPOC></Rob>".to_vec(),
+        vec![b'<'; 3000],
+    ];
+    let ctl: SocketAddr = "127.0.0.1:6000".parse().unwrap();
+    let other: SocketAddr = "[::ffff:127.0.0.1]:6001".parse().unwrap();
+    let mut session = Session::new(0.1);
+    let mut log = RateLog::new(Duration::from_secs(10));
+    let t0 = Instant::now();
+    let mut bad = m(0);
+    bad.plate_from_camera.translation.vector.x = f64::NAN;
     let mut run = |from: u64| {
         for (k, d) in datagrams.iter().enumerate() {
             let k = from + k as u64;
+            let now = k as f64 * 0.004;
             if k % 10 == 0 {
-                publisher.publish(&m(k));
+                // Every fifth publication is broken: a frozen-invalid cycle.
+                if k % 50 == 0 {
+                    publisher.publish(&Measurement {
+                        seq: k,
+                        time_s: now,
+                        ..bad
+                    });
+                } else {
+                    publisher.publish(&m(k));
+                }
             }
+            for h in &hostile {
+                assert!(parse_rob(h).is_err());
+                let _ = log.due("hostile", t0 + Duration::from_millis(k));
+            }
+            assert!(session.is_foreign(other, now) || k == from);
             let f = parse_rob(d.as_bytes()).unwrap();
+            let verdict = session.classify(ctl, f.ipoc.value() + k * 4, now);
+            assert!(verdict.advances());
+            session.commit(ctl, f.ipoc.value() + k * 4, now);
             let latest = reader.read();
-            let o = law.cycle(k as f64 * 0.004, f.rsol, latest.as_ref());
-            let n = fmt.write(&o.send, &f.ipoc, &mut out).unwrap();
+            let o = law.cycle(now, f.rsol, latest.as_ref());
+            if k % 50 == 0 {
+                assert_eq!(o.status, LawStatus::FrozenInvalid);
+            }
+            let send = if law.admissible(&o.send) {
+                o.send
+            } else {
+                law.hold()
+            };
+            let n = fmt.write(&send, &f.ipoc, &mut out).unwrap();
             assert!(n > 0);
         }
     };

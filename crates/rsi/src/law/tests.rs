@@ -149,21 +149,26 @@ fn pose_conversions_round_trip() {
 
 #[test]
 fn converges_in_every_mode_and_frame() {
-    for mode in [CorrectionMode::Relative, CorrectionMode::Absolute] {
-        for frame in [CorrFrame::Base, CorrFrame::Tool] {
-            for includes in [false, true] {
-                let cfg = LawConfig {
-                    mode,
-                    frame,
-                    rsol_includes_correction: includes,
-                    ..LawConfig::default()
-                };
-                let (dt, dr, law) = run_loop(cfg, includes, 1500);
-                assert!(
-                    dt < 1e-4 && dr < 1e-5,
-                    "{mode:?} {frame:?} {includes}: {dt} mm {dr}°, total {:?}",
-                    law.total()
-                );
+    // The total lives on the printed grid: the loop settles within a unit
+    // or two of it (an integrator on a grid has that dead band).
+    for (decimals, tol_mm, tol_deg) in [(6, 1e-4, 1e-5), (4, 4e-4, 4e-4)] {
+        for mode in [CorrectionMode::Relative, CorrectionMode::Absolute] {
+            for frame in [CorrFrame::Base, CorrFrame::Tool] {
+                for includes in [false, true] {
+                    let cfg = LawConfig {
+                        mode,
+                        frame,
+                        rsol_includes_correction: includes,
+                        decimals,
+                        ..LawConfig::default()
+                    };
+                    let (dt, dr, law) = run_loop(cfg, includes, 1500);
+                    assert!(
+                        dt < tol_mm && dr < tol_deg,
+                        "{decimals} {mode:?} {frame:?} {includes}: {dt} mm {dr}°, total {:?}",
+                        law.total()
+                    );
+                }
             }
         }
     }
@@ -263,7 +268,7 @@ fn quality_gates() {
         law.cycle(0.0, Some(NOMINAL), Some(&good)).status,
         LawStatus::Tracking
     );
-    for code in 0..7 {
+    for code in 0..8 {
         assert_eq!(LawStatus::from_code(code).unwrap().code(), code);
     }
 }
@@ -287,4 +292,97 @@ fn measure_only_sends_zero_but_reports_the_error() {
     assert_eq!(out.status, LawStatus::MeasureOnly);
     assert_eq!(out.send, [0.0; 6]);
     assert!((out.error.unwrap()[0] + 2.0).abs() < 1e-9);
+}
+
+#[test]
+fn a_huge_hand_eye_freezes_and_never_enters_the_total() {
+    // Finite translations of 1.7e308 mm compose to a non-finite error.
+    let huge = HandEye {
+        tcp_from_camera: pose_to_isometry(&[1.7e308, -1.7e308, 1.7e308, 90.0, 10.0, 0.0]),
+        base_from_plate: pose_to_isometry(&[-1.7e308, 1.7e308, 1.7e308, 30.0, 0.0, 0.0]),
+    };
+    let he = hand_eye();
+    for mode in [CorrectionMode::Relative, CorrectionMode::Absolute] {
+        let cfg = LawConfig {
+            mode,
+            ..LawConfig::default()
+        };
+        let mut law = CorrectionLaw::new(cfg, huge);
+        let m = measurement(&he, &pose_to_isometry(&NOMINAL), 0.0, 1);
+        for k in 0..5 {
+            let out = law.cycle(k as f64 * 0.004, Some(NOMINAL), Some(&m));
+            assert!(
+                out.error.unwrap().iter().any(|v| !v.is_finite()),
+                "{:?}",
+                out.error
+            );
+            assert_eq!(out.status, LawStatus::FrozenInvalid);
+            assert_eq!(out.send, [0.0; 6]);
+            assert_eq!(out.total, [0.0; 6]);
+            assert!(law.admissible(&out.send));
+        }
+        assert_eq!(LawStatus::FrozenInvalid.name(), "frozen_invalid");
+    }
+    // A good hand-eye: an implausible measurement freezes, a good one then
+    // tracks from the unchanged total.
+    let mut law = CorrectionLaw::new(LawConfig::default(), he);
+    let good = measurement(
+        &he,
+        &pose_to_isometry(&[446.0, 10.0, 790.0, 170.0, 5.0, 175.0]),
+        0.0,
+        1,
+    );
+    for k in 0..3 {
+        law.cycle(k as f64 * 0.004, Some(NOMINAL), Some(&good));
+    }
+    let held = law.total();
+    let far = measurement(
+        &he,
+        &pose_to_isometry(&[1e6, 10.0, 790.0, 170.0, 5.0, 175.0]),
+        0.02,
+        2,
+    );
+    let out = law.cycle(0.02, Some(NOMINAL), Some(&far));
+    assert_eq!(out.status, LawStatus::FrozenInvalid);
+    assert_eq!(law.total(), held);
+    let good2 = Measurement {
+        seq: 3,
+        time_s: 0.024,
+        ..good
+    };
+    let out = law.cycle(0.024, Some(NOMINAL), Some(&good2));
+    assert_eq!(out.status, LawStatus::Tracking);
+    assert!(out.total.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn relative_increments_carry_the_rounding_remainder() {
+    // A slew limit of 0.00337° per cycle is not a whole number of printed
+    // digits: rounding each increment on its own would add up to 2.0178°.
+    let cfg = LawConfig {
+        max_step_deg: 0.00337,
+        clamp_deg: 2.0,
+        max_age_s: 60.0,
+        ..LawConfig::default()
+    };
+    let he = hand_eye();
+    let mut law = CorrectionLaw::new(cfg, he);
+    let turned = measurement(
+        &he,
+        &pose_to_isometry(&[445.0, 10.0, 790.0, 180.0, 5.0, 175.0]),
+        0.0,
+        1,
+    );
+    let mut sum = 0i64;
+    for k in 0..1000 {
+        let out = law.cycle(k as f64 * 0.004, Some(NOMINAL), Some(&turned));
+        // What the controller receives: the printed increment.
+        let printed: f64 = format!("{:.4}", out.send[3]).parse().unwrap();
+        let units = (printed * 1e4).round() as i64;
+        assert!(units.abs() <= 33, "cycle {k}: {units}");
+        sum += units;
+        assert!(sum.abs() <= 20_000, "cycle {k}: {sum}");
+        assert_eq!(sum, (law.total()[3] * 1e4).round() as i64);
+    }
+    assert_eq!(sum, -20_000);
 }
