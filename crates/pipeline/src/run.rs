@@ -11,7 +11,7 @@ use photopose_field::Field;
 use photopose_geometry::rotation::quaternion_from_matrix;
 use photopose_geometry::Camera;
 use photopose_locate::{LocateOptions, Locator, PoseStatus as LocateStatus};
-use photopose_stream::{PoseMessage, PoseStatus, TcpServer, UdpSender};
+use photopose_stream::{Edge, PoseMessage, PoseStatus, TcpLimits, TcpServer, UdpSender};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -156,7 +156,12 @@ pub struct Pipeline {
     tcp_addr: Option<SocketAddr>,
     metrics: Option<crate::metrics::MetricsServer>,
     metrics_addr: Option<SocketAddr>,
+    /// The tokio runtime of the TCP stream and the metrics endpoint.
+    edge: Option<Edge>,
 }
+
+/// Worker threads of the edge runtime: the network edges are light.
+const EDGE_THREADS: usize = 1;
 
 impl std::fmt::Debug for Pipeline {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -205,9 +210,23 @@ impl Pipeline {
                 &config.udp,
             )?)
         };
-        let tcp = match config.tcp_listen {
-            Some(a) => Some(TcpServer::bind(a, config.tcp_client_queue)?),
-            None => None,
+        // The network edges (TCP stream, metrics) run on one tokio runtime
+        // of their own; the pipeline's threads never await.
+        let edge = if config.tcp_listen.is_some() || config.metrics_listen.is_some() {
+            Some(Edge::start(EDGE_THREADS)?)
+        } else {
+            None
+        };
+        let tcp = match (config.tcp_listen, &edge) {
+            (Some(a), Some(edge)) => Some(TcpServer::bind(
+                edge.handle(),
+                a,
+                TcpLimits {
+                    max_clients: config.tcp_max_clients,
+                    client_queue: config.tcp_client_queue,
+                },
+            )?),
+            _ => None,
         };
         let tcp_addr = tcp.as_ref().map(|t| t.local_addr());
         // The RSI server reads the latest pose from a lock-free slot the
@@ -239,16 +258,13 @@ impl Pipeline {
             rsi: rsi_link.as_ref().map(|(_, _, s)| Arc::clone(s)),
             ..Counters::default()
         });
-        let metrics = match config.metrics_listen {
-            Some(a) => Some(
-                crate::metrics::MetricsServer::start(a, counters.clone(), stop.clone()).map_err(
-                    |source| PipelineError::Thread {
-                        name: format!("metrics on {a}"),
-                        source,
-                    },
-                )?,
-            ),
-            None => None,
+        let metrics = match (config.metrics_listen, &edge) {
+            (Some(a), Some(edge)) => Some(crate::metrics::MetricsServer::start(
+                edge.handle(),
+                a,
+                counters.clone(),
+            )?),
+            _ => None,
         };
         let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
@@ -316,6 +332,7 @@ impl Pipeline {
             tcp_addr,
             metrics,
             metrics_addr,
+            edge,
         })
     }
 
@@ -380,9 +397,13 @@ impl Pipeline {
                 "RSI server stopped"
             );
         }
-        if let Some(m) = self.metrics {
-            self.stop.store(true, Ordering::Release);
-            m.join();
+        if let Some(m) = self.metrics.take() {
+            m.stop();
+        }
+        if let Some(edge) = self.edge.take() {
+            // The output thread has closed the TCP stream: its clients get
+            // what is queued, then the runtime's threads are joined.
+            edge.stop();
         }
         self.counters
     }

@@ -109,8 +109,8 @@ impl TextEndpoint {
                         },
                     };
                     let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
-                        drop(stream);
                         let n = stats.refused.fetch_add(1, Ordering::Relaxed) + 1;
+                        drop(stream);
                         if last_refusal_log.is_none_or(|t| t.elapsed() >= REFUSAL_LOG_INTERVAL) {
                             tracing::warn!(client = %peer, %addr, refused_total = n,
                                 "HTTP endpoint: connection limit reached, closing new connections");

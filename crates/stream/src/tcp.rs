@@ -204,8 +204,8 @@ impl Hub {
         // Forget clients that have left.
         self.clients.retain(|c| !c.lines.is_closed());
         if self.clients.len() >= self.limits.max_clients {
-            drop(stream);
             self.stats.refused.fetch_add(1, Ordering::Relaxed);
+            drop(stream);
             let r = &mut self.refusals;
             r.since_log += 1;
             if r
