@@ -207,7 +207,8 @@ mod tests {
         let c = Arc::new(Counters::default());
         c.frames_in.store(42, Ordering::Relaxed);
         let edge = photopose_stream::Edge::start(1).unwrap();
-        let server = MetricsServer::start(edge.handle(), "127.0.0.1:0".parse().unwrap(), c).unwrap();
+        let server =
+            MetricsServer::start(edge.handle(), "127.0.0.1:0".parse().unwrap(), c).unwrap();
         let mut s = std::net::TcpStream::connect(server.local_addr()).unwrap();
         s.write_all(b"GET /metrics HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
             .unwrap();

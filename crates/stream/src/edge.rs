@@ -4,7 +4,7 @@
 //! of lines from the pipeline's dedicated threads to it.
 //!
 //! The pipeline's threads (grabber, detection workers, output, RSI) never
-//! await. They hand lines to the runtime through a [`LineFeed`]: a fixed
+//! await. They hand lines to the runtime through a line feed ([`line_feed`]): a fixed
 //! pool of preallocated buffers passed through two lock-free bounded queues
 //! plus a [`tokio::sync::Notify`] that wakes the edge task. Handing over a
 //! line never blocks and, once the buffers have grown to the line length,
@@ -146,9 +146,10 @@ impl EdgeHandle {
         let addr = std_listener
             .local_addr()
             .map_err(socket("cannot read the address of", listen.to_string()))?;
-        std_listener
-            .set_nonblocking(true)
-            .map_err(socket("cannot make the listener non-blocking on", addr.to_string()))?;
+        std_listener.set_nonblocking(true).map_err(socket(
+            "cannot make the listener non-blocking on",
+            addr.to_string(),
+        ))?;
         let _entered = self.runtime.enter();
         let listener = tokio::net::TcpListener::from_std(std_listener)
             .map_err(socket("cannot register the listener on", addr.to_string()))?;

@@ -1,7 +1,7 @@
 //! TCP: clients receive every pose as a JSON line, served on the edge
 //! runtime ([`crate::edge`]). The output thread hands each line over through
-//! a [`crate::edge::LineFeed`] (no allocation, never blocks; dropped and
-//! counted when the edge is behind). One hub task accepts clients and fans
+//! a line feed ([`crate::edge::line_feed`]: no allocation, never blocks;
+//! dropped and counted when the edge is behind). One hub task accepts clients and fans
 //! the lines out; each client is a task with a bounded queue of lines. A
 //! client whose queue is full (it reads too slowly) is dropped, connections
 //! beyond the client limit are accepted and closed at once, and a client
@@ -208,8 +208,7 @@ impl Hub {
             drop(stream);
             let r = &mut self.refusals;
             r.since_log += 1;
-            if r
-                .last_log
+            if r.last_log
                 .is_none_or(|t| t.elapsed() >= REFUSAL_LOG_INTERVAL)
             {
                 tracing::warn!(
@@ -253,20 +252,21 @@ impl Hub {
             let line = Bytes::copy_from_slice(&buf);
             self.lines.give_back(buf);
             let (stats, queue) = (&self.stats, self.limits.client_queue);
-            self.clients.retain(|c| match c.lines.try_send(line.clone()) {
-                Ok(()) => true,
-                Err(mpsc::error::TrySendError::Closed(_)) => false,
-                Err(mpsc::error::TrySendError::Full(_)) => {
-                    c.kick.cancel();
-                    stats.dropped.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!(
-                        client = %c.peer,
-                        queue,
-                        "dropping TCP pose client: its queue is full (it reads too slowly)"
-                    );
-                    false
-                }
-            });
+            self.clients
+                .retain(|c| match c.lines.try_send(line.clone()) {
+                    Ok(()) => true,
+                    Err(mpsc::error::TrySendError::Closed(_)) => false,
+                    Err(mpsc::error::TrySendError::Full(_)) => {
+                        c.kick.cancel();
+                        stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        tracing::info!(
+                            client = %c.peer,
+                            queue,
+                            "dropping TCP pose client: its queue is full (it reads too slowly)"
+                        );
+                        false
+                    }
+                });
         }
     }
 }

@@ -44,9 +44,15 @@ fn the_endpoint_keeps_its_limits() {
     .unwrap();
     let addr = endpoint.local_addr();
     let ok = ask(addr, &get("/metrics"));
-    assert!(ok.starts_with("HTTP/1.1 200 OK") && ok.ends_with("answer 1\n"), "{ok}");
+    assert!(
+        ok.starts_with("HTTP/1.1 200 OK") && ok.ends_with("answer 1\n"),
+        "{ok}"
+    );
     assert!(ask(addr, &get("/")).starts_with("HTTP/1.1 404"));
-    let post = ask(addr, b"POST /metrics HTTP/1.1\r\nHost: t\r\nContent-Length: 0\r\nConnection: close\r\n\r\n");
+    let post = ask(
+        addr,
+        b"POST /metrics HTTP/1.1\r\nHost: t\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+    );
     assert!(post.starts_with("HTTP/1.1 405"), "{post}");
     // A head above the limit.
     let mut big = b"GET /metrics HTTP/1.1\r\nHost: t\r\nX-Pad: ".to_vec();
@@ -61,7 +67,10 @@ fn the_endpoint_keeps_its_limits() {
     let idle: Vec<TcpStream> = (0..4).map(|_| TcpStream::connect(addr).unwrap()).collect();
     let t0 = Instant::now();
     while endpoint.stats().accepted.load(Ordering::Relaxed) < 8 {
-        assert!(t0.elapsed() < Duration::from_secs(5), "the idle clients were not accepted");
+        assert!(
+            t0.elapsed() < Duration::from_secs(5),
+            "the idle clients were not accepted"
+        );
         std::thread::sleep(Duration::from_millis(2));
     }
     let extra = ask(addr, &get("/metrics"));

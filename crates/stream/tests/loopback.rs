@@ -79,7 +79,8 @@ fn tcp_clients_get_every_line_and_a_slow_one_is_dropped() {
         max_clients: 16,
         client_queue: 1024,
     };
-    let mut server = TcpServer::bind(edge.handle(), "127.0.0.1:0".parse().unwrap(), limits).unwrap();
+    let mut server =
+        TcpServer::bind(edge.handle(), "127.0.0.1:0".parse().unwrap(), limits).unwrap();
     let addr = server.local_addr();
     let readers: Vec<_> = (0..2)
         .map(|_| {

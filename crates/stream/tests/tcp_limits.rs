@@ -143,7 +143,9 @@ fn a_client_that_never_reads_is_dropped_when_its_queue_fills_and_freed() {
         }
     });
     let mut slow = tiny_window_client(addr);
-    wait_for("both connected", || stats.connected.load(Ordering::Relaxed) == 2);
+    wait_for("both connected", || {
+        stats.connected.load(Ordering::Relaxed) == 2
+    });
     let mut buf = Vec::new();
     let mut seq = 0u64;
     let t0 = Instant::now();
@@ -179,6 +181,10 @@ fn a_client_that_never_reads_is_dropped_when_its_queue_fills_and_freed() {
     server.shutdown();
     let n = reader.join().unwrap();
     let lost = stats.lines_dropped.load(Ordering::Relaxed);
-    assert_eq!(n + lost, seq, "the healthy client got every line handed over");
+    assert_eq!(
+        n + lost,
+        seq,
+        "the healthy client got every line handed over"
+    );
     edge.stop();
 }
