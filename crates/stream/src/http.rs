@@ -70,6 +70,8 @@ pub struct TextEndpoint {
 
 /// At most one log line per this interval about refused connections.
 const REFUSAL_LOG_INTERVAL: Duration = Duration::from_secs(10);
+/// Time a connection has to finish its answer when it is closed.
+const GRACEFUL_CLOSE: Duration = Duration::from_secs(1);
 /// The smallest request-head buffer hyper accepts.
 const MIN_HEAD_BUFFER: usize = 8192;
 
@@ -131,11 +133,15 @@ impl TextEndpoint {
                     let stop = stop.clone();
                     edge.spawn(async move {
                         let _slot = slot;
+                        tokio::pin!(connection);
                         tokio::select! {
-                            _ = connection => {}
+                            _ = connection.as_mut() => return,
                             _ = stop.cancelled() => {}
                             _ = tokio::time::sleep(limits.max_connection_life) => {}
                         }
+                        // Finish the request in progress, then close.
+                        connection.as_mut().graceful_shutdown();
+                        let _ = tokio::time::timeout(GRACEFUL_CLOSE, connection).await;
                     });
                 }
             }

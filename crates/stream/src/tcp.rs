@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, Notify};
 use tokio_util::sync::CancellationToken;
 
 /// Largest accepted `client_queue` (lines queued per client).
@@ -99,6 +99,7 @@ impl TcpServer {
             edge: edge.clone(),
             clients: Vec::with_capacity(limits.max_clients),
             refusals: Refusals::default(),
+            left: Arc::new(Notify::new()),
         };
         edge.spawn(hub.run());
         Ok(TcpServer {
@@ -171,6 +172,8 @@ struct Hub {
     edge: EdgeHandle,
     clients: Vec<ClientLink>,
     refusals: Refusals,
+    /// Woken by a client task that ends, so its link is forgotten at once.
+    left: Arc<Notify>,
 }
 
 impl Hub {
@@ -179,6 +182,7 @@ impl Hub {
             tokio::select! {
                 biased;
                 _ = self.stop.cancelled() => break,
+                _ = self.left.notified() => self.clients.retain(|c| !c.lines.is_closed()),
                 _ = self.lines.ready() => {
                     self.fan_out();
                     if self.lines.is_closed() {
@@ -228,13 +232,12 @@ impl Hub {
         self.stats.accepted.fetch_add(1, Ordering::Relaxed);
         self.stats.connected.fetch_add(1, Ordering::Relaxed);
         tracing::info!(client = %peer, "TCP pose client connected");
-        self.edge.spawn(serve_client(
-            stream,
-            peer,
-            rx,
-            kick.clone(),
-            Arc::clone(&self.stats),
-        ));
+        let ended = Ended {
+            stats: Arc::clone(&self.stats),
+            hub: Arc::clone(&self.left),
+        };
+        self.edge
+            .spawn(serve_client(stream, peer, rx, kick.clone(), ended));
         self.clients.push(ClientLink {
             lines: tx,
             kick,
@@ -271,40 +274,58 @@ impl Hub {
     }
 }
 
-/// Decrements the connected gauge however a client task ends.
-struct Connected(Arc<TcpStats>);
+/// However a client task ends: the connected gauge goes down and the hub
+/// is told to forget the client.
+struct Ended {
+    stats: Arc<TcpStats>,
+    hub: Arc<Notify>,
+}
 
-impl Drop for Connected {
+impl Drop for Ended {
     fn drop(&mut self) {
-        self.0.connected.fetch_sub(1, Ordering::Relaxed);
+        self.stats.connected.fetch_sub(1, Ordering::Relaxed);
+        self.hub.notify_one();
     }
 }
 
-/// Writes the queued lines to one client until it leaves, is kicked, or the
-/// server closes (then the queue is flushed first).
+/// Serves one client; when it ends, the socket and the queue are gone
+/// before the hub is told.
 async fn serve_client(
     stream: TcpStream,
     peer: SocketAddr,
+    lines: mpsc::Receiver<Bytes>,
+    kick: CancellationToken,
+    ended: Ended,
+) {
+    if let Some(reason) = write_lines(stream, lines, kick).await {
+        ended.stats.disconnected.fetch_add(1, Ordering::Relaxed);
+        tracing::info!(client = %peer, %reason, "TCP pose client disconnected");
+    }
+    drop(ended);
+}
+
+/// Writes the queued lines to one client until it leaves (the reason is
+/// returned), is kicked, or the server closes (the queue is flushed first).
+async fn write_lines(
+    stream: TcpStream,
     mut lines: mpsc::Receiver<Bytes>,
     kick: CancellationToken,
-    stats: Arc<TcpStats>,
-) {
-    let _connected = Connected(Arc::clone(&stats));
+) -> Option<String> {
     let (mut reader, mut writer) = stream.into_split();
     // Clients send nothing; reading notices when they leave.
     let mut scratch = [0u8; 256];
-    let left = loop {
+    loop {
         tokio::select! {
             biased;
-            _ = kick.cancelled() => return,
+            _ = kick.cancelled() => return None,
             line = lines.recv() => match line {
                 Some(line) => {
                     tokio::select! {
                         biased;
-                        _ = kick.cancelled() => return,
+                        _ = kick.cancelled() => return None,
                         written = writer.write_all(&line) => {
                             if let Err(e) = written {
-                                break format!("writing failed: {e}");
+                                return Some(format!("writing failed: {e}"));
                             }
                         }
                     }
@@ -312,16 +333,14 @@ async fn serve_client(
                 None => {
                     // The server closes: everything queued was written.
                     let _ = writer.shutdown().await;
-                    return;
+                    return None;
                 }
             },
             read = reader.read(&mut scratch) => match read {
-                Ok(0) => break "closed by the client".to_string(),
+                Ok(0) => return Some("closed by the client".to_string()),
                 Ok(_) => {}
-                Err(e) => break format!("reading failed: {e}"),
+                Err(e) => return Some(format!("reading failed: {e}")),
             },
         }
-    };
-    stats.disconnected.fetch_add(1, Ordering::Relaxed);
-    tracing::info!(client = %peer, reason = %left, "TCP pose client disconnected");
+    }
 }
