@@ -251,6 +251,8 @@ mod tests {
             "photopose_source_connected 1",
             "photopose_stream_clients 2",
             "photopose_stream_clients_dropped_total 0",
+            "photopose_stream_clients_refused_total 0",
+            "photopose_stream_lines_dropped_total 0",
         ] {
             assert!(body.lines().any(|l| l == line), "{line} missing:\n{body}");
         }
