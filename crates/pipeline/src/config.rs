@@ -287,10 +287,16 @@ struct OutputSection {
     tcp_listen: Option<String>,
     #[serde(default = "default_queue")]
     tcp_client_queue: usize,
+    #[serde(default = "default_max_clients")]
+    tcp_max_clients: usize,
 }
 
 fn default_queue() -> usize {
     256
+}
+
+fn default_max_clients() -> usize {
+    16
 }
 
 impl Default for OutputSection {
@@ -299,6 +305,7 @@ impl Default for OutputSection {
             udp: Vec::new(),
             tcp_listen: None,
             tcp_client_queue: default_queue(),
+            tcp_max_clients: default_max_clients(),
         }
     }
 }
@@ -362,6 +369,8 @@ pub struct Config {
     pub tcp_listen: Option<SocketAddr>,
     /// Lines queued per TCP client.
     pub tcp_client_queue: usize,
+    /// TCP clients served at once.
+    pub tcp_max_clients: usize,
     /// Prometheus endpoint address.
     pub metrics_listen: Option<SocketAddr>,
     /// The KUKA RSI server, when `[rsi] enabled = true`.
@@ -556,11 +565,20 @@ impl Config {
             })?),
             None => None,
         };
-        if !(1..=1_000_000).contains(&f.output.tcp_client_queue) {
+        // Per-client memory is bounded: a queue of at most 4096 lines
+        // (about 2.5 MB of pose lines), at most 1024 clients.
+        if !(1..=photopose_stream::tcp::MAX_CLIENT_QUEUE).contains(&f.output.tcp_client_queue) {
             return Err(bad(
                 "output.tcp_client_queue",
                 f.output.tcp_client_queue.to_string(),
-                "must be 1..=1000000",
+                "must be 1..=4096 lines",
+            ));
+        }
+        if !(1..=photopose_stream::tcp::MAX_CLIENTS).contains(&f.output.tcp_max_clients) {
+            return Err(bad(
+                "output.tcp_max_clients",
+                f.output.tcp_max_clients.to_string(),
+                "must be 1..=1024 clients",
             ));
         }
         let rsi = if f.rsi.enabled {
@@ -602,6 +620,7 @@ impl Config {
             udp,
             tcp_listen,
             tcp_client_queue: f.output.tcp_client_queue,
+            tcp_max_clients: f.output.tcp_max_clients,
             metrics_listen: match &f.metrics.listen {
                 Some(a) => Some(a.parse::<SocketAddr>().map_err(|_| {
                     bad(
@@ -789,7 +808,7 @@ mod tests {
     #[test]
     fn missing_sections_take_their_defaults() {
         let c = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
-        assert_eq!(c.tcp_client_queue, 256);
+        assert_eq!((c.tcp_client_queue, c.tcp_max_clients), (256, 16));
         assert_eq!((c.workers, c.slots), (2, 8));
         let r = Config::parse(
             "[source]\nkind = \"replay\"\n[source.replay]\npath = \"a.mcap\"\nspeed = 2.5\n",
@@ -827,6 +846,20 @@ mod tests {
     }
 
     #[test]
+    fn the_stream_keys_are_documented_with_their_defaults() {
+        let defaults = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
+        let example = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
+        for key in ["udp", "tcp_listen", "tcp_client_queue", "tcp_max_clients"] {
+            assert!(
+                EXAMPLE.lines().any(|l| l.starts_with(&format!("{key} = "))),
+                "output.{key} is not in config/photopose.toml"
+            );
+        }
+        assert_eq!(example.tcp_client_queue, defaults.tcp_client_queue);
+        assert_eq!(example.tcp_max_clients, defaults.tcp_max_clients);
+    }
+
+    #[test]
     fn errors_name_the_key() {
         let cases = [
             (
@@ -855,6 +888,22 @@ mod tests {
                     "tcp_listen = \"localhost\"",
                 ),
                 "output.tcp_listen",
+            ),
+            (
+                EXAMPLE.replace("tcp_client_queue = 256", "tcp_client_queue = 1000000"),
+                "output.tcp_client_queue",
+            ),
+            (
+                EXAMPLE.replace("tcp_client_queue = 256", "tcp_client_queue = 0"),
+                "output.tcp_client_queue",
+            ),
+            (
+                EXAMPLE.replace("tcp_max_clients = 16", "tcp_max_clients = 0"),
+                "output.tcp_max_clients",
+            ),
+            (
+                EXAMPLE.replace("tcp_max_clients = 16", "tcp_max_clients = 5000"),
+                "output.tcp_max_clients",
             ),
             ("[source]\n".to_string(), "kind"),
             ("[source]\nkind = \"replay\"\n".to_string(), "source.replay.path"),

@@ -1,14 +1,13 @@
 //! The Prometheus text endpoint: counters and the latency histogram of a
-//! running pipeline at `http://<listen>/metrics`, one thread, no framework.
+//! running pipeline at `http://<listen>/metrics`, served from the edge
+//! runtime (many connections at once, bounded).
 
 use crate::run::{Counters, LATENCY_BASE_US, LATENCY_BUCKETS};
+use photopose_stream::{EdgeHandle, HttpLimits, StreamError, TextEndpoint};
 use std::fmt::Write as _;
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::net::SocketAddr;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::thread::JoinHandle;
-use std::time::Duration;
 
 /// The metrics in Prometheus' text exposition format.
 pub fn render(c: &Counters) -> String {
@@ -95,9 +94,27 @@ pub fn render(c: &Counters) -> String {
             ),
             (
                 "photopose_stream_clients_dropped_total",
-                "TCP clients dropped for a full queue or a write error.",
+                "TCP clients dropped because their queue was full (too slow).",
                 "counter",
                 &tcp.dropped,
+            ),
+            (
+                "photopose_stream_clients_disconnected_total",
+                "TCP clients that left (closed, reset, write failed).",
+                "counter",
+                &tcp.disconnected,
+            ),
+            (
+                "photopose_stream_clients_refused_total",
+                "TCP connections closed at once: the client limit was reached.",
+                "counter",
+                &tcp.refused,
+            ),
+            (
+                "photopose_stream_lines_dropped_total",
+                "Pose lines not streamed over TCP because the edge runtime was behind.",
+                "counter",
+                &tcp.lines_dropped,
             ),
         ] {
             let _ = writeln!(
@@ -141,68 +158,41 @@ pub fn render(c: &Counters) -> String {
     s
 }
 
-/// Serves [`render`] over HTTP until stopped.
+/// Serves [`render`] at `/metrics` on the edge runtime
+/// ([`photopose_stream::http`]): every connection its own task, so an idle
+/// or slow client never delays a scrape; bounded by
+/// [`photopose_stream::HttpLimits`].
 #[derive(Debug)]
 pub struct MetricsServer {
-    addr: SocketAddr,
-    thread: Option<JoinHandle<()>>,
+    endpoint: TextEndpoint,
 }
 
 impl MetricsServer {
-    /// Listens on `listen`; `stop` ends the thread.
+    /// Listens on `listen` and serves from `edge` until [`MetricsServer::stop`]
+    /// or the edge stops.
     pub fn start(
+        edge: &EdgeHandle,
         listen: SocketAddr,
         counters: Arc<Counters>,
-        stop: Arc<AtomicBool>,
-    ) -> std::io::Result<Self> {
-        let listener = TcpListener::bind(listen)?;
-        listener.set_nonblocking(true)?;
-        let addr = listener.local_addr()?;
-        let thread = std::thread::Builder::new().name("metrics".into()).spawn(move || {
-            while !stop.load(Ordering::Acquire) {
-                match listener.accept() {
-                    Ok((mut stream, _)) => {
-                        let _ = stream.set_nonblocking(false);
-                        let _ = stream.set_read_timeout(Some(Duration::from_millis(500)));
-                        let _ = stream.set_write_timeout(Some(Duration::from_millis(500)));
-                        let mut req = [0u8; 1024];
-                        let n = stream.read(&mut req).unwrap_or(0);
-                        let ok = req[..n].starts_with(b"GET /metrics");
-                        let (status, body) = if ok {
-                            ("200 OK", render(&counters))
-                        } else {
-                            ("404 Not Found", "try /metrics\n".to_string())
-                        };
-                        let _ = write!(
-                            stream,
-                            "HTTP/1.1 {status}\r\nContent-Type: text/plain; version=0.0.4\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-                            body.len()
-                        );
-                    }
-                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(20)),
-                    Err(e) => {
-                        tracing::warn!(error = %e, "metrics endpoint: accept failed");
-                        std::thread::sleep(Duration::from_millis(200));
-                    }
-                }
-            }
-        })?;
-        Ok(MetricsServer {
-            addr,
-            thread: Some(thread),
-        })
+    ) -> Result<Self, StreamError> {
+        let endpoint = TextEndpoint::start(
+            edge,
+            listen,
+            "/metrics",
+            Arc::new(move || render(&counters)),
+            HttpLimits::default(),
+        )?;
+        Ok(MetricsServer { endpoint })
     }
 
     /// The address it listens on.
     pub fn local_addr(&self) -> SocketAddr {
-        self.addr
+        self.endpoint.local_addr()
     }
 
-    /// Waits for the thread (after the stop flag was set).
-    pub fn join(mut self) {
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+    /// Stops accepting and closes the connections.
+    pub fn stop(self) {
+        self.endpoint.stop();
     }
 }
 
@@ -210,14 +200,17 @@ impl MetricsServer {
 mod tests {
     use super::*;
 
+    use std::io::{Read, Write};
+
     #[test]
     fn serves_the_counters_over_http() {
         let c = Arc::new(Counters::default());
         c.frames_in.store(42, Ordering::Relaxed);
-        let stop = Arc::new(AtomicBool::new(false));
-        let server = MetricsServer::start("127.0.0.1:0".parse().unwrap(), c, stop.clone()).unwrap();
+        let edge = photopose_stream::Edge::start(1).unwrap();
+        let server =
+            MetricsServer::start(edge.handle(), "127.0.0.1:0".parse().unwrap(), c).unwrap();
         let mut s = std::net::TcpStream::connect(server.local_addr()).unwrap();
-        s.write_all(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n")
+        s.write_all(b"GET /metrics HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
             .unwrap();
         let mut body = String::new();
         s.read_to_string(&mut body).unwrap();
@@ -228,8 +221,14 @@ mod tests {
             !body.contains("photopose_source_"),
             "no source counters: {body}"
         );
-        stop.store(true, Ordering::Release);
-        server.join();
+        let mut s = std::net::TcpStream::connect(server.local_addr()).unwrap();
+        s.write_all(b"GET /other HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            .unwrap();
+        let mut other = String::new();
+        s.read_to_string(&mut other).unwrap();
+        assert!(other.starts_with("HTTP/1.1 404"), "{other}");
+        server.stop();
+        edge.stop();
     }
 
     #[test]
@@ -252,6 +251,8 @@ mod tests {
             "photopose_source_connected 1",
             "photopose_stream_clients 2",
             "photopose_stream_clients_dropped_total 0",
+            "photopose_stream_clients_refused_total 0",
+            "photopose_stream_lines_dropped_total 0",
         ] {
             assert!(body.lines().any(|l| l == line), "{line} missing:\n{body}");
         }

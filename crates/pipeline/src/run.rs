@@ -13,7 +13,7 @@ use photopose_acquire::{spawn_grabber_with, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
 use photopose_geometry::Camera;
 use photopose_locate::{LocateOptions, Locator};
-use photopose_stream::{PoseMessage, PoseStatus};
+use photopose_stream::{Edge, PoseMessage, PoseStatus};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -220,7 +220,12 @@ pub struct Pipeline {
     metrics: Option<crate::metrics::MetricsServer>,
     metrics_addr: Option<SocketAddr>,
     watchdog: Option<Watchdog>,
+    /// The tokio runtime of the TCP stream and the metrics endpoint.
+    edge: Option<Edge>,
 }
+
+/// Worker threads of the edge runtime: the network edges are light.
+const EDGE_THREADS: usize = 1;
 
 impl std::fmt::Debug for Pipeline {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -275,6 +280,13 @@ impl Pipeline {
             || photopose_frame::Image::new_mono8(camera.sensor.width, camera.sensor.height),
         );
         let (out_tx, out_rx) = bounded::<Outcome>(slots * 2 + config.workers);
+        // The network edges (TCP stream, metrics) run on one tokio runtime
+        // of their own; the pipeline's threads never await.
+        let edge = if config.tcp_listen.is_some() || config.metrics_listen.is_some() {
+            Some(Edge::start(EDGE_THREADS)?)
+        } else {
+            None
+        };
         // The RSI server reads the latest pose from a lock-free slot the
         // output stage publishes into; it never waits on vision.
         let (rsi, rsi_link) = match &config.rsi {
@@ -301,7 +313,7 @@ impl Pipeline {
             None => (None, None),
         };
         let rsi_addr = rsi.as_ref().map(|s| s.local_addr());
-        let sinks = crate::sink::build(config, rsi_link)?;
+        let sinks = crate::sink::build(config, rsi_link, edge.as_ref().map(|e| e.handle()))?;
         let tcp_addr = sinks.tcp_addr;
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
@@ -309,16 +321,13 @@ impl Pipeline {
             rsi: sinks.rsi.clone(),
             ..Counters::default()
         });
-        let metrics = match config.metrics_listen {
-            Some(a) => Some(
-                crate::metrics::MetricsServer::start(a, counters.clone(), stop.clone()).map_err(
-                    |source| PipelineError::Thread {
-                        name: format!("metrics on {a}"),
-                        source,
-                    },
-                )?,
-            ),
-            None => None,
+        let metrics = match (config.metrics_listen, &edge) {
+            (Some(a), Some(edge)) => Some(crate::metrics::MetricsServer::start(
+                edge.handle(),
+                a,
+                counters.clone(),
+            )?),
+            _ => None,
         };
         let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
@@ -419,6 +428,7 @@ impl Pipeline {
             metrics,
             metrics_addr,
             watchdog: Some(watchdog),
+            edge,
         })
     }
 
@@ -486,9 +496,13 @@ impl Pipeline {
                 "RSI server stopped"
             );
         }
-        if let Some(m) = self.metrics {
-            self.stop.store(true, Ordering::Release);
-            m.join();
+        if let Some(m) = self.metrics.take() {
+            m.stop();
+        }
+        if let Some(edge) = self.edge.take() {
+            // The output thread has closed the TCP stream: its clients get
+            // what is queued, then the runtime's threads are joined.
+            edge.stop();
         }
         self.counters
     }

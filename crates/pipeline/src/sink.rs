@@ -66,8 +66,13 @@ impl std::fmt::Debug for Sinks {
 }
 
 /// The sinks `config` asks for: the RSI slot (when `rsi` is given: the
-/// server the pipeline started), UDP datagrams, the TCP stream.
-pub fn build(config: &Config, rsi: Option<rsi::RsiSink>) -> Result<Sinks, PipelineError> {
+/// server the pipeline started), UDP datagrams, the TCP stream (on `edge`,
+/// the runtime of the network edges).
+pub fn build(
+    config: &Config,
+    rsi: Option<rsi::RsiSink>,
+    edge: Option<&photopose_stream::EdgeHandle>,
+) -> Result<Sinks, PipelineError> {
     let mut sinks: Vec<Box<dyn PoseSink>> = Vec::new();
     let stats = rsi.as_ref().map(|r| r.stats());
     if let Some(r) = rsi {
@@ -77,7 +82,7 @@ pub fn build(config: &Config, rsi: Option<rsi::RsiSink>) -> Result<Sinks, Pipeli
         sinks.push(Box::new(u));
     }
     let (mut tcp_addr, mut tcp) = (None, None);
-    if let Some(t) = tcp::TcpSink::from_config(config)? {
+    if let Some(t) = tcp::TcpSink::from_config(config, edge)? {
         (tcp_addr, tcp) = (t.local_addr(), t.stats());
         sinks.push(Box::new(t));
     }

@@ -3,24 +3,32 @@
 //! One [`PoseMessage`] per frame, encoded as one line of JSON
 //! ([`message`]); sent as one UDP datagram to each configured destination
 //! ([`udp`]) and as a JSON line to every client of a TCP server ([`tcp`]).
-//! A slow TCP client has a bounded queue and is dropped with a log when it
-//! overflows; nothing here ever blocks the caller. Once warm, publishing a
-//! pose allocates nothing (encoding goes into reused buffers).
+//! The TCP server, like every network edge that serves people and other
+//! programs (also the metrics endpoint, [`http`]), runs on the one tokio
+//! runtime of [`edge`]; the pipeline's threads hand lines to it without
+//! waiting. A slow TCP client has a bounded queue and is dropped with a log
+//! when it overflows; nothing here ever blocks the caller. Once warm,
+//! publishing a pose allocates nothing (encoding goes into reused buffers).
 //!
 //! The formats are documented in `docs/streams.md`.
 
+pub mod edge;
+pub mod http;
 pub mod message;
 pub mod tcp;
 pub mod udp;
 
+pub use edge::{Edge, EdgeHandle};
+pub use http::{HttpLimits, TextEndpoint};
 pub use message::{PoseMessage, PoseStatus};
-pub use tcp::{TcpServer, TcpStats};
+pub use tcp::{TcpLimits, TcpServer, TcpStats};
 pub use udp::UdpSender;
 
 use thiserror::Error;
 
 /// Why a stream could not be set up.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum StreamError {
     /// Binding or configuring a socket failed.
     #[error("{what} {addr}: {source}")]
@@ -29,6 +37,12 @@ pub enum StreamError {
         what: &'static str,
         /// The address.
         addr: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The edge runtime (tokio) could not start.
+    #[error("cannot start the edge runtime: {source}")]
+    Runtime {
         /// The OS error.
         source: std::io::Error,
     },

@@ -1,107 +1,112 @@
-//! TCP: any number of clients receive every pose as a JSON line. Each client
-//! has a writer thread and a bounded queue of preallocated line buffers; a
-//! client whose queue is full (it reads too slowly) is dropped with a log,
-//! so a slow client never stalls the pipeline. Publishing copies the line
-//! into a free buffer of each client: no allocation once warm.
+//! TCP: clients receive every pose as a JSON line, served on the edge
+//! runtime ([`crate::edge`]). The output thread hands each line over through
+//! a line feed ([`crate::edge::line_feed`]: no allocation, never blocks;
+//! dropped and counted when the edge is behind). One hub task accepts clients and fans
+//! the lines out; each client is a task with a bounded queue of lines. A
+//! client whose queue is full (it reads too slowly) is dropped, connections
+//! beyond the client limit are accepted and closed at once, and a client
+//! that leaves leaves nothing behind.
 
+use crate::edge::{line_feed, EdgeHandle, FeedReceiver, FeedSender};
 use crate::StreamError;
-use crossbeam_channel::{bounded, Receiver, Sender, TrySendError};
-use std::io::Write;
-use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
-use std::time::Duration;
+use bytes::Bytes;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{mpsc, Notify};
+use tokio_util::sync::CancellationToken;
+
+/// Largest accepted `client_queue` (lines queued per client).
+pub const MAX_CLIENT_QUEUE: usize = 4096;
+/// Largest accepted `max_clients`.
+pub const MAX_CLIENTS: usize = 1024;
+/// Lines handed from the output thread to the hub at most at once (the
+/// feed's buffer pool); one pool for all clients.
+const FEED_LINES: usize = 1024;
+/// Initial capacity of a feed buffer: a pose line is about 600 bytes.
+const LINE_CAPACITY: usize = 1024;
+/// At most one log line per this interval about refused clients.
+const REFUSAL_LOG_INTERVAL: Duration = Duration::from_secs(10);
+
+/// The bounds of a TCP pose stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TcpLimits {
+    /// Clients served at once (1..=[`MAX_CLIENTS`]); more are refused.
+    pub max_clients: usize,
+    /// Lines queued per client (1..=[`MAX_CLIENT_QUEUE`]) before it is dropped.
+    pub client_queue: usize,
+}
+
+impl Default for TcpLimits {
+    fn default() -> Self {
+        TcpLimits {
+            max_clients: 16,
+            client_queue: 256,
+        }
+    }
+}
 
 /// Counters of the TCP server.
 #[derive(Debug, Default)]
 pub struct TcpStats {
-    /// Clients accepted.
+    /// Clients accepted (and served).
     pub accepted: AtomicU64,
-    /// Clients dropped for a full queue or a write error.
+    /// Clients dropped because their queue was full (they read too slowly).
     pub dropped: AtomicU64,
+    /// Clients that left (closed, reset, or a write failed).
+    pub disconnected: AtomicU64,
+    /// Connections refused (closed at once) because the client limit was reached.
+    pub refused: AtomicU64,
+    /// Lines not sent to anyone because the edge runtime was behind.
+    pub lines_dropped: AtomicU64,
     /// Clients connected now.
     pub connected: AtomicU64,
 }
 
-struct Client {
-    peer: SocketAddr,
-    filled: Sender<Vec<u8>>,
-    free: Receiver<Vec<u8>>,
-    alive: Arc<AtomicBool>,
-    writer: Option<JoinHandle<()>>,
-}
-
-/// A TCP server streaming pose lines to its clients.
+/// A TCP server streaming pose lines to its clients from the edge runtime.
+#[derive(Debug)]
 pub struct TcpServer {
     addr: SocketAddr,
-    pending: Receiver<Client>,
-    clients: Vec<Client>,
+    feed: FeedSender,
     stats: Arc<TcpStats>,
-    stop: Arc<AtomicBool>,
-    acceptor: Option<JoinHandle<()>>,
-    queue: usize,
-    /// Clients being torn down, joined on shutdown.
-    retired: Arc<Mutex<Vec<JoinHandle<()>>>>,
-}
-
-impl std::fmt::Debug for TcpServer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TcpServer")
-            .field("addr", &self.addr)
-            .field("clients", &self.clients.len())
-            .field("queue", &self.queue)
-            .finish()
-    }
+    limits: TcpLimits,
 }
 
 impl TcpServer {
-    /// Listens on `listen`; every client gets a queue of `queue` lines.
-    pub fn bind(listen: SocketAddr, queue: usize) -> Result<Self, StreamError> {
-        let listener = TcpListener::bind(listen).map_err(|source| StreamError::Socket {
-            what: "cannot listen for TCP pose clients on",
-            addr: listen.to_string(),
-            source,
-        })?;
-        let addr = listener
-            .local_addr()
-            .map_err(|source| StreamError::Socket {
-                what: "cannot read the address of",
-                addr: listen.to_string(),
-                source,
-            })?;
-        listener
-            .set_nonblocking(true)
-            .map_err(|source| StreamError::Socket {
-                what: "cannot make the TCP listener non-blocking on",
-                addr: addr.to_string(),
-                source,
-            })?;
-        let queue = queue.max(1);
-        let stop = Arc::new(AtomicBool::new(false));
-        let stats = Arc::new(TcpStats::default());
-        let (tx, pending) = bounded::<Client>(64);
-        let acceptor = {
-            let stop = stop.clone();
-            let stats = stats.clone();
-            std::thread::Builder::new()
-                .name("pose-tcp-accept".into())
-                .spawn(move || accept_loop(listener, tx, queue, stop, stats))
-                .map_err(|source| StreamError::Socket {
-                    what: "cannot start the TCP acceptor for",
-                    addr: addr.to_string(),
-                    source,
-                })?
+    /// Listens on `listen` and serves clients on `edge` within `limits`
+    /// (clamped to their ranges).
+    pub fn bind(
+        edge: &EdgeHandle,
+        listen: SocketAddr,
+        limits: TcpLimits,
+    ) -> Result<Self, StreamError> {
+        let limits = TcpLimits {
+            max_clients: limits.max_clients.clamp(1, MAX_CLIENTS),
+            client_queue: limits.client_queue.clamp(1, MAX_CLIENT_QUEUE),
         };
+        let (listener, addr) = edge.listen(listen, "cannot listen for TCP pose clients on")?;
+        let (feed, lines) = line_feed(FEED_LINES, LINE_CAPACITY);
+        let stats = Arc::new(TcpStats::default());
+        let hub = Hub {
+            listener,
+            lines,
+            limits,
+            stats: Arc::clone(&stats),
+            stop: edge.stop_token(),
+            edge: edge.clone(),
+            clients: Vec::with_capacity(limits.max_clients),
+            refusals: Refusals::default(),
+            left: Arc::new(Notify::new()),
+        };
+        edge.spawn(hub.run());
         Ok(TcpServer {
             addr,
-            pending,
-            clients: Vec::new(),
+            feed,
             stats,
-            stop,
-            acceptor: Some(acceptor),
-            queue,
-            retired: Arc::new(Mutex::new(Vec::new())),
+            limits,
         })
     }
 
@@ -110,156 +115,232 @@ impl TcpServer {
         self.addr
     }
 
+    /// The bounds in force.
+    pub fn limits(&self) -> TcpLimits {
+        self.limits
+    }
+
     /// The counters.
     pub fn stats(&self) -> &TcpStats {
         &self.stats
     }
 
-    /// The counters, shareable with a metrics thread.
+    /// The counters, shareable with a metrics endpoint.
     pub fn shared_stats(&self) -> Arc<TcpStats> {
         Arc::clone(&self.stats)
     }
 
-    /// Queues `line` for every client; never blocks. A client with a full
-    /// queue, or whose writer has failed, is dropped.
+    /// Hands `line` to every client; never blocks, never allocates once
+    /// warm. When the edge is behind the line is dropped and counted.
     pub fn publish(&mut self, line: &[u8]) {
-        while let Ok(c) = self.pending.try_recv() {
-            self.clients.push(c);
-        }
-        let mut k = 0;
-        while k < self.clients.len() {
-            let c = &mut self.clients[k];
-            let ok = c.alive.load(Ordering::Acquire)
-                && match c.free.try_recv() {
-                    Ok(mut buf) => {
-                        buf.clear();
-                        buf.extend_from_slice(line);
-                        !matches!(
-                            c.filled.try_send(buf),
-                            Err(TrySendError::Full(_) | TrySendError::Disconnected(_))
-                        )
-                    }
-                    Err(_) => false,
-                };
-            if ok {
-                k += 1;
-                continue;
-            }
-            let c = self.clients.swap_remove(k);
-            let reason = if c.alive.load(Ordering::Acquire) {
-                "its queue is full (it reads too slowly)"
-            } else {
-                "writing to it failed (disconnected)"
-            };
-            tracing::warn!(client = %c.peer, queue = self.queue, "dropping TCP pose client: {reason}");
-            self.retire(c);
+        if !self.feed.send(line) {
+            self.stats.lines_dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    fn retire(&mut self, mut c: Client) {
-        c.alive.store(false, Ordering::Release);
-        self.stats.dropped.fetch_add(1, Ordering::Relaxed);
-        self.stats.connected.fetch_sub(1, Ordering::Relaxed);
-        // Dropping the sender ends the writer thread.
-        drop(c.filled);
-        if let (Some(w), Ok(mut r)) = (c.writer.take(), self.retired.lock()) {
-            r.push(w);
-        }
-    }
-
-    /// Stops accepting, lets the writers flush what is queued and joins all threads.
-    pub fn shutdown(mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(a) = self.acceptor.take() {
-            let _ = a.join();
-        }
-        while let Ok(c) = self.pending.try_recv() {
-            self.clients.push(c);
-        }
-        for mut c in self.clients.drain(..) {
-            drop(c.filled);
-            if let Some(w) = c.writer.take() {
-                let _ = w.join();
-            }
-        }
-        if let Ok(mut r) = self.retired.lock() {
-            for w in r.drain(..) {
-                let _ = w.join();
-            }
-        }
+    /// Stops accepting; the clients get what is queued, then their
+    /// connections are closed. Returns at once: the edge runtime finishes
+    /// the work (and [`crate::edge::Edge::stop`] waits for it).
+    pub fn shutdown(self) {
+        // Dropping the feed's sender closes it: the hub forwards the lines
+        // still waiting and ends.
+        drop(self.feed);
     }
 }
 
-fn accept_loop(
+/// Rate-limited logging of refused connections.
+#[derive(Default)]
+struct Refusals {
+    last_log: Option<Instant>,
+    since_log: u64,
+}
+
+/// What the hub keeps of a served client.
+struct ClientLink {
+    lines: mpsc::Sender<Bytes>,
+    kick: CancellationToken,
+    peer: SocketAddr,
+}
+
+/// Accepts clients and fans the lines out (one task per server).
+struct Hub {
     listener: TcpListener,
-    tx: Sender<Client>,
-    queue: usize,
-    stop: Arc<AtomicBool>,
+    lines: FeedReceiver,
+    limits: TcpLimits,
     stats: Arc<TcpStats>,
-) {
-    while !stop.load(Ordering::Acquire) {
-        match listener.accept() {
-            Ok((stream, peer)) => {
-                let _ = stream.set_nodelay(true);
-                let _ = stream.set_nonblocking(false);
-                // A stuck peer must not hold its writer forever.
-                let _ = stream.set_write_timeout(Some(Duration::from_secs(2)));
-                let (filled_tx, filled_rx) = bounded::<Vec<u8>>(queue);
-                let (free_tx, free_rx) = bounded::<Vec<u8>>(queue);
-                for _ in 0..queue {
-                    let _ = free_tx.send(Vec::with_capacity(1024));
-                }
-                let alive = Arc::new(AtomicBool::new(true));
-                let writer = {
-                    let alive = alive.clone();
-                    std::thread::Builder::new()
-                        .name("pose-tcp-client".into())
-                        .spawn(move || write_loop(stream, filled_rx, free_tx, alive))
-                };
-                match writer {
-                    Ok(w) => {
-                        stats.accepted.fetch_add(1, Ordering::Relaxed);
-                        stats.connected.fetch_add(1, Ordering::Relaxed);
-                        tracing::info!(client = %peer, "TCP pose client connected");
-                        let c = Client {
-                            peer,
-                            filled: filled_tx,
-                            free: free_rx,
-                            alive,
-                            writer: Some(w),
-                        };
-                        if tx.send(c).is_err() {
-                            return;
-                        }
-                    }
-                    Err(e) => {
-                        tracing::error!(client = %peer, error = %e, "cannot start a writer for a TCP client")
-                    }
-                }
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(10))
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "accepting a TCP pose client failed");
-                std::thread::sleep(Duration::from_millis(100));
-            }
-        }
-    }
+    stop: CancellationToken,
+    edge: EdgeHandle,
+    clients: Vec<ClientLink>,
+    refusals: Refusals,
+    /// Woken by a client task that ends, so its link is forgotten at once.
+    left: Arc<Notify>,
 }
 
-fn write_loop(
-    mut stream: TcpStream,
-    filled: Receiver<Vec<u8>>,
-    free: Sender<Vec<u8>>,
-    alive: Arc<AtomicBool>,
-) {
-    for buf in filled.iter() {
-        if stream.write_all(&buf).is_err() {
-            alive.store(false, Ordering::Release);
+impl Hub {
+    async fn run(mut self) {
+        loop {
+            tokio::select! {
+                biased;
+                _ = self.stop.cancelled() => break,
+                _ = self.left.notified() => self.clients.retain(|c| !c.lines.is_closed()),
+                _ = self.lines.ready() => {
+                    self.fan_out();
+                    if self.lines.is_closed() {
+                        self.fan_out();
+                        break;
+                    }
+                }
+                accepted = self.listener.accept() => match accepted {
+                    Ok((stream, peer)) => self.admit(stream, peer),
+                    Err(e) => {
+                        // Out of descriptors and the like: wait, do not spin.
+                        tracing::warn!(error = %e, "accepting a TCP pose client failed");
+                        tokio::time::sleep(Duration::from_millis(100)).await;
+                    }
+                },
+            }
+        }
+        // Dropping the senders lets every client flush its queue and close.
+        self.clients.clear();
+    }
+
+    fn admit(&mut self, stream: TcpStream, peer: SocketAddr) {
+        // Forget clients that have left.
+        self.clients.retain(|c| !c.lines.is_closed());
+        if self.clients.len() >= self.limits.max_clients {
+            self.stats.refused.fetch_add(1, Ordering::Relaxed);
+            drop(stream);
+            let r = &mut self.refusals;
+            r.since_log += 1;
+            if r.last_log
+                .is_none_or(|t| t.elapsed() >= REFUSAL_LOG_INTERVAL)
+            {
+                tracing::warn!(
+                    client = %peer,
+                    refused = r.since_log,
+                    max_clients = self.limits.max_clients,
+                    "refusing TCP pose clients: the client limit is reached (output.tcp_max_clients)"
+                );
+                r.last_log = Some(Instant::now());
+                r.since_log = 0;
+            }
             return;
         }
-        let _ = free.try_send(buf);
+        let _ = stream.set_nodelay(true);
+        let (tx, rx) = mpsc::channel(self.limits.client_queue);
+        let kick = CancellationToken::new();
+        self.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        self.stats.connected.fetch_add(1, Ordering::Relaxed);
+        tracing::info!(client = %peer, "TCP pose client connected");
+        let ended = Ended {
+            stats: Arc::clone(&self.stats),
+            hub: Arc::clone(&self.left),
+        };
+        self.edge
+            .spawn(serve_client(stream, peer, rx, kick.clone(), ended));
+        self.clients.push(ClientLink {
+            lines: tx,
+            kick,
+            peer,
+        });
     }
-    let _ = stream.flush();
+
+    /// Forwards every waiting line to every client; drops full clients.
+    fn fan_out(&mut self) {
+        while let Some(buf) = self.lines.take() {
+            if self.clients.is_empty() {
+                self.lines.give_back(buf);
+                continue;
+            }
+            let line = Bytes::copy_from_slice(&buf);
+            self.lines.give_back(buf);
+            let (stats, queue) = (&self.stats, self.limits.client_queue);
+            self.clients
+                .retain(|c| match c.lines.try_send(line.clone()) {
+                    Ok(()) => true,
+                    Err(mpsc::error::TrySendError::Closed(_)) => false,
+                    Err(mpsc::error::TrySendError::Full(_)) => {
+                        c.kick.cancel();
+                        stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        tracing::info!(
+                            client = %c.peer,
+                            queue,
+                            "dropping TCP pose client: its queue is full (it reads too slowly)"
+                        );
+                        false
+                    }
+                });
+        }
+    }
+}
+
+/// However a client task ends: the connected gauge goes down and the hub
+/// is told to forget the client.
+struct Ended {
+    stats: Arc<TcpStats>,
+    hub: Arc<Notify>,
+}
+
+impl Drop for Ended {
+    fn drop(&mut self) {
+        self.stats.connected.fetch_sub(1, Ordering::Relaxed);
+        self.hub.notify_one();
+    }
+}
+
+/// Serves one client; when it ends, the socket and the queue are gone
+/// before the hub is told.
+async fn serve_client(
+    stream: TcpStream,
+    peer: SocketAddr,
+    lines: mpsc::Receiver<Bytes>,
+    kick: CancellationToken,
+    ended: Ended,
+) {
+    if let Some(reason) = write_lines(stream, lines, kick).await {
+        ended.stats.disconnected.fetch_add(1, Ordering::Relaxed);
+        tracing::info!(client = %peer, %reason, "TCP pose client disconnected");
+    }
+    drop(ended);
+}
+
+/// Writes the queued lines to one client until it leaves (the reason is
+/// returned), is kicked, or the server closes (the queue is flushed first).
+async fn write_lines(
+    stream: TcpStream,
+    mut lines: mpsc::Receiver<Bytes>,
+    kick: CancellationToken,
+) -> Option<String> {
+    let (mut reader, mut writer) = stream.into_split();
+    // Clients send nothing; reading notices when they leave.
+    let mut scratch = [0u8; 256];
+    loop {
+        tokio::select! {
+            biased;
+            _ = kick.cancelled() => return None,
+            line = lines.recv() => match line {
+                Some(line) => {
+                    tokio::select! {
+                        biased;
+                        _ = kick.cancelled() => return None,
+                        written = writer.write_all(&line) => {
+                            if let Err(e) = written {
+                                return Some(format!("writing failed: {e}"));
+                            }
+                        }
+                    }
+                }
+                None => {
+                    // The server closes: everything queued was written.
+                    let _ = writer.shutdown().await;
+                    return None;
+                }
+            },
+            read = reader.read(&mut scratch) => match read {
+                Ok(0) => return Some("closed by the client".to_string()),
+                Ok(_) => {}
+                Err(e) => return Some(format!("reading failed: {e}")),
+            },
+        }
+    }
 }

@@ -2,7 +2,7 @@
 //! UDP destination and TCP client in order; a slow TCP client is dropped
 //! without stalling the others; an unreachable destination is counted.
 
-use photopose_stream::{PoseMessage, PoseStatus, TcpServer, UdpSender};
+use photopose_stream::{Edge, PoseMessage, PoseStatus, TcpLimits, TcpServer, UdpSender};
 use std::io::{BufRead, BufReader};
 use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::sync::atomic::Ordering;
@@ -74,7 +74,13 @@ fn wait_for(mut f: impl FnMut() -> bool) {
 #[test]
 fn tcp_clients_get_every_line_and_a_slow_one_is_dropped() {
     // 1024 lines of slack: 50 ms at this rate, whatever else the machine does.
-    let mut server = TcpServer::bind("127.0.0.1:0".parse().unwrap(), 1024).unwrap();
+    let edge = Edge::start(1).unwrap();
+    let limits = TcpLimits {
+        max_clients: 16,
+        client_queue: 1024,
+    };
+    let mut server =
+        TcpServer::bind(edge.handle(), "127.0.0.1:0".parse().unwrap(), limits).unwrap();
     let addr = server.local_addr();
     let readers: Vec<_> = (0..2)
         .map(|_| {
@@ -92,10 +98,7 @@ fn tcp_clients_get_every_line_and_a_slow_one_is_dropped() {
         .collect();
     // A client that never reads, with a tiny socket buffer.
     let slow = TcpStream::connect(addr).unwrap();
-    wait_for(|| {
-        server.publish(b"");
-        server.stats().connected.load(Ordering::Relaxed) == 3
-    });
+    wait_for(|| server.stats().connected.load(Ordering::Relaxed) == 3);
     // Publish at about 20 kHz (far above any camera) until the slow
     // client's socket buffer and queue are full and it is dropped.
     let mut buf = Vec::new();
@@ -123,6 +126,7 @@ fn tcp_clients_get_every_line_and_a_slow_one_is_dropped() {
         assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "in order");
     }
     drop(slow);
+    edge.stop();
     // Sleeping alone takes n × 50 µs; the rest is publishing, which never blocked.
     let sleeping = Duration::from_micros(50 * n);
     assert!(

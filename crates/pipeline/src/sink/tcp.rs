@@ -4,7 +4,7 @@
 use super::{Outgoing, PoseSink};
 use crate::config::Config;
 use crate::run::PipelineError;
-use photopose_stream::TcpServer;
+use photopose_stream::{EdgeHandle, TcpLimits, TcpServer};
 use std::net::SocketAddr;
 use std::sync::Arc;
 
@@ -13,14 +13,21 @@ use std::sync::Arc;
 pub struct TcpSink(Option<TcpServer>);
 
 impl TcpSink {
-    /// The sink of `[output] tcp_listen`, if set.
-    pub fn from_config(config: &Config) -> Result<Option<TcpSink>, PipelineError> {
-        match config.tcp_listen {
-            Some(a) => Ok(Some(TcpSink(Some(TcpServer::bind(
+    /// The sink of `[output] tcp_listen`, if set, served on `edge`.
+    pub fn from_config(
+        config: &Config,
+        edge: Option<&EdgeHandle>,
+    ) -> Result<Option<TcpSink>, PipelineError> {
+        match (config.tcp_listen, edge) {
+            (Some(a), Some(edge)) => Ok(Some(TcpSink(Some(TcpServer::bind(
+                edge,
                 a,
-                config.tcp_client_queue,
+                TcpLimits {
+                    max_clients: config.tcp_max_clients,
+                    client_queue: config.tcp_client_queue,
+                },
             )?)))),
-            None => Ok(None),
+            _ => Ok(None),
         }
     }
 
