@@ -16,9 +16,9 @@
 //! `λ1 ≥ λ2` give the axis spread `2 atan √(λ2/λ1)` (for two axes at angle
 //! `φ`, exactly `φ`).
 
-use crate::kuka::isometry;
 use crate::HandEyeError;
 use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
+use photopose_geometry::pose::isometry_from_matrix;
 use photopose_geometry::rotation::nearest_rotation;
 
 /// The closed-form estimate of `X = T_tcp←camera` and `Z = T_base←plate`.
@@ -127,7 +127,7 @@ pub fn closed_form(
                 .into(),
         })?
         * rhs;
-    let x = isometry(&rx, &tx);
+    let x = isometry_from_matrix(&rx, &tx);
     // Z from every station.
     let mut rz_sum = Matrix3::zeros();
     let mut tz_sum = Vector3::zeros();
@@ -139,7 +139,7 @@ pub fn closed_form(
     let rz = nearest_rotation(&rz_sum).ok_or_else(|| HandEyeError::DegenerateMotion {
         what: "the stations disagree on the plate's orientation".into(),
     })?;
-    let z = isometry(&rz, &(tz_sum / n as f64));
+    let z = isometry_from_matrix(&rz, &(tz_sum / n as f64));
     Ok(ClosedForm {
         camera_in_tcp: x,
         plate_in_base: z,
@@ -150,7 +150,7 @@ pub fn closed_form(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kuka::isometry_from_xyzabc;
+    use photopose_geometry::pose::isometry_from_xyzabc;
 
     #[test]
     fn exact_stations_give_the_exact_transforms() {
