@@ -99,18 +99,10 @@ pub fn closed_form(
             rel.push((a, b));
         }
     }
-    let svd = h.svd(true, true);
-    let (u, vt) = match (svd.u, svd.v_t) {
-        (Some(u), Some(vt)) => (u, vt),
-        _ => {
-            return Err(HandEyeError::DegenerateMotion {
-                what: "the rotation vectors of the station pairs do not determine R_X".into(),
-            })
-        }
-    };
-    let v = vt.transpose();
-    let d = (v * u.transpose()).determinant().signum();
-    let rx = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    // R_X maximises Σ a·(R_X b), i.e. tr(R_X H): the rotation nearest to Hᵀ.
+    let rx = nearest_rotation(&h.transpose()).ok_or_else(|| HandEyeError::DegenerateMotion {
+        what: "the rotation vectors of the station pairs do not determine R_X".into(),
+    })?;
     // Translation: stacked (R_A' − I) t_X = R_X t_B' − t_A'.
     let mut nmat = Matrix3::zeros();
     let mut rhs = Vector3::zeros();
