@@ -14,9 +14,9 @@
 
 use crate::error::CircleError;
 use nalgebra::{
-    Isometry3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
+    Isometry3, Matrix6, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
 };
-use photopose_geometry::pose::{exterior_from_camera_pose, isometry_from_xyzabc};
+use photopose_geometry::pose::{exterior_from_camera_pose, isometry_from_xyzabc, perturbed};
 use photopose_geometry::{rng::SplitMix64, Exterior};
 use std::f64::consts::TAU;
 
@@ -348,11 +348,7 @@ pub fn perturb(pose: &Isometry3<f64>, cov: &Matrix6<f64>, rng: &mut SplitMix64) 
     let d = eig.eigenvectors * Vector6::from_fn(|k, _| eig.eigenvalues[k].max(0.0).sqrt() * z[k]);
     let w = Vector3::new(d[3], d[4], d[5]);
     // M = Rᵀ, so R·exp([ω]) gives M' = exp(−[ω]) M.
-    let rotation = Rotation3::from_scaled_axis(-w) * pose.rotation.to_rotation_matrix();
-    Isometry3::from_parts(
-        Translation3::from(pose.translation.vector + Vector3::new(d[0], d[1], d[2])),
-        UnitQuaternion::from_rotation_matrix(&rotation),
-    )
+    perturbed(pose, &Vector3::new(d[0], d[1], d[2]), &-w)
 }
 
 /// The camera poses of `samples` as a pose measurement would give them:
