@@ -300,6 +300,29 @@ mod tests {
             prop_assert_eq!(back.translation, pose.translation);
         }
 
+        /// The one orthonormalisation gives the rotations the former
+        /// per-crate extractions gave: nalgebra's quaternion of the unchecked
+        /// matrix (handeye, formats, circle) to 1e-12 for KUKA matrices; for
+        /// products of rotations the exact product to 1e-14, where the
+        /// iterative `from_matrix_eps` (rsi, stopping at 1e-12) was within
+        /// 1e-11.
+        #[test]
+        fn isometry_from_matrix_equals_the_former_extractions(
+            p in prop::array::uniform3(-180.0..180.0f64),
+            q in prop::array::uniform3(-180.0..180.0f64),
+        ) {
+            let m = matrix_from_kuka_abc_deg(p[0], p[1], p[2]);
+            let t = Vector3::new(1.0, 2.0, 3.0);
+            let new = isometry_from_matrix(&m, &t).rotation.to_rotation_matrix().into_inner();
+            let old = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m));
+            prop_assert!((new - old.to_rotation_matrix().into_inner()).abs().max() < 1e-12);
+            let product = m * matrix_from_kuka_abc_deg(q[0], q[1], q[2]);
+            let new = isometry_from_matrix(&product, &t).rotation.to_rotation_matrix().into_inner();
+            let old = UnitQuaternion::from_matrix_eps(&product, 1e-12, 100, UnitQuaternion::identity());
+            prop_assert!((new - product).abs().max() < 1e-14);
+            prop_assert!((new - old.to_rotation_matrix().into_inner()).abs().max() < 1e-11);
+        }
+
         /// Exterior → camera pose → exterior: `R` to 1e-12, the centre
         /// exactly; and the camera pose's `M` is `Rᵀ`.
         #[test]
