@@ -70,7 +70,9 @@ pub struct ResectionReport {
     /// The exterior orientation.
     pub exterior: Exterior,
     /// A-posteriori covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (mm², rad²),
-    /// `ω` the small rotations of the camera about the field's axes.
+    /// `ω` the small rotations of the camera about the field's axes in the
+    /// sense `R ← R·(I + [ω]ₓ)`; [`crate::pose::camera_pose_covariance`]
+    /// gives the camera pose's.
     pub covariance: Matrix6<f64>,
     /// A-posteriori σ0 of an image coordinate, mm.
     pub sigma0: f64,
