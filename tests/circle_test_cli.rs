@@ -32,7 +32,9 @@ fn write_stream(cell: &Cell, path: &std::path::Path) -> usize {
         let m = if i % 100 == 50 {
             PoseMessage::without_pose(i as u64, t, t, PoseStatus::TooFewTargets)
         } else {
-            let e = photopose_circle::pose::exterior_of(&perturb(&s.camera, &cov, &mut rng));
+            let e = photopose_geometry::pose::exterior_from_camera_pose(&perturb(
+                &s.camera, &cov, &mut rng,
+            ));
             let r = e.rotation;
             let mut m = PoseMessage::without_pose(i as u64, t, t, PoseStatus::Ok);
             m.center = Some(e.center.into());
@@ -192,7 +194,7 @@ fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
     let samples = cell.samples().unwrap();
     let mut text = String::new();
     for (i, s) in samples.iter().step_by(59).enumerate() {
-        let e = photopose_circle::pose::exterior_of(&s.camera);
+        let e = photopose_geometry::pose::exterior_from_camera_pose(&s.camera);
         let r = e.rotation;
         let rows = [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]);
         let line = if i == 3 {

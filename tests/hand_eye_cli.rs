@@ -9,11 +9,13 @@ mod common;
 use common::{bin, scratch};
 use nalgebra::{Isometry3, Vector3};
 use photopose_formats::hand_eye::load_hand_eye;
+use photopose_geometry::pose::{
+    camera_pose, isometry_from_xyzabc, perturbed, wrap_deg, xyzabc_from_isometry,
+};
 use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::Exterior;
-use photopose_handeye::kuka::{isometry, perturbed, wrap_deg};
 use photopose_handeye::stations::{CameraSource, StationRow};
-use photopose_handeye::{isometry_from_xyzabc, xyzabc_from_isometry, STATIONS_HEADER};
+use photopose_handeye::STATIONS_HEADER;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Output;
@@ -57,14 +59,14 @@ fn noisy(t: &Isometry3<f64>, rng: &mut SplitMix64, mm: f64, deg: f64) -> Isometr
 /// The robot's (noisy) TCP pose for a camera at `e`.
 fn robot_pose(e: &Exterior, rng: &mut SplitMix64) -> [f64; 6] {
     let (x, z) = truth();
-    let b = isometry(&e.rotation.transpose(), &e.center);
+    let b = camera_pose(e);
     xyzabc_from_isometry(&noisy(&(z * b * x.inverse()), rng, 0.02, 0.005))
 }
 
 /// A station row with the camera pose columns (noisy, with their stds).
 fn pose_row(name: &str, e: &Exterior, rng: &mut SplitMix64) -> StationRow {
     let robot = robot_pose(e, rng);
-    let b = isometry(&e.rotation.transpose(), &e.center);
+    let b = camera_pose(e);
     StationRow {
         line: 0,
         name: name.into(),

@@ -99,7 +99,7 @@ fn a_station_is_taken_while_the_robot_stands_still() {
     let rows = photopose_handeye::parse_stations(&text, "stations.csv").unwrap();
     assert_eq!(rows.len(), 1, "{text}");
     // The simulated robot's actual TCP (its RIst, printed to 4 decimals).
-    let got = photopose_handeye::isometry_from_xyzabc(rows[0].robot_xyzabc);
+    let got = photopose_geometry::pose::isometry_from_xyzabc(rows[0].robot_xyzabc);
     assert!(
         (got.translation.vector - actual.translation.vector).norm() < 1e-3,
         "{got:?} vs {actual:?}"

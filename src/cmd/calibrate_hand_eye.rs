@@ -228,7 +228,7 @@ fn load_stations(args: &Args) -> Result<Vec<Station>> {
             .map_err(|e| anyhow::anyhow!("{origin}:{}: station {}: {e}", row.line, row.name))?;
         out.push(Station {
             name: row.name.clone(),
-            robot: photopose_handeye::isometry_from_xyzabc(row.robot_xyzabc),
+            robot: photopose_geometry::pose::isometry_from_xyzabc(row.robot_xyzabc),
             camera: pose,
         });
     }

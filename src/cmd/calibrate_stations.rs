@@ -73,10 +73,10 @@ fn sample(v: &serde_json::Value) -> Option<Sample> {
     Some(Sample {
         time_s: v["camera_time_ns"].as_u64()? as f64 / 1e9,
         robot_xyzabc: std::array::from_fn(|k| robot[k]),
-        camera: photopose_handeye::kuka::isometry(
-            &r.transpose(),
-            &photopose_geometry::Vector3::new(c[0], c[1], c[2]),
-        ),
+        camera: photopose_geometry::pose::camera_pose(&photopose_geometry::Exterior::new(
+            r,
+            photopose_geometry::Vector3::new(c[0], c[1], c[2]),
+        )),
         camera_std: [sc[0], sc[1], sc[2], sr[0], sr[1], sr[2]],
     })
 }

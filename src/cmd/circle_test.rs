@@ -6,8 +6,9 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use photopose_circle::pose::{camera_pose, from_xyzabc, tcp_from_camera};
+use photopose_circle::pose::tcp_from_camera;
 use photopose_circle::{analyse, plot, report, AnalysisOptions, CircleTest, Isometry3};
+use photopose_geometry::pose::{camera_pose, isometry_from_xyzabc};
 use photopose_geometry::{rotation, Exterior, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -295,6 +296,6 @@ pub fn read_hand_eye(path: &Path) -> Result<HandEye> {
     }
     Ok(HandEye {
         xyzabc,
-        camera_in_tcp: from_xyzabc(xyzabc),
+        camera_in_tcp: isometry_from_xyzabc(xyzabc),
     })
 }

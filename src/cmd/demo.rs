@@ -66,7 +66,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     // The mount is the hand-eye transform; the plate's pose in the robot
     // base is the cell's (the plate frame is the base frame here).
     let hand_eye = args.out.join("hand-eye.toml");
-    let x = photopose_circle::pose::to_xyzabc(&cell.mount.camera_in_tcp);
+    let x = photopose_geometry::pose::xyzabc_from_isometry(&cell.mount.camera_in_tcp);
     let f = |v: [f64; 6]| {
         v.iter()
             .map(|x| format!("{x:.6}"))

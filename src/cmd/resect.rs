@@ -76,8 +76,7 @@ impl<'a> PoseLine<'a> {
     pub fn new(image: &'a str, r: &ResectionReport, rejected_ids: &'a [u64]) -> Self {
         let e = &r.exterior;
         let rot = e.rotation;
-        let q = photopose_geometry::rotation::quaternion_from_matrix(&rot)
-            .map(|q| [q.w, q.i, q.j, q.k])
+        let q = photopose_geometry::rotation::quaternion_wxyz_from_matrix(&rot)
             .unwrap_or([f64::NAN; 4]);
         PoseLine {
             image,

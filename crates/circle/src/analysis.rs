@@ -6,7 +6,7 @@
 use crate::error::CircleError;
 use crate::fit::{Circle, Plane};
 use crate::harmonics::{Series, Term};
-use nalgebra::{Isometry3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::f64::consts::{PI, TAU};
 
@@ -370,9 +370,8 @@ pub fn mean_rotation(rotations: &[UnitQuaternion<f64>]) -> UnitQuaternion<f64> {
         .iter()
         .map(|r| r.to_rotation_matrix().into_inner())
         .sum();
-    let mut mean = photopose_geometry::rotation::nearest_rotation(&sum)
-        .map(|m| UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m)))
-        .unwrap_or(rotations[0]);
+    let mut mean =
+        photopose_geometry::rotation::unit_quaternion_from_matrix(&sum).unwrap_or(rotations[0]);
     for _ in 0..20 {
         let step: Vector3<f64> = rotations
             .iter()
@@ -390,7 +389,7 @@ pub fn mean_rotation(rotations: &[UnitQuaternion<f64>]) -> UnitQuaternion<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pose::from_xyzabc;
+    use photopose_geometry::pose::isometry_from_xyzabc as from_xyzabc;
 
     #[test]
     fn an_exact_circle_has_no_deviation() {

@@ -13,10 +13,10 @@
 //! about 100 mm from the TCP looking down at the plate from ≈ 600 mm.
 
 use crate::error::CircleError;
-use crate::pose::{exterior_of, from_xyzabc};
 use nalgebra::{
-    Isometry3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
+    Isometry3, Matrix6, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
 };
+use photopose_geometry::pose::{exterior_from_camera_pose, isometry_from_xyzabc, perturbed};
 use photopose_geometry::{rng::SplitMix64, Exterior};
 use std::f64::consts::TAU;
 
@@ -261,7 +261,7 @@ impl Default for CameraMount {
     /// (`C = 180°`, tool pointing down) the camera looks straight down.
     fn default() -> Self {
         CameraMount {
-            camera_in_tcp: from_xyzabc(Self::DEFAULT_XYZABC),
+            camera_in_tcp: isometry_from_xyzabc(Self::DEFAULT_XYZABC),
         }
     }
 }
@@ -284,7 +284,7 @@ pub struct CellSample {
 impl CellSample {
     /// The camera's exterior orientation (what the renderer renders).
     pub fn exterior(&self) -> Exterior {
-        exterior_of(&self.camera)
+        exterior_from_camera_pose(&self.camera)
     }
 }
 
@@ -307,7 +307,7 @@ impl Cell {
         self.error.check()?;
         let p = &self.path;
         let [a, b, c] = p.orientation_abc_deg;
-        let m_cmd = from_xyzabc([0.0, 0.0, 0.0, a, b, c]).rotation;
+        let m_cmd = isometry_from_xyzabc([0.0, 0.0, 0.0, a, b, c]).rotation;
         let centre = Vector3::from(p.center_mm);
         let mut rng = SplitMix64::new(self.error.seed);
         let n = p.n_samples();
@@ -348,11 +348,7 @@ pub fn perturb(pose: &Isometry3<f64>, cov: &Matrix6<f64>, rng: &mut SplitMix64) 
     let d = eig.eigenvectors * Vector6::from_fn(|k, _| eig.eigenvalues[k].max(0.0).sqrt() * z[k]);
     let w = Vector3::new(d[3], d[4], d[5]);
     // M = Rᵀ, so R·exp([ω]) gives M' = exp(−[ω]) M.
-    let rotation = Rotation3::from_scaled_axis(-w) * pose.rotation.to_rotation_matrix();
-    Isometry3::from_parts(
-        Translation3::from(pose.translation.vector + Vector3::new(d[0], d[1], d[2])),
-        UnitQuaternion::from_rotation_matrix(&rotation),
-    )
+    perturbed(pose, &Vector3::new(d[0], d[1], d[2]), &-w)
 }
 
 /// The camera poses of `samples` as a pose measurement would give them:
@@ -430,7 +426,7 @@ mod tests {
         cov[(4, 4)] = 1e-5f64.powi(2);
         cov[(0, 4)] = 0.8 * 0.01 * 1e-5;
         cov[(4, 0)] = cov[(0, 4)];
-        let pose = from_xyzabc([0.0, 0.0, 600.0, 0.0, 0.0, 0.0]);
+        let pose = isometry_from_xyzabc([0.0, 0.0, 600.0, 0.0, 0.0, 0.0]);
         let mut rng = SplitMix64::new(3);
         let (mut sxx, mut sww, mut sxw) = (0.0, 0.0, 0.0);
         let n = 20_000;

@@ -21,8 +21,8 @@
 //! ```
 
 use crate::FormatError;
-use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use photopose_geometry::rotation::matrix_from_kuka_abc_deg;
+use nalgebra::Isometry3;
+use photopose_geometry::pose::isometry_from_xyzabc;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -40,12 +40,7 @@ pub struct Transform {
 impl Transform {
     /// The transform as an isometry (child → parent).
     pub fn isometry(&self) -> Isometry3<f64> {
-        let p = &self.xyzabc;
-        let m = matrix_from_kuka_abc_deg(p[3], p[4], p[5]);
-        Isometry3::from_parts(
-            Translation3::from(Vector3::new(p[0], p[1], p[2])),
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m)),
-        )
+        isometry_from_xyzabc(self.xyzabc)
     }
 }
 
@@ -170,6 +165,7 @@ pub fn save_hand_eye(path: &Path, f: &HandEyeFile) -> Result<(), FormatError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     fn sample() -> HandEyeFile {
         HandEyeFile {

@@ -1,6 +1,7 @@
 //! The collinearity equations linearised over many points at once, in
 //! structure-of-arrays form so that the per-point arithmetic and the
-//! normal-equation products vectorise. Owned by [`crate::resection`].
+//! normal-equation products vectorise. Used by the resection and by precision
+//! prediction; imports neither.
 //!
 //! With `R = R0 · cayley(a, b, c)` linearised at zero increments, the
 //! analytic derivative is `R0 · dcayley/da_k (0) = 2 R0 [e_k]ₓ`, so
@@ -10,7 +11,7 @@
 
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
-use crate::resection::{Observation, Status};
+use crate::observation::{Observation, Status};
 use nalgebra::{Matrix6, Vector6};
 use wide::f64x2;
 

@@ -5,8 +5,9 @@
 use crate::camera::Camera;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
-use crate::resection::{cofactor, normal_matrix};
-use nalgebra::{Matrix6, Vector3};
+use crate::linearised::Linearised;
+use crate::observation::{Observation, Status};
+use nalgebra::{Matrix2, Matrix6, Vector2, Vector3, Vector6};
 
 /// Predicted precision of a resection.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,6 +62,40 @@ pub fn visible_points(
     }
 }
 
+/// Unit-weight normal matrix of the six unknowns at `e` over `points` seen
+/// by a camera of principal distance `c` (for precision prediction).
+pub fn normal_matrix(
+    c: f64,
+    e: &Exterior,
+    points: &[Vector3<f64>],
+) -> Result<Matrix6<f64>, GeometryError> {
+    let obs: Vec<Observation> = points
+        .iter()
+        .map(|p| Observation {
+            id: 0,
+            object: *p,
+            image: Vector2::zeros(),
+            weight: Matrix2::identity(),
+        })
+        .collect();
+    let mut lin = Linearised::default();
+    lin.load(&obs, &vec![Status::Used; obs.len()]);
+    Ok(lin.evaluate(c, e)?.n)
+}
+
+/// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.
+pub(crate) fn to_omega(q: &Matrix6<f64>) -> Matrix6<f64> {
+    let t = Matrix6::from_diagonal(&Vector6::new(1.0, 1.0, 1.0, 2.0, 2.0, 2.0));
+    t * q * t
+}
+
+/// Inverse of the unit-weight normal matrix in `(C, ω)` units: multiply by
+/// σ² (mm²) for a covariance.
+pub fn cofactor(n: &Matrix6<f64>) -> Result<Matrix6<f64>, GeometryError> {
+    let q = n.cholesky().ok_or(GeometryError::Singular)?.inverse();
+    Ok(to_omega(&q))
+}
+
 /// Predicted covariance for image noise `sigma_px` (per coordinate) over
 /// `points` (which must be visible).
 pub fn predict(
@@ -86,7 +121,7 @@ pub fn predict(
 
 /// Projection of an object point with its uncertainty: the ideal image
 /// coordinates (mm) and their 2×2 covariance (mm²) propagated from the
-/// covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (as in [`crate::ResectionReport`]).
+/// covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (as a resection reports it).
 /// `None` if the point is not in front of the camera.
 pub fn projection_with_covariance(
     c: f64,

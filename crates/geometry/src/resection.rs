@@ -17,37 +17,12 @@ use crate::closed_form;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
 use crate::linearised::{Linearised, Normals};
+use crate::precision::{std_center, std_rotation_deg, to_omega};
 use crate::rng::SplitMix64;
 use crate::rotation::cayley;
-use nalgebra::{Matrix2, Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3};
 
-/// One control point seen in the image.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Observation {
-    /// Target id (for reports).
-    pub id: u64,
-    /// Object (field) coordinates, mm.
-    pub object: Vector3<f64>,
-    /// Ideal (corrected) image coordinates, mm: see [`Camera::correct`].
-    pub image: Vector2<f64>,
-    /// Weight (information) matrix of the two image coordinates relative to
-    /// an observation of unit weight: the covariance of `image` is
-    /// `σ0² · weight⁻¹`. The identity for equally precise, uncorrelated
-    /// coordinates; must be symmetric positive definite.
-    pub weight: Matrix2<f64>,
-}
-
-impl Observation {
-    /// An observation from a measured pixel position, corrected with `camera`.
-    pub fn from_pixel(camera: &Camera, id: u64, object: Vector3<f64>, col: f64, row: f64) -> Self {
-        Observation {
-            id,
-            object,
-            image: camera.correct_pixel(col, row),
-            weight: Matrix2::identity(),
-        }
-    }
-}
+pub use crate::observation::{Observation, Status};
 
 /// Tuning of the resection; the defaults suit the project's cameras.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,7 +70,9 @@ pub struct ResectionReport {
     /// The exterior orientation.
     pub exterior: Exterior,
     /// A-posteriori covariance of `(Xc, Yc, Zc, ωX, ωY, ωZ)` (mm², rad²),
-    /// `ω` the small rotations of the camera about the field's axes.
+    /// `ω` the small rotations of the camera about the field's axes in the
+    /// sense `R ← R·(I + [ω]ₓ)`; [`crate::pose::camera_pose_covariance`]
+    /// gives the camera pose's.
     pub covariance: Matrix6<f64>,
     /// A-posteriori σ0 of an image coordinate, mm.
     pub sigma0: f64,
@@ -116,24 +93,13 @@ pub struct ResectionReport {
 impl ResectionReport {
     /// Standard deviations of `Xc, Yc, Zc`, mm.
     pub fn std_center(&self) -> Vector3<f64> {
-        crate::precision::std_center(&self.covariance)
+        std_center(&self.covariance)
     }
 
     /// Standard deviations of the rotations about the field's X, Y, Z axes, degrees.
     pub fn std_rotation_deg(&self) -> Vector3<f64> {
-        crate::precision::std_rotation_deg(&self.covariance)
+        std_rotation_deg(&self.covariance)
     }
-}
-
-/// What happened to an observation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Status {
-    /// Used in the adjustment.
-    Used,
-    /// Did not agree with the closed-form hypothesis.
-    Outlier,
-    /// Removed by data snooping.
-    Snooped,
 }
 
 /// The resection workspace (see the module doc).
@@ -145,40 +111,6 @@ pub struct Resection {
     status: Vec<Status>,
     rejected: Vec<u64>,
     lin: Linearised,
-}
-
-/// Unit-weight normal matrix of the six unknowns at `e` over `points` seen
-/// by a camera of principal distance `c` (for precision prediction).
-pub fn normal_matrix(
-    c: f64,
-    e: &Exterior,
-    points: &[Vector3<f64>],
-) -> Result<Matrix6<f64>, GeometryError> {
-    let obs: Vec<Observation> = points
-        .iter()
-        .map(|p| Observation {
-            id: 0,
-            object: *p,
-            image: Vector2::zeros(),
-            weight: Matrix2::identity(),
-        })
-        .collect();
-    let mut lin = Linearised::default();
-    lin.load(&obs, &vec![Status::Used; obs.len()]);
-    Ok(lin.evaluate(c, e)?.n)
-}
-
-/// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.
-fn to_omega(q: &Matrix6<f64>) -> Matrix6<f64> {
-    let t = Matrix6::from_diagonal(&Vector6::new(1.0, 1.0, 1.0, 2.0, 2.0, 2.0));
-    t * q * t
-}
-
-/// Inverse of the unit-weight normal matrix in `(C, ω)` units: multiply by
-/// σ² (mm²) for a covariance.
-pub fn cofactor(n: &Matrix6<f64>) -> Result<Matrix6<f64>, GeometryError> {
-    let q = n.cholesky().ok_or(GeometryError::Singular)?.inverse();
-    Ok(to_omega(&q))
 }
 
 impl Resection {

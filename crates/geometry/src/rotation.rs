@@ -1,6 +1,8 @@
 //! Rotations: the paper's Cayley / Hamilton-normalised quaternion form
-//! `R = (I + S)(I - S)^-1` with its analytic partial derivatives, and
-//! conversions to and from matrices, unit quaternions and KUKA `A, B, C`.
+//! `R = (I + S)(I - S)^-1` with its analytic partial derivatives, the one
+//! re-orthonormalisation of the project ([`nearest_rotation`]), and
+//! conversions between matrices, quaternions (`_wxyz`: scalar first) and
+//! KUKA `A, B, C`. Poses (rotation with translation) are in [`crate::pose`].
 
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
@@ -78,17 +80,25 @@ pub fn cayley_derivatives(a: f64, b: f64, c: f64) -> [Matrix3<f64>; 3] {
 /// The Cayley parameters of a rotation matrix, `None` for a rotation of 180°
 /// (which the form cannot express) or a matrix that is not a rotation.
 pub fn cayley_from_matrix(r: &Matrix3<f64>) -> Option<Vector3<f64>> {
-    let q = quaternion_from_matrix(r)?;
-    if q.w.abs() < 1e-12 {
+    let [w, x, y, z] = quaternion_wxyz_from_matrix(r)?;
+    if w.abs() < 1e-12 {
         return None;
     }
-    Some(Vector3::new(q.i / q.w, q.j / q.w, q.k / q.w))
+    Some(Vector3::new(x / w, y / w, z / w))
 }
 
-/// Re-orthonormalises a nearly orthogonal matrix (nearest rotation, polar
-/// decomposition by SVD). `None` if it cannot be made a proper rotation.
+/// The one re-orthonormalisation of the project: the rotation nearest to `m`
+/// in the Frobenius norm (polar decomposition by SVD, `U·Vᵀ` with the sign
+/// of the smallest singular direction flipped if that gives a reflection).
+/// Every conversion from a matrix to a rotation (isometry, quaternion) goes
+/// through it. `None` if `m` has a non-finite element or the SVD does not
+/// converge (never loops unbounded).
 pub fn nearest_rotation(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
-    let svd = m.svd(true, true);
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // nalgebra's `svd` with its default tolerance, but a bounded iteration count.
+    let svd = m.try_svd(true, true, 5.0 * f64::EPSILON, 1000)?;
     let (u, vt) = (svd.u?, svd.v_t?);
     let mut r = u * vt;
     if r.determinant() < 0.0 {
@@ -105,22 +115,34 @@ pub fn is_rotation(m: &Matrix3<f64>, tol: f64) -> bool {
         && (m.determinant() - 1.0).abs() < tol
 }
 
-/// The unit quaternion (Hamilton convention, `w >= 0`) of a rotation matrix.
-pub fn quaternion_from_matrix(r: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
-    if !is_rotation(r, 1e-6) {
-        return None;
-    }
-    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
-    Some(if q.w < 0.0 {
-        UnitQuaternion::new_unchecked(-q.into_inner())
-    } else {
-        q
-    })
+/// The unit quaternion of the rotation nearest to `m` ([`nearest_rotation`]),
+/// as nalgebra extracts it (either sign). `None` where [`nearest_rotation`]
+/// gives none.
+pub fn unit_quaternion_from_matrix(m: &Matrix3<f64>) -> Option<UnitQuaternion<f64>> {
+    let r = nearest_rotation(m)?;
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(r),
+    ))
 }
 
-/// The rotation matrix of a quaternion `(w, x, y, z)` (normalised here).
-pub fn matrix_from_quaternion(w: f64, x: f64, y: f64, z: f64) -> Option<Matrix3<f64>> {
-    let q = Quaternion::new(w, x, y, z);
+/// The Hamilton unit quaternion of a rotation matrix as `[w, x, y, z]`
+/// (scalar first), sign chosen so that `w >= 0`; `None` unless `m` is a
+/// rotation to within 1e-6 (it is re-orthonormalised by [`nearest_rotation`]).
+/// `matrix_from_quaternion_wxyz` gives `m` back.
+pub fn quaternion_wxyz_from_matrix(m: &Matrix3<f64>) -> Option<[f64; 4]> {
+    if !is_rotation(m, 1e-6) {
+        return None;
+    }
+    let q = unit_quaternion_from_matrix(m)?;
+    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
+    Some([s * q.w, s * q.i, s * q.j, s * q.k])
+}
+
+/// The rotation matrix of a quaternion `[w, x, y, z]` (scalar first;
+/// normalised here, either sign gives the same matrix); `None` for a
+/// non-finite or (nearly) zero quaternion.
+pub fn matrix_from_quaternion_wxyz(q: [f64; 4]) -> Option<Matrix3<f64>> {
+    let q = Quaternion::new(q[0], q[1], q[2], q[3]);
     let n = q.norm();
     if !(n.is_finite() && n > 1e-12) {
         return None;
@@ -223,12 +245,32 @@ mod tests {
         #[test]
         fn quaternion_round_trips(w in -1.0..1.0f64, x in -1.0..1.0f64, y in -1.0..1.0f64, z in -1.0..1.0f64) {
             prop_assume!((w * w + x * x + y * y + z * z) > 1e-3);
-            let m = matrix_from_quaternion(w, x, y, z).unwrap();
+            let m = matrix_from_quaternion_wxyz([w, x, y, z]).unwrap();
             prop_assert!(is_rotation(&m, 1e-12));
-            let q = quaternion_from_matrix(&m).unwrap();
-            let m2 = matrix_from_quaternion(q.w, q.i, q.j, q.k).unwrap();
+            let q = quaternion_wxyz_from_matrix(&m).unwrap();
+            let m2 = matrix_from_quaternion_wxyz(q).unwrap();
             prop_assert!((m - m2).abs().max() < 1e-12);
-            prop_assert!(q.w >= 0.0);
+            // Sign convention: w >= 0, so the quaternion is the input's
+            // (normalised) or its negative, whichever has w >= 0.
+            prop_assert!(q[0] >= 0.0);
+            let n = (w * w + x * x + y * y + z * z).sqrt();
+            let s = if w < 0.0 { -1.0 / n } else { 1.0 / n };
+            if w.abs() > 1e-6 {
+                for (k, v) in [w, x, y, z].into_iter().enumerate() {
+                    prop_assert!((q[k] - s * v).abs() < 1e-12, "{:?} vs {:?}", q, [w, x, y, z]);
+                }
+            }
+        }
+
+        #[test]
+        fn nearest_rotation_undoes_a_small_disturbance(a in -3.0..3.0f64, b in -3.0..3.0f64, c in -3.0..3.0f64, e in prop::array::uniform9(-1e-6..1e-6f64)) {
+            let r = cayley(a, b, c);
+            let m = r + Matrix3::from_column_slice(&e);
+            let n = nearest_rotation(&m).unwrap();
+            prop_assert!(is_rotation(&n, 1e-14));
+            // Within the disturbance of the exact rotation, and a fixed point.
+            prop_assert!((n - r).abs().max() < 1e-5);
+            prop_assert!((nearest_rotation(&r).unwrap() - r).abs().max() < 1e-14);
         }
 
         #[test]
@@ -259,6 +301,32 @@ mod tests {
         // The spec's example pose A=180, B=0, C=180: tool z points down.
         let m = matrix_from_kuka_abc_deg(180.0, 0.0, 180.0);
         assert!((m.column(2) + Vector3::z()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn quaternion_wxyz_names_the_scalar_first() {
+        // 90° about z: w = cos 45°, z = sin 45°.
+        let m = matrix_from_kuka_abc_deg(90.0, 0.0, 0.0);
+        let q = quaternion_wxyz_from_matrix(&m).unwrap();
+        let h = 0.5f64.sqrt();
+        assert!(
+            (q[0] - h).abs() < 1e-15 && (q[3] - h).abs() < 1e-15,
+            "{q:?}"
+        );
+        assert!(q[1].abs() < 1e-15 && q[2].abs() < 1e-15);
+        assert!(quaternion_wxyz_from_matrix(&(m * 1.1)).is_none());
+    }
+
+    #[test]
+    fn nearest_rotation_refuses_bad_matrices() {
+        let mut m = Matrix3::identity();
+        m[(1, 2)] = f64::NAN;
+        assert!(nearest_rotation(&m).is_none());
+        m[(1, 2)] = f64::INFINITY;
+        assert!(nearest_rotation(&m).is_none());
+        // A reflection becomes the nearest proper rotation.
+        let r = nearest_rotation(&Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0))).unwrap();
+        assert!(is_rotation(&r, 1e-12));
     }
 
     #[test]

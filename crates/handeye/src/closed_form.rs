@@ -16,9 +16,9 @@
 //! `λ1 ≥ λ2` give the axis spread `2 atan √(λ2/λ1)` (for two axes at angle
 //! `φ`, exactly `φ`).
 
-use crate::kuka::isometry;
 use crate::HandEyeError;
 use nalgebra::{Isometry3, Matrix3, SymmetricEigen, Vector3};
+use photopose_geometry::pose::isometry_from_matrix;
 use photopose_geometry::rotation::nearest_rotation;
 
 /// The closed-form estimate of `X = T_tcp←camera` and `Z = T_base←plate`.
@@ -99,18 +99,10 @@ pub fn closed_form(
             rel.push((a, b));
         }
     }
-    let svd = h.svd(true, true);
-    let (u, vt) = match (svd.u, svd.v_t) {
-        (Some(u), Some(vt)) => (u, vt),
-        _ => {
-            return Err(HandEyeError::DegenerateMotion {
-                what: "the rotation vectors of the station pairs do not determine R_X".into(),
-            })
-        }
-    };
-    let v = vt.transpose();
-    let d = (v * u.transpose()).determinant().signum();
-    let rx = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    // R_X maximises Σ a·(R_X b), i.e. tr(R_X H): the rotation nearest to Hᵀ.
+    let rx = nearest_rotation(&h.transpose()).ok_or_else(|| HandEyeError::DegenerateMotion {
+        what: "the rotation vectors of the station pairs do not determine R_X".into(),
+    })?;
     // Translation: stacked (R_A' − I) t_X = R_X t_B' − t_A'.
     let mut nmat = Matrix3::zeros();
     let mut rhs = Vector3::zeros();
@@ -127,7 +119,7 @@ pub fn closed_form(
                 .into(),
         })?
         * rhs;
-    let x = isometry(&rx, &tx);
+    let x = isometry_from_matrix(&rx, &tx);
     // Z from every station.
     let mut rz_sum = Matrix3::zeros();
     let mut tz_sum = Vector3::zeros();
@@ -139,7 +131,7 @@ pub fn closed_form(
     let rz = nearest_rotation(&rz_sum).ok_or_else(|| HandEyeError::DegenerateMotion {
         what: "the stations disagree on the plate's orientation".into(),
     })?;
-    let z = isometry(&rz, &(tz_sum / n as f64));
+    let z = isometry_from_matrix(&rz, &(tz_sum / n as f64));
     Ok(ClosedForm {
         camera_in_tcp: x,
         plate_in_base: z,
@@ -150,7 +142,7 @@ pub fn closed_form(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kuka::isometry_from_xyzabc;
+    use photopose_geometry::pose::isometry_from_xyzabc;
 
     #[test]
     fn exact_stations_give_the_exact_transforms() {

@@ -11,9 +11,9 @@
 //! are the mean of the per-frame ones, not divided by √n, because the
 //! frames of one station share their systematic errors.
 
-use crate::kuka::{isometry_from_xyzabc, xyzabc_from_isometry};
 use crate::stations::{CameraSource, StationRow};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use photopose_geometry::pose::{isometry_from_xyzabc, xyzabc_from_isometry};
 
 /// When the robot counts as standing, and as moved on.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -23,9 +23,9 @@
 //! Gauss–Newton with Levenberg–Marquardt damping; each step re-bases the
 //! rotations, so any attitude works.
 
-use crate::kuka::perturbed;
 use crate::{HandEyeError, Station};
 use nalgebra::{Isometry3, Matrix3, Matrix6, SMatrix, SVector, Vector3, Vector6};
+use photopose_geometry::pose::perturbed;
 
 /// The 12 × 12 matrices of the adjustment.
 pub type Matrix12 = SMatrix<f64, 12, 12>;
@@ -229,8 +229,8 @@ pub fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kuka::isometry_from_xyzabc;
     use crate::CameraPose;
+    use photopose_geometry::pose::isometry_from_xyzabc;
 
     #[test]
     fn jacobian_matches_central_differences() {

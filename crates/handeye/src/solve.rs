@@ -12,11 +12,11 @@
 //! a-priori standard deviations fit the scale of the residuals.
 
 use crate::closed_form::closed_form;
-use crate::kuka::{xyzabc_from_isometry, xyzabc_std};
 use crate::refine::{linearise, refine, Matrix12, RobotPrecision};
 use crate::stats::f_critical;
 use crate::{HandEyeError, Station};
 use nalgebra::{Isometry3, Matrix6};
+use photopose_geometry::pose::{xyzabc_from_isometry, xyzabc_std};
 
 /// Options of [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -22,8 +22,8 @@
 //! the others may be left out (all of a group or none). An unknown column is
 //! an error naming it. Blank lines and lines starting with `#` are skipped.
 
-use crate::kuka::{isometry_from_xyzabc, xyzabc_from_isometry};
 use crate::{CameraPose, HandEyeError, Station};
+use photopose_geometry::pose::{isometry_from_xyzabc, xyzabc_from_isometry};
 
 /// The header of a station file with every column, in the order
 /// [`StationRow::csv_line`] writes them.

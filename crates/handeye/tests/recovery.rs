@@ -9,13 +9,13 @@
 
 use nalgebra::{Cholesky, Isometry3, Matrix6, Vector3, Vector6};
 use photopose_field::Field;
+use photopose_geometry::pose::{
+    camera_pose, camera_pose_covariance, isometry_from_xyzabc, perturbed,
+};
 use photopose_geometry::precision::{predict, visible_points};
 use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::{Camera, Exterior};
-use photopose_handeye::kuka::{isometry, perturbed};
-use photopose_handeye::{
-    isometry_from_xyzabc, solve, CameraPose, HandEye, HandEyeError, HandEyeOptions, Station,
-};
+use photopose_handeye::{solve, CameraPose, HandEye, HandEyeError, HandEyeOptions, Station};
 
 const PLATE: &str = include_str!("../../../config/plate.csv");
 
@@ -97,9 +97,9 @@ fn stations(
         .iter()
         .enumerate()
         .map(|(k, e)| {
-            let b = isometry(&e.rotation.transpose(), &e.center);
+            let b = camera_pose(e);
             let a = z * b * x.inverse();
-            let cov = sim.covariance(e);
+            let cov = camera_pose_covariance(&sim.covariance(e));
             let l = Cholesky::new(cov).unwrap().l();
             let d = l * normal6(rng) * noise_factor;
             let b_meas = perturbed(

@@ -15,7 +15,7 @@ pub mod udp;
 use crate::config::Config;
 use crate::result::{PoseResult, ResultStatus};
 use crate::run::PipelineError;
-use photopose_geometry::rotation::quaternion_from_matrix;
+use photopose_geometry::rotation::quaternion_wxyz_from_matrix;
 use photopose_stream::{PoseMessage, PoseStatus};
 
 /// What the output stage hands every sink for one message.
@@ -116,7 +116,7 @@ pub fn message(result: &PoseResult) -> PoseMessage {
             [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
             [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
         ]);
-        m.quaternion_wxyz = quaternion_from_matrix(&r).map(|q| [q.w, q.i, q.j, q.k]);
+        m.quaternion_wxyz = quaternion_wxyz_from_matrix(&r);
         m.std_center = Some(p.std_center().into());
         m.std_rotation_deg = Some(p.std_rotation_deg().into());
         m.sigma0_px = Some(p.sigma0_px);

@@ -15,7 +15,7 @@ use photopose_geometry::Exterior;
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_rsi::controller::{SimConfig, SimController};
-use photopose_rsi::law::{isometry, isometry_to_pose, pose_to_isometry};
+use photopose_rsi::law::{isometry_to_pose, pose_to_isometry};
 use photopose_rsi::server::{RsiClock, RsiServer};
 use photopose_rsi::{latest_slot, HandEye, Measurement, RsiConfig};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -66,9 +66,8 @@ fn main() {
         nalgebra::Vector3::new(0.0, 1.0, 0.0),
     )
     .expect("camera pose");
-    let nominal = isometry_to_pose(
-        &he.tcp_in_base(&isometry(&cam_pose.rotation.transpose(), &cam_pose.center)),
-    );
+    let nominal =
+        isometry_to_pose(&he.tcp_in_base(&photopose_geometry::pose::camera_pose(&cam_pose)));
 
     // Frames for the load, rendered before the clock starts.
     let cam = photopose_formats::default_camera();

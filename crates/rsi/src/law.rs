@@ -34,7 +34,8 @@
 //! `Rz(A)·Ry(B)·Rx(C)` of the correction rotation).
 
 use crate::codec::Pose6;
-use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use photopose_geometry::pose;
 use photopose_geometry::rotation::{kuka_abc_deg_from_matrix, matrix_from_kuka_abc_deg};
 use photopose_geometry::ResectionReport;
 
@@ -165,7 +166,7 @@ impl Measurement {
     pub fn from_report(report: &ResectionReport, time_s: f64, seq: u64) -> Measurement {
         let e = &report.exterior;
         Measurement {
-            plate_from_camera: isometry(&e.rotation.transpose(), &e.center),
+            plate_from_camera: pose::camera_pose(e),
             std_mm: report.std_center().max(),
             std_deg: report.std_rotation_deg().max(),
             n_targets: report.n_points as u32,
@@ -177,25 +178,17 @@ impl Measurement {
 
 /// An isometry from a rotation matrix and a translation.
 pub fn isometry(r: &Matrix3<f64>, t: &Vector3<f64>) -> Isometry3<f64> {
-    Isometry3::from_parts(
-        Translation3::from(*t),
-        UnitQuaternion::from_matrix_eps(r, 1e-12, 100, UnitQuaternion::identity()),
-    )
+    pose::isometry_from_matrix(r, t)
 }
 
 /// A KUKA pose `X, Y, Z, A, B, C` as an isometry (frame in its parent).
 pub fn pose_to_isometry(p: &Pose6) -> Isometry3<f64> {
-    isometry(
-        &matrix_from_kuka_abc_deg(p[3], p[4], p[5]),
-        &Vector3::new(p[0], p[1], p[2]),
-    )
+    pose::isometry_from_xyzabc(*p)
 }
 
 /// An isometry as a KUKA pose `X, Y, Z, A, B, C`.
 pub fn isometry_to_pose(iso: &Isometry3<f64>) -> Pose6 {
-    let t = iso.translation.vector;
-    let [a, b, c] = kuka_abc_deg_from_matrix(iso.rotation.to_rotation_matrix().matrix());
-    [t.x, t.y, t.z, a, b, c]
+    pose::xyzabc_from_isometry(iso)
 }
 
 /// Applies a correction `c` to a pose as the controller does in `frame`:

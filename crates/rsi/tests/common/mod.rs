@@ -4,9 +4,10 @@
 #![allow(dead_code)]
 
 use nalgebra::{Isometry3, Vector3};
+use photopose_geometry::pose::{camera_pose, exterior_from_camera_pose};
 use photopose_geometry::Exterior;
 use photopose_rsi::codec::Pose6;
-use photopose_rsi::law::{isometry, isometry_to_pose, pose_to_isometry};
+use photopose_rsi::law::{isometry_to_pose, pose_to_isometry};
 use photopose_rsi::{HandEye, RsiConfig, RsiSettings};
 
 /// The hand-eye pair of the tests: the camera 120 mm out on the flange,
@@ -27,17 +28,12 @@ pub fn nominal_tcp(he: &HandEye) -> Pose6 {
         Vector3::new(0.0, 1.0, 0.0),
     )
     .unwrap();
-    let plate_from_camera: Isometry3<f64> = isometry(&e.rotation.transpose(), &e.center);
-    isometry_to_pose(&he.tcp_in_base(&plate_from_camera))
+    isometry_to_pose(&he.tcp_in_base(&camera_pose(&e)))
 }
 
 /// The camera's exterior orientation for a TCP pose.
 pub fn exterior_of(he: &HandEye, tcp: &Isometry3<f64>) -> Exterior {
-    let c = he.camera_in_plate(tcp);
-    Exterior::new(
-        c.rotation.to_rotation_matrix().matrix().transpose(),
-        c.translation.vector,
-    )
+    exterior_from_camera_pose(&he.camera_in_plate(tcp))
 }
 
 /// Server settings on loopback (any port), answering 127.0.0.1.
