@@ -101,7 +101,6 @@ fn metric(body: &str, name: &str) -> Option<f64> {
 }
 
 #[test]
-#[ignore = "enabled once the TCP stream is bounded (the edge branch)"]
 fn the_daemon_survives_abuse_with_flat_resources() {
     let secs: u64 = std::env::var("PHOTOPOSE_SOAK_SECS")
         .ok()
