@@ -27,6 +27,7 @@ use thiserror::Error;
 
 /// Why the fake camera cannot serve.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum FakeError {
     /// Only 8-bit images can be served.
     #[error("the fake camera serves Mono8 images only")]

@@ -14,6 +14,7 @@ use thiserror::Error;
 
 /// Why a source gave no frame.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum SourceError {
     /// No frame within the timeout; the source is alive: call again.
     #[error("no frame within {0:?}")]

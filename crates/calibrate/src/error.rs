@@ -5,6 +5,7 @@ use thiserror::Error;
 
 /// Why a calibration could not give a camera.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum CalibrateError {
     /// A parameter name (for `--fix`) is not one of the camera file's keys.
     #[error("unknown camera parameter `{0}` (one of c, x0, y0, k1, k2, k3, p1, p2, b1, b2)")]

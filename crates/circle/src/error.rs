@@ -4,6 +4,7 @@ use thiserror::Error;
 
 /// Why a circular test or a cell could not be computed.
 #[derive(Debug, Error, PartialEq)]
+#[non_exhaustive]
 pub enum CircleError {
     /// Fewer samples than the fit needs.
     #[error("{what}: {got} samples, at least {need} needed")]

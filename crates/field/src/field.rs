@@ -60,6 +60,7 @@ impl Target {
 
 /// A problem with a test field, naming where it is.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum FieldError {
     /// The text is empty or has no header.
     #[error("{origin}: empty test field (expected header `id,x,y,z,kind,radius`)")]

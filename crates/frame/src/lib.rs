@@ -60,6 +60,7 @@ pub struct ImageView<'a> {
 
 /// An image whose buffer does not fit its size.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum FrameError {
     /// Buffer length differs from `width * height`.
     #[error("image buffer holds {got} pixels, {width}×{height} needs {need}")]

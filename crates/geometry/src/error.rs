@@ -7,6 +7,7 @@ use thiserror::Error;
 /// Every variant says what was wrong with the input; none of them is a panic
 /// in disguise.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum GeometryError {
     /// A camera parameter is out of its valid range.
     #[error("camera parameter `{key}` = {value} is invalid: {why}")]

@@ -99,6 +99,7 @@ pub struct Station {
 
 /// Why a hand-eye calibration could not be computed.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum HandEyeError {
     /// Fewer stations than the problem needs.
     #[error("{got} stations given, the hand-eye calibration needs at least {need} (10 or more recommended)")]

@@ -33,6 +33,7 @@ use thiserror::Error;
 /// Why a frame could not be processed at all (as opposed to a frame that
 /// simply shows too few targets, which is a [`PoseStatus`]).
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum LocateError {
     /// The image does not fit the detector (size, buffer).
     #[error(transparent)]

@@ -23,6 +23,7 @@ use thiserror::Error;
 
 /// Why the pipeline could not start.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum PipelineError {
     /// A pose stream could not be opened.
     #[error(transparent)]

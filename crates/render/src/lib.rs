@@ -73,6 +73,7 @@ pub use truth::TargetTruth;
 
 /// Why a frame cannot be rendered.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum RenderError {
     /// The output image's size differs from the camera's sensor.
     #[error("output image is {got_width}×{got_height}, the camera's sensor is {width}×{height}")]

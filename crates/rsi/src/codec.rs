@@ -30,6 +30,7 @@ pub const MAX_DELAY: u64 = u32::MAX as u64;
 
 /// Why a datagram was rejected or a reply could not be written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum CodecError {
     /// The datagram is empty (or only whitespace).
     #[error("empty datagram")]

@@ -16,6 +16,7 @@ use thiserror::Error;
 
 /// Why the `[rsi]` section was rejected.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum ConfigError {
     /// The TOML does not parse or has an unknown key.
     #[error("[rsi]: {0}")]

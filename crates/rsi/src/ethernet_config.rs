@@ -14,6 +14,7 @@ use thiserror::Error;
 
 /// Why an `RSI_EthernetConfig.xml` was rejected.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum EthernetConfigError {
     /// Not well-formed XML.
     #[error("RSI_EthernetConfig.xml line {line}: {what}")]

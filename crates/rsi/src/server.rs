@@ -27,6 +27,7 @@ pub const STOP_POLL: Duration = Duration::from_millis(50);
 
 /// Why the server could not start.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum ServerError {
     /// The socket could not be bound or set up.
     #[error("RSI socket {addr}: {source}")]

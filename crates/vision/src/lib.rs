@@ -49,6 +49,7 @@ use thiserror::Error;
 
 /// Errors of the detector (a frame without targets is a result, not an error).
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
 pub enum VisionError {
     /// The window is larger than the detector's capacity.
     #[error(
