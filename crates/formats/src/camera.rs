@@ -1,6 +1,12 @@
 //! The camera file (TOML, `conventions.md`): `[sensor]`, `[interior]`,
 //! optional `[distortion]`. Unknown keys and missing required keys are errors
 //! that name the file and the key.
+//!
+//! Values are range-checked at load, naming the key: sensor sides
+//! 2..=65535 px, pixel size 0.1–100 µm, principal distance 0.1–10 000 mm,
+//! the principal point on the sensor, and distortion parameters whose
+//! correction stays finite and smaller than the sensor diagonal at every
+//! corner of the sensor.
 
 use crate::FormatError;
 use photopose_geometry::{Camera, Distortion, Interior, Sensor};
@@ -63,15 +69,34 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
         err(format!("{at}{msg}"))
     })?;
     let dim = |key: &str, v: i64| -> Result<u32, FormatError> {
-        u32::try_from(v).map_err(|_| err(format!("{key} = {v} must be a positive pixel count")))
+        match u32::try_from(v) {
+            Ok(n) if (2..=MAX_SENSOR_SIDE).contains(&n) => Ok(n),
+            _ => Err(err(format!(
+                "{key} = {v} must be a pixel count in 2..={MAX_SENSOR_SIDE}"
+            ))),
+        }
     };
+    let within = |key: &str, v: f64, (lo, hi): (f64, f64), unit: &str| {
+        if v.is_finite() && (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(err(format!("{key} = {v} must be {lo}..={hi} {unit}")))
+        }
+    };
+    within(
+        "sensor.pixel_size",
+        f.sensor.pixel_size,
+        PIXEL_SIZE_MM,
+        "mm",
+    )?;
+    within("interior.c", f.interior.c, PRINCIPAL_DISTANCE_MM, "mm")?;
     let sensor = Sensor {
         width: dim("sensor.width", f.sensor.width)?,
         height: dim("sensor.height", f.sensor.height)?,
         pixel_size: f.sensor.pixel_size,
     };
     let d = f.distortion;
-    Camera::new(
+    let camera = Camera::new(
         sensor,
         Interior {
             c: f.interior.c,
@@ -88,7 +113,61 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
             b2: d.b2,
         },
     )
-    .map_err(|e| err(e.to_string()))
+    .map_err(|e| err(e.to_string()))?;
+    check_distortion(&camera).map_err(err)?;
+    Ok(camera)
+}
+
+/// Largest sensor side of a camera file, px.
+pub const MAX_SENSOR_SIDE: u32 = 65_535;
+/// Range of the pixel size, mm (0.1–100 µm).
+pub const PIXEL_SIZE_MM: (f64, f64) = (1e-4, 0.1);
+/// Range of the principal distance, mm.
+pub const PRINCIPAL_DISTANCE_MM: (f64, f64) = (0.1, 10_000.0);
+
+/// Checks that the distortion correction is finite and smaller than the
+/// sensor diagonal at the four sensor corners (the farthest points from the
+/// principal point, where the polynomial terms are largest); the error
+/// names the parameter whose term is largest there.
+fn check_distortion(camera: &Camera) -> Result<(), String> {
+    let s = &camera.sensor;
+    let (w, h) = (s.width as f64 - 1.0, s.height as f64 - 1.0);
+    let diagonal = (s.width as f64).hypot(s.height as f64) * s.pixel_size;
+    let d = &camera.distortion;
+    for (col, row) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        let m = camera.pixel_to_image(col, row);
+        let (x, y) = (m.x - camera.interior.x0, m.y - camera.interior.y0);
+        let size = d.correction(x, y).norm();
+        if size.is_finite() && size <= diagonal {
+            continue;
+        }
+        // The term of each parameter alone at this corner names the key.
+        let zero = Distortion::default();
+        let terms = [
+            ("distortion.k1", d.k1, Distortion { k1: d.k1, ..zero }),
+            ("distortion.k2", d.k2, Distortion { k2: d.k2, ..zero }),
+            ("distortion.k3", d.k3, Distortion { k3: d.k3, ..zero }),
+            ("distortion.p1", d.p1, Distortion { p1: d.p1, ..zero }),
+            ("distortion.p2", d.p2, Distortion { p2: d.p2, ..zero }),
+            ("distortion.b1", d.b1, Distortion { b1: d.b1, ..zero }),
+            ("distortion.b2", d.b2, Distortion { b2: d.b2, ..zero }),
+        ];
+        let mut worst = ("distortion", 0.0, f64::NEG_INFINITY);
+        for (key, coefficient, alone) in terms {
+            let v = alone.correction(x, y).norm();
+            let v = if v.is_nan() { f64::INFINITY } else { v };
+            if v > worst.2 {
+                worst = (key, coefficient, v);
+            }
+        }
+        let (key, coefficient, value) = worst;
+        return Err(format!(
+            "{key} = {coefficient:e}: the distortion correction at sensor corner \
+             ({col}, {row}) is {size:e} mm (this term alone {value:e} mm), more than the \
+             sensor diagonal of {diagonal:.3} mm"
+        ));
+    }
+    Ok(())
 }
 
 /// The text of the project's default camera (`config/camera.toml`).
@@ -102,7 +181,7 @@ pub fn default_camera() -> Camera {
 
 /// Loads a camera file.
 pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
-    let text = crate::read_text(path)?;
+    let text = crate::read_text(path, crate::FileKind::Camera)?;
     parse_camera(&text, &path.display().to_string())
 }
 
