@@ -163,7 +163,7 @@ fn check_distortion(camera: &Camera) -> Result<(), String> {
         let (key, coefficient, value) = worst;
         return Err(format!(
             "{key} = {coefficient:e}: the distortion correction at sensor corner \
-             ({col}, {row}) is {size:e} mm (this term alone {value:e} mm), more than the \
+             ({col}, {row}) is {size:.3e} mm (this term alone {value:.3e} mm), more than the \
              sensor diagonal of {diagonal:.3} mm"
         ));
     }
@@ -250,5 +250,78 @@ mod tests {
                 "{e:?} lacks {want:?}"
             );
         }
+    }
+
+    #[test]
+    fn values_outside_physical_ranges_are_refused_naming_the_key() {
+        let cases = [
+            (GOOD.replace("c = 12.0", "c = 0.05"), "interior.c = 0.05 must be 0.1..=10000 mm"),
+            (GOOD.replace("c = 12.0", "c = 1e308"), "interior.c = 1000"),
+            (
+                GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.00001"),
+                "sensor.pixel_size = 0.00001 must be 0.0001..=0.1 mm",
+            ),
+            (
+                GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.5"),
+                "sensor.pixel_size = 0.5",
+            ),
+            (
+                GOOD.replace("width = 1300", "width = 65536"),
+                "sensor.width = 65536 must be a pixel count in 2..=65535",
+            ),
+            (
+                GOOD.replace("height = 1030", "height = 1"),
+                "sensor.height = 1 must be",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk1 = 1e300\n"),
+                "distortion.k1 = 1e300: the distortion correction at sensor corner (0, 0) is inf mm",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk3 = 1.0\n"),
+                "distortion.k3 = 1e0: the distortion correction at sensor corner",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk2 = 1e-2\nb2 = 0.001\n"),
+                "distortion.k2 = 1e-2",
+            ),
+            (format!("{GOOD}[distortion]\nb1 = 5.0\n"), "distortion.b1 = 5e0"),
+            (format!("{GOOD}[distortion]\np2 = 1.0\n"), "more than the sensor diagonal of 11.113 mm"),
+        ];
+        for (text, want) in cases {
+            let e = parse_camera(&text, "cam.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("cam.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
+        }
+        // The ranges' ends are accepted, and so is a strong real lens.
+        for ok in [
+            GOOD.replace("c = 12.0", "c = 0.1"),
+            GOOD.replace("c = 12.0", "c = 10000.0"),
+            GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.0001"),
+            GOOD.replace("width = 1300", "width = 65535"),
+            format!("{GOOD}[distortion]\nk1 = -2.5e-3\nk2 = 1e-5\np1 = 1e-4\nb1 = 1e-3\n"),
+        ] {
+            parse_camera(&ok, "cam.toml").unwrap();
+        }
+    }
+
+    #[test]
+    fn a_camera_file_is_read_with_its_limit() {
+        let dir = std::env::temp_dir().join(format!("photopose-cam-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("padded.toml");
+        // A valid camera file padded with comments beyond the camera limit.
+        let mut text = GOOD.to_string();
+        while text.len() as u64 <= crate::FileKind::Camera.limit() {
+            text.push_str("# ................................................................\n");
+        }
+        std::fs::write(&p, &text).unwrap();
+        let e = load_camera(&p).unwrap_err().to_string();
+        assert!(e.contains("too large for the camera file"), "{e}");
+        std::fs::write(&p, GOOD).unwrap();
+        load_camera(&p).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -134,7 +134,7 @@ pub enum FileError {
     },
     /// The file is larger than its kind's limit.
     #[error(
-        "{path}: too large for a {kind}: {size}{} bytes, the limit is {limit} bytes",
+        "{path}: too large for the {kind}: {size}{} bytes, the limit is {limit} bytes",
         if *at_least { " or more" } else { "" }
     )]
     TooLarge {
@@ -339,7 +339,7 @@ mod tests {
         assert_eq!(
             e.to_string(),
             format!(
-                "{}: too large for a camera file: 6 bytes, the limit is 5 bytes",
+                "{}: too large for the camera file: 6 bytes, the limit is 5 bytes",
                 p.display()
             )
         );

@@ -818,22 +818,6 @@ mod tests {
         assert!(e.contains("pixel (1, 0) = 101 exceeds"), "{e}");
     }
 
-    /// CRC-32 of the PNG chunks (bitwise; tests only).
-    fn crc32(data: &[u8]) -> u32 {
-        let mut crc = !0u32;
-        for &b in data {
-            crc ^= b as u32;
-            for _ in 0..8 {
-                crc = if crc & 1 == 1 {
-                    (crc >> 1) ^ 0xedb8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-        !crc
-    }
-
     /// A hand-made 62-byte greyscale PNG whose header declares
     /// `width × height` pixels of `depth` bits.
     pub(crate) fn tiny_png(width: u32, height: u32, depth: u8) -> Vec<u8> {
@@ -842,7 +826,7 @@ mod tests {
             let start = out.len();
             out.extend_from_slice(kind);
             out.extend_from_slice(data);
-            let crc = crc32(&out[start..]);
+            let crc = crc32fast::hash(&out[start..]);
             out.extend_from_slice(&crc.to_be_bytes());
         }
         let mut out = PNG_MAGIC.to_vec();
