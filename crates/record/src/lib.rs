@@ -202,10 +202,18 @@ impl Recorder {
 }
 
 /// A recording read into memory: the frames' byte ranges in file order.
-#[derive(Debug)]
 pub struct Recording {
     path: String,
     frames: Vec<Vec<u8>>,
+}
+
+impl std::fmt::Debug for Recording {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recording")
+            .field("path", &self.path)
+            .field("frames", &self.frames.len())
+            .finish()
+    }
 }
 
 impl Recording {
