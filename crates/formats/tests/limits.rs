@@ -23,8 +23,11 @@ fn text(p: &Path, kind: FileKind) -> Result<String, FormatError> {
     Ok(read_text(p, kind)?)
 }
 
-/// Every loader of the crate, by name, returning its error text.
-fn loaders() -> Vec<(&'static str, fn(&Path) -> Option<String>)> {
+/// A loader: the error text of reading a path, `None` if it was accepted.
+type Loader = fn(&Path) -> Option<String>;
+
+/// Every loader of the crate, by the kind of file it reads.
+fn loaders() -> Vec<(&'static str, Loader)> {
     fn e<T>(r: Result<T, FormatError>) -> Option<String> {
         r.err().map(|e| e.to_string())
     }

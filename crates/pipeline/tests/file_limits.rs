@@ -134,8 +134,7 @@ fn replay_err(cfg: &Config) -> String {
         panic!("replay expected")
     };
     ReplaySource::open(&photopose_formats::default_camera(), r)
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string()
 }
 

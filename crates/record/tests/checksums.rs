@@ -69,9 +69,7 @@ fn a_flipped_bit_in_a_frame_is_a_chunk_crc_error_naming_the_file() {
     bytes[at + 10] ^= 0x08;
     let bad = dir.join("flipped.mcap");
     std::fs::write(&bad, &bytes).unwrap();
-    let e = Recording::open(&bad)
-        .err()
-        .expect("a flipped bit is refused");
+    let e = Recording::open(&bad).expect_err("a flipped bit is refused");
     assert!(matches!(e, RecordError::Corrupt { .. }), "{e}");
     let msg = e.to_string();
     assert!(
@@ -97,8 +95,7 @@ fn a_flipped_bit_outside_the_chunk_records_is_a_data_section_crc_error() {
     let bad = dir.join("header.mcap");
     std::fs::write(&bad, &bytes).unwrap();
     let e = Recording::open(&bad)
-        .err()
-        .expect("a flipped bit is refused")
+        .expect_err("a flipped bit is refused")
         .to_string();
     assert!(
         e.starts_with(&format!(
