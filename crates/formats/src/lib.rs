@@ -2,7 +2,7 @@
 //!
 //! Owns the camera TOML file, loading of test-field CSV files, the
 //! observation CSV (`id,col,row`) and image files (greyscale PGM and PNG),
-//! and reading files with limits ([`file`]: every file photopose reads goes
+//! and reading files with limits ([`file`](mod@file): every file photopose reads goes
 //! through [`read_text`] or [`read_bytes`]). Parsing functions take text and
 //! an origin (file name) for error messages; `load_*` functions read the file
 //! first.
