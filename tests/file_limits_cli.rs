@@ -200,3 +200,36 @@ fn a_fifo_is_refused_without_waiting_for_a_writer() {
     assert!(started.elapsed() < Duration::from_secs(30));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn check_config_refuses_a_hand_eye_file_with_huge_translations() {
+    let dir = scratch("hugehe");
+    let he = dir.join("he.toml");
+    std::fs::write(
+        &he,
+        "[camera_in_tcp]\nxyzabc = [1.7e308, 0.0, -80.0, 0.0, 0.0, 180.0]\n\
+         std_xyzabc = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]\n\
+         [plate_in_base]\nxyzabc = [400.0, 0.0, -200.0, 0.0, 0.0, 0.0]\n\
+         std_xyzabc = [0.01, 0.01, 0.01, 0.001, 0.001, 0.001]\n",
+    )
+    .unwrap();
+    let cfg = dir.join("photopose.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[source]\nkind = \"synthetic\"\n[rsi]\nenabled = true\nbind = \"127.0.0.1\"\n\
+             port = 59152\ncontrollers = [\"127.0.0.1\"]\nhand_eye = \"{}\"\n",
+            he.display()
+        ),
+    )
+    .unwrap();
+    let out = run_limited(&[&"check-config", &cfg]);
+    assert!(!out.status.success(), "accepted: {}", stderr(&out));
+    let e = stderr(&out);
+    assert!(
+        e.contains(&format!("{}: camera_in_tcp.xyzabc[0] (X) = ", he.display()))
+            && e.contains("is outside ±100000 mm"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
