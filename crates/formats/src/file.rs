@@ -81,7 +81,8 @@ impl FileKind {
     /// The largest file of this kind that is read, bytes.
     ///
     /// Text files are limited far above any real file of their kind (a
-    /// camera file has a dozen lines, a controller file a few kilobytes, a
+    /// camera file has a dozen lines, a controller file a few kilobytes (64 KiB
+    /// refuses the 880 KB file that hung the old XML parser), a
     /// field of 100 000 targets about 5 MB). An image is limited to what the
     /// largest sensor of a camera file (65535 × 65535) cannot reach anyway in
     /// practice; [`crate::image::load_image_for`] reads at most what the
@@ -94,7 +95,7 @@ impl FileKind {
             FileKind::Camera => 64 * KIB,
             FileKind::Field => 16 * MIB,
             FileKind::HandEye => 64 * KIB,
-            FileKind::ControllerFile => MIB,
+            FileKind::ControllerFile => 64 * KIB,
             FileKind::Observations => 16 * MIB,
             FileKind::Stations => 16 * MIB,
             FileKind::Poses => 256 * MIB,

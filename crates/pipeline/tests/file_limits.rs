@@ -93,28 +93,35 @@ fn an_oversized_configuration_or_controller_file_is_refused_by_size() {
         e.contains("too large for the configuration file: 10485760 bytes, the limit is"),
         "{e}"
     );
-    // A 10 MB controller file is refused by size before it is parsed.
+    // Controller files of 880 KB (hung the old XML parser) and 10 MB are
+    // refused by size before they are parsed.
     let xml = dir.join("RSI_EthernetConfig.xml");
-    let mut text = String::from("<ROOT><CONFIG><IP_NUMBER>127.0.0.1</IP_NUMBER>");
-    while text.len() < 10 << 20 {
-        text.push_str("<!-- padding padding padding padding padding padding -->\n");
+    for size in [880_000, 10 << 20] {
+        let mut text = String::from("<ROOT><CONFIG><IP_NUMBER>127.0.0.1</IP_NUMBER>");
+        while text.len() < size {
+            text.push_str("<ELEMENT TAG=\"DEF_RIst.X\" TYPE=\"DOUBLE\" INDX=\"1\" />\n");
+        }
+        text.push_str("</CONFIG></ROOT>\n");
+        std::fs::write(&xml, &text).unwrap();
+        std::fs::write(
+            &cfg,
+            format!(
+                "[source]\nkind = \"synthetic\"\n[rsi]\nenabled = true\nethernet_config = \"{}\"\n\
+                 hand_eye = \"he.toml\"\n",
+                xml.display()
+            ),
+        )
+        .unwrap();
+        let e = load_err(&cfg);
+        assert!(
+            e.contains(&format!(
+                "too large for the controller file (RSI_EthernetConfig.xml): {} bytes, \
+                 the limit is 65536 bytes",
+                text.len()
+            )) && e.ends_with("(named by `rsi.ethernet_config`)"),
+            "{e}"
+        );
     }
-    text.push_str("</CONFIG></ROOT>\n");
-    std::fs::write(&xml, text).unwrap();
-    std::fs::write(
-        &cfg,
-        format!(
-            "[source]\nkind = \"synthetic\"\n[rsi]\nenabled = true\nethernet_config = \"{}\"\n\
-             hand_eye = \"he.toml\"\n",
-            xml.display()
-        ),
-    )
-    .unwrap();
-    let e = load_err(&cfg);
-    assert!(
-        e.contains("too large for the controller file") && e.contains("rsi.ethernet_config"),
-        "{e}"
-    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
