@@ -30,13 +30,10 @@ impl<'a> ErrorLine<'a> {
     }
 }
 
-/// Loads an image file and checks its size against the camera; the error
-/// names the file.
+/// Loads an image file of the camera's sensor size (checked from the
+/// file's header before any pixel is decoded); the error names the file.
 pub fn load_frame(path: &Path, camera: &Camera) -> Result<Image, String> {
-    let image = photopose_formats::load_image(path).map_err(|e| e.to_string())?;
-    photopose_formats::check_size(&image, camera, &path.display().to_string())
-        .map_err(|e| e.to_string())?;
-    Ok(image)
+    photopose_formats::load_image_for(path, camera).map_err(|e| e.to_string())
 }
 
 /// The exit status of a batch with `failed` failed inputs.

@@ -185,7 +185,7 @@ fn hand_eye_file(he: &HandEye) -> HandEyeFile {
 /// Reads the station file and measures the camera pose of every station
 /// that names a frame.
 fn load_stations(args: &Args) -> Result<Vec<Station>> {
-    let text = photopose_formats::read_text(&args.stations)?;
+    let text = photopose_formats::read_text(&args.stations, photopose_formats::FileKind::Stations)?;
     let origin = args.stations.display().to_string();
     let rows = parse_stations(&text, &origin)?;
     let default_std = [

@@ -230,7 +230,7 @@ pub fn write_outputs(dir: &Path, out: &Outputs) -> Result<Vec<PathBuf>> {
 /// Appends the camera poses of one file; lines without a pose are counted.
 pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {name}"))?;
+    let text = photopose_formats::read_text(path, photopose_formats::FileKind::Poses)?;
     let mut summary = InputSummary {
         path: name.clone(),
         lines: 0,

@@ -1,6 +1,12 @@
 //! The camera file (TOML, `docs/conventions.md`): `[sensor]`, `[interior]`,
 //! optional `[distortion]`. Unknown keys and missing required keys are errors
 //! that name the file and the key.
+//!
+//! Values are range-checked at load, naming the key: sensor sides
+//! 2..=65535 px, pixel size 0.1–100 µm, principal distance 0.1–10 000 mm,
+//! the principal point on the sensor, and distortion parameters whose
+//! correction stays finite and smaller than the sensor diagonal at every
+//! corner of the sensor.
 
 use crate::FormatError;
 use photopose_geometry::{Camera, Distortion, Interior, Sensor};
@@ -63,15 +69,34 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
         err(format!("{at}{msg}"))
     })?;
     let dim = |key: &str, v: i64| -> Result<u32, FormatError> {
-        u32::try_from(v).map_err(|_| err(format!("{key} = {v} must be a positive pixel count")))
+        match u32::try_from(v) {
+            Ok(n) if (2..=MAX_SENSOR_SIDE).contains(&n) => Ok(n),
+            _ => Err(err(format!(
+                "{key} = {v} must be a pixel count in 2..={MAX_SENSOR_SIDE}"
+            ))),
+        }
     };
+    let within = |key: &str, v: f64, (lo, hi): (f64, f64), unit: &str| {
+        if v.is_finite() && (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(err(format!("{key} = {v} must be {lo}..={hi} {unit}")))
+        }
+    };
+    within(
+        "sensor.pixel_size",
+        f.sensor.pixel_size,
+        PIXEL_SIZE_MM,
+        "mm",
+    )?;
+    within("interior.c", f.interior.c, PRINCIPAL_DISTANCE_MM, "mm")?;
     let sensor = Sensor {
         width: dim("sensor.width", f.sensor.width)?,
         height: dim("sensor.height", f.sensor.height)?,
         pixel_size: f.sensor.pixel_size,
     };
     let d = f.distortion;
-    Camera::new(
+    let camera = Camera::new(
         sensor,
         Interior {
             c: f.interior.c,
@@ -88,7 +113,61 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
             b2: d.b2,
         },
     )
-    .map_err(|e| err(e.to_string()))
+    .map_err(|e| err(e.to_string()))?;
+    check_distortion(&camera).map_err(err)?;
+    Ok(camera)
+}
+
+/// Largest sensor side of a camera file, px.
+pub const MAX_SENSOR_SIDE: u32 = 65_535;
+/// Range of the pixel size, mm (0.1–100 µm).
+pub const PIXEL_SIZE_MM: (f64, f64) = (1e-4, 0.1);
+/// Range of the principal distance, mm.
+pub const PRINCIPAL_DISTANCE_MM: (f64, f64) = (0.1, 10_000.0);
+
+/// Checks that the distortion correction is finite and smaller than the
+/// sensor diagonal at the four sensor corners (the farthest points from the
+/// principal point, where the polynomial terms are largest); the error
+/// names the parameter whose term is largest there.
+fn check_distortion(camera: &Camera) -> Result<(), String> {
+    let s = &camera.sensor;
+    let (w, h) = (s.width as f64 - 1.0, s.height as f64 - 1.0);
+    let diagonal = (s.width as f64).hypot(s.height as f64) * s.pixel_size;
+    let d = &camera.distortion;
+    for (col, row) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        let m = camera.pixel_to_image(col, row);
+        let (x, y) = (m.x - camera.interior.x0, m.y - camera.interior.y0);
+        let size = d.correction(x, y).norm();
+        if size.is_finite() && size <= diagonal {
+            continue;
+        }
+        // The term of each parameter alone at this corner names the key.
+        let zero = Distortion::default();
+        let terms = [
+            ("distortion.k1", d.k1, Distortion { k1: d.k1, ..zero }),
+            ("distortion.k2", d.k2, Distortion { k2: d.k2, ..zero }),
+            ("distortion.k3", d.k3, Distortion { k3: d.k3, ..zero }),
+            ("distortion.p1", d.p1, Distortion { p1: d.p1, ..zero }),
+            ("distortion.p2", d.p2, Distortion { p2: d.p2, ..zero }),
+            ("distortion.b1", d.b1, Distortion { b1: d.b1, ..zero }),
+            ("distortion.b2", d.b2, Distortion { b2: d.b2, ..zero }),
+        ];
+        let mut worst = ("distortion", 0.0, f64::NEG_INFINITY);
+        for (key, coefficient, alone) in terms {
+            let v = alone.correction(x, y).norm();
+            let v = if v.is_nan() { f64::INFINITY } else { v };
+            if v > worst.2 {
+                worst = (key, coefficient, v);
+            }
+        }
+        let (key, coefficient, value) = worst;
+        return Err(format!(
+            "{key} = {coefficient:e}: the distortion correction at sensor corner \
+             ({col}, {row}) is {size:.3e} mm (this term alone {value:.3e} mm), more than the \
+             sensor diagonal of {diagonal:.3} mm"
+        ));
+    }
+    Ok(())
 }
 
 /// The text of the project's default camera (`config/camera.toml`).
@@ -102,7 +181,7 @@ pub fn default_camera() -> Camera {
 
 /// Loads a camera file.
 pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
-    let text = crate::read_text(path)?;
+    let text = crate::read_text(path, crate::FileKind::Camera)?;
     parse_camera(&text, &path.display().to_string())
 }
 
@@ -171,5 +250,78 @@ mod tests {
                 "{e:?} lacks {want:?}"
             );
         }
+    }
+
+    #[test]
+    fn values_outside_physical_ranges_are_refused_naming_the_key() {
+        let cases = [
+            (GOOD.replace("c = 12.0", "c = 0.05"), "interior.c = 0.05 must be 0.1..=10000 mm"),
+            (GOOD.replace("c = 12.0", "c = 1e308"), "interior.c = 1000"),
+            (
+                GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.00001"),
+                "sensor.pixel_size = 0.00001 must be 0.0001..=0.1 mm",
+            ),
+            (
+                GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.5"),
+                "sensor.pixel_size = 0.5",
+            ),
+            (
+                GOOD.replace("width = 1300", "width = 65536"),
+                "sensor.width = 65536 must be a pixel count in 2..=65535",
+            ),
+            (
+                GOOD.replace("height = 1030", "height = 1"),
+                "sensor.height = 1 must be",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk1 = 1e300\n"),
+                "distortion.k1 = 1e300: the distortion correction at sensor corner (0, 0) is inf mm",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk3 = 1.0\n"),
+                "distortion.k3 = 1e0: the distortion correction at sensor corner",
+            ),
+            (
+                format!("{GOOD}[distortion]\nk2 = 1e-2\nb2 = 0.001\n"),
+                "distortion.k2 = 1e-2",
+            ),
+            (format!("{GOOD}[distortion]\nb1 = 5.0\n"), "distortion.b1 = 5e0"),
+            (format!("{GOOD}[distortion]\np2 = 1.0\n"), "more than the sensor diagonal of 11.113 mm"),
+        ];
+        for (text, want) in cases {
+            let e = parse_camera(&text, "cam.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("cam.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
+        }
+        // The ranges' ends are accepted, and so is a strong real lens.
+        for ok in [
+            GOOD.replace("c = 12.0", "c = 0.1"),
+            GOOD.replace("c = 12.0", "c = 10000.0"),
+            GOOD.replace("pixel_size = 0.0067", "pixel_size = 0.0001"),
+            GOOD.replace("width = 1300", "width = 65535"),
+            format!("{GOOD}[distortion]\nk1 = -2.5e-3\nk2 = 1e-5\np1 = 1e-4\nb1 = 1e-3\n"),
+        ] {
+            parse_camera(&ok, "cam.toml").unwrap();
+        }
+    }
+
+    #[test]
+    fn a_camera_file_is_read_with_its_limit() {
+        let dir = std::env::temp_dir().join(format!("photopose-cam-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("padded.toml");
+        // A valid camera file padded with comments beyond the camera limit.
+        let mut text = GOOD.to_string();
+        while text.len() as u64 <= crate::FileKind::Camera.limit() {
+            text.push_str("# ................................................................\n");
+        }
+        std::fs::write(&p, &text).unwrap();
+        let e = load_camera(&p).unwrap_err().to_string();
+        assert!(e.contains("too large for the camera file"), "{e}");
+        std::fs::write(&p, GOOD).unwrap();
+        load_camera(&p).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

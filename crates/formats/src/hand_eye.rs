@@ -3,7 +3,9 @@
 //! (`Z = T_base←plate`) as KUKA `X, Y, Z, A, B, C` with their standard
 //! deviations, and the figures of the fit that produced them. Written by
 //! `photopose calibrate hand-eye`, read by the daemon. Unknown and missing
-//! keys are errors that name the file and the key.
+//! keys, and values out of range (a translation beyond 100 m, an angle
+//! beyond ±360°, an absurd standard deviation), are errors that name the
+//! file and the key.
 //!
 //! ```toml
 //! # photopose hand-eye calibration (frames: see docs/hand-eye.md)
@@ -72,7 +74,23 @@ pub struct HandEyeFile {
     pub fit: Option<Fit>,
 }
 
-/// Parses hand-eye TOML text; `origin` names the file in errors.
+/// Largest translation of a transform, mm (100 m: beyond any robot cell).
+pub const MAX_TRANSLATION_MM: f64 = 100_000.0;
+/// Largest KUKA angle `A`, `B`, `C`, degrees.
+pub const MAX_ANGLE_DEG: f64 = 360.0;
+/// Largest standard deviation of a translation (and RMS of the fit), mm.
+pub const MAX_STD_MM: f64 = 1000.0;
+/// Largest standard deviation of an angle (and RMS of the fit), degrees.
+pub const MAX_STD_DEG: f64 = 180.0;
+/// Largest σ0 of the fit.
+pub const MAX_SIGMA0: f64 = 1.0e6;
+/// The names of the six values of `xyzabc`.
+const AXES: [&str; 6] = ["X", "Y", "Z", "A", "B", "C"];
+
+/// Parses hand-eye TOML text; `origin` names the file in errors. Values are
+/// range-checked, naming the key: translations within ±[`MAX_TRANSLATION_MM`],
+/// angles within ±[`MAX_ANGLE_DEG`], standard deviations finite, ≥ 0 and at
+/// most [`MAX_STD_MM`] / [`MAX_STD_DEG`].
 pub fn parse_hand_eye(text: &str, origin: &str) -> Result<HandEyeFile, FormatError> {
     let err = |what: String| FormatError::HandEye {
         origin: origin.into(),
@@ -92,23 +110,38 @@ pub fn parse_hand_eye(text: &str, origin: &str) -> Result<HandEyeFile, FormatErr
         ("camera_in_tcp", &f.camera_in_tcp),
         ("plate_in_base", &f.plate_in_base),
     ] {
-        if let Some(v) = t.xyzabc.iter().find(|v| !v.is_finite()) {
-            return Err(err(format!("{table}.xyzabc: {v} is not a finite number")));
-        }
-        if let Some(v) = t.std_xyzabc.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-            return Err(err(format!(
-                "{table}.std_xyzabc: {v} is not a standard deviation (finite, ≥ 0)"
-            )));
+        for (k, (&v, &sd)) in t.xyzabc.iter().zip(&t.std_xyzabc).enumerate() {
+            let (name, limit, std_limit, unit) = if k < 3 {
+                (AXES[k], MAX_TRANSLATION_MM, MAX_STD_MM, "mm")
+            } else {
+                (AXES[k], MAX_ANGLE_DEG, MAX_STD_DEG, "°")
+            };
+            if !v.is_finite() {
+                return Err(err(format!(
+                    "{table}.xyzabc[{k}] ({name}) = {v} is not a finite number"
+                )));
+            }
+            if v.abs() > limit {
+                return Err(err(format!(
+                    "{table}.xyzabc[{k}] ({name}) = {v} is outside ±{limit} {unit}"
+                )));
+            }
+            if !(sd.is_finite() && (0.0..=std_limit).contains(&sd)) {
+                return Err(err(format!(
+                    "{table}.std_xyzabc[{k}] ({name}) = {sd} is not a standard deviation \
+                     (finite, 0..={std_limit} {unit})"
+                )));
+            }
         }
     }
     if let Some(fit) = &f.fit {
-        for (key, v) in [
-            ("fit.sigma0", fit.sigma0),
-            ("fit.rms_mm", fit.rms_mm),
-            ("fit.rms_deg", fit.rms_deg),
+        for (key, v, max) in [
+            ("fit.sigma0", fit.sigma0, MAX_SIGMA0),
+            ("fit.rms_mm", fit.rms_mm, MAX_STD_MM),
+            ("fit.rms_deg", fit.rms_deg, MAX_STD_DEG),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(err(format!("{key} = {v} must be finite and ≥ 0")));
+            if !(v.is_finite() && (0.0..=max).contains(&v)) {
+                return Err(err(format!("{key} = {v} must be finite and in 0..={max}")));
             }
         }
         if fit.stations < 3 {
@@ -123,7 +156,7 @@ pub fn parse_hand_eye(text: &str, origin: &str) -> Result<HandEyeFile, FormatErr
 
 /// Loads a hand-eye file.
 pub fn load_hand_eye(path: &Path) -> Result<HandEyeFile, FormatError> {
-    let text = crate::read_text(path)?;
+    let text = crate::read_text(path, crate::FileKind::HandEye)?;
     parse_hand_eye(&text, &path.display().to_string())
 }
 
@@ -235,7 +268,7 @@ mod tests {
         );
         check_err(
             &good.replacen("std_xyzabc = [0.021", "std_xyzabc = [-0.021", 1),
-            "camera_in_tcp.std_xyzabc: -0.021",
+            "camera_in_tcp.std_xyzabc[0] (X) = -0.021",
         );
         check_err(
             &good.replace("[plate_in_base]", "[plate_in_world]"),
@@ -253,5 +286,56 @@ mod tests {
             "[camera_in_tcp]\nxyzabc = [1, 2, 3]\nstd_xyzabc = [0, 0, 0, 0, 0, 0]\n",
             "line 2",
         );
+    }
+
+    #[test]
+    fn huge_but_finite_values_are_refused_naming_the_key() {
+        let good = hand_eye_to_toml(&sample());
+        check_err(
+            &good.replace("xyzabc = [35.012345678901,", "xyzabc = [1.7e308,"),
+            "camera_in_tcp.xyzabc[0] (X) = 170000000000000000000",
+        );
+        check_err(
+            &good.replace(
+                "xyzabc = [1100.0, 200.0, 15.0,",
+                "xyzabc = [1100.0, -1.7e308, 15.0,",
+            ),
+            "plate_in_base.xyzabc[1] (Y) = -1700000000000000",
+        );
+        check_err(
+            &good.replace(
+                "xyzabc = [1100.0, 200.0, 15.0,",
+                "xyzabc = [1100.0, 200.0, 100000.5,",
+            ),
+            "plate_in_base.xyzabc[2] (Z) = 100000.5 is outside ±100000 mm",
+        );
+        check_err(
+            &good.replace("91.0, 2.5, 178.5]", "91.0, 2.5, 1e300]"),
+            "camera_in_tcp.xyzabc[5] (C) = 1000000",
+        );
+        check_err(
+            &good.replace("25.0, 0.8, -0.6]", "25.0, -361.0, -0.6]"),
+            "plate_in_base.xyzabc[4] (B) = -361 is outside ±360 °",
+        );
+        check_err(
+            &good.replacen("std_xyzabc = [0.021", "std_xyzabc = [1e6", 1),
+            "camera_in_tcp.std_xyzabc[0] (X) = 1000000 is not a standard deviation",
+        );
+        check_err(
+            &good.replace("0.002, 0.0021, 0.0019]", "0.002, 0.0021, 181.0]"),
+            "plate_in_base.std_xyzabc[5] (C) = 181",
+        );
+        check_err(
+            &good.replace("rms_mm = 0.011", "rms_mm = 1e9"),
+            "fit.rms_mm = 1000000000",
+        );
+        // The limits themselves are accepted.
+        let edge = good
+            .replace(
+                "xyzabc = [1100.0, 200.0, 15.0,",
+                "xyzabc = [100000.0, -100000.0, 15.0,",
+            )
+            .replace("25.0, 0.8, -0.6]", "360.0, -360.0, 359.9]");
+        parse_hand_eye(&edge, "he.toml").unwrap();
     }
 }

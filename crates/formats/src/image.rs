@@ -15,7 +15,14 @@
 //! Files are recognised by their content when read and chosen by their
 //! extension (`.pgm`, `.png`, any case) when written. Every error names the
 //! file and what is wrong with it.
+//!
+//! Reading is bounded: the file is read with a size limit ([`crate::file`]),
+//! and the width × height its header declares is checked against the
+//! camera's sensor (or [`ImageLimits::Any`]'s hard maximum) before a pixel
+//! is allocated or decoded, so a tiny file declaring a huge image costs
+//! nothing.
 
+use crate::file::{read_bytes_limited, FileKind};
 use crate::FormatError;
 use photopose_frame::{Image, Pixels};
 use photopose_geometry::Camera;
@@ -85,20 +92,97 @@ impl ImageFormat {
     }
 }
 
-/// Reads an image file (PGM or PNG, recognised by content).
-pub fn load_image(path: &Path) -> Result<Image, FormatError> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| {
-        if source.kind() == std::io::ErrorKind::NotFound {
-            FormatError::Missing { path: name.clone() }
-        } else {
-            FormatError::Io {
-                path: name.clone(),
-                source,
-            }
+/// The largest image side read without a camera, px (a camera file's
+/// largest sensor side).
+pub const MAX_IMAGE_SIDE: u32 = 65_535;
+/// The most pixels an image read without a camera may have (256 Mpx:
+/// 512 MiB of 16-bit samples).
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
+/// What an image file may declare, checked against its header before any
+/// pixel is allocated or decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageLimits {
+    /// Exactly the camera's sensor size.
+    Sensor {
+        /// Sensor width, px.
+        width: u32,
+        /// Sensor height, px.
+        height: u32,
+    },
+    /// Any size up to [`MAX_IMAGE_SIDE`] per side and [`MAX_IMAGE_PIXELS`].
+    Any,
+}
+
+impl ImageLimits {
+    /// The camera's sensor size.
+    pub fn of(camera: &Camera) -> Self {
+        ImageLimits::Sensor {
+            width: camera.sensor.width,
+            height: camera.sensor.height,
         }
-    })?;
-    decode_image(&bytes, &name)
+    }
+
+    /// The largest image file read under these limits, bytes: twice the
+    /// 16-bit raster (room for any sane PNG) plus 1 MiB of headers, at most
+    /// the image kind's limit.
+    pub fn file_limit(self) -> u64 {
+        let kind = FileKind::Image.limit();
+        match self {
+            ImageLimits::Sensor { width, height } => (4 * width as u64 * height as u64)
+                .saturating_add(1 << 20)
+                .min(kind),
+            ImageLimits::Any => kind,
+        }
+    }
+
+    /// Checks a header's declared size; the error names the file.
+    pub fn check(self, width: u32, height: u32, origin: &str) -> Result<(), FormatError> {
+        match self {
+            ImageLimits::Sensor {
+                width: camera_width,
+                height: camera_height,
+            } if (width, height) != (camera_width, camera_height) => Err(FormatError::ImageSize {
+                origin: origin.into(),
+                width,
+                height,
+                camera_width,
+                camera_height,
+            }),
+            ImageLimits::Any
+                if width > MAX_IMAGE_SIDE
+                    || height > MAX_IMAGE_SIDE
+                    || width as u64 * height as u64 > MAX_IMAGE_PIXELS =>
+            {
+                Err(FormatError::ImageHeader {
+                    origin: origin.into(),
+                    what: format!(
+                        "{width}×{height} is larger than an image is read \
+                         ({MAX_IMAGE_SIDE} px per side, {MAX_IMAGE_PIXELS} pixels at most)"
+                    ),
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Reads an image file (PGM or PNG, recognised by content) of any size up
+/// to [`ImageLimits::Any`].
+pub fn load_image(path: &Path) -> Result<Image, FormatError> {
+    load_with(path, ImageLimits::Any)
+}
+
+/// Reads an image file for `camera`: the file is refused when larger than
+/// the sensor's image can be, and the header's width × height must be the
+/// sensor's before any pixel is decoded.
+pub fn load_image_for(path: &Path, camera: &Camera) -> Result<Image, FormatError> {
+    load_with(path, ImageLimits::of(camera))
+}
+
+fn load_with(path: &Path, limits: ImageLimits) -> Result<Image, FormatError> {
+    let bytes = read_bytes_limited(path, FileKind::Image, limits.file_limit())?;
+    decode_image_for(&bytes, &path.display().to_string(), limits)
 }
 
 /// Writes an image file, PGM or PNG by the path's extension.
@@ -112,11 +196,22 @@ pub fn save_image(path: &Path, image: &Image) -> Result<(), FormatError> {
     std::fs::write(path, &bytes).map_err(|source| FormatError::Write { path: name, source })
 }
 
-/// Decodes PGM or PNG bytes; `origin` names the file in errors.
+/// Decodes PGM or PNG bytes of any size up to [`ImageLimits::Any`];
+/// `origin` names the file in errors.
 pub fn decode_image(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
+    decode_image_for(bytes, origin, ImageLimits::Any)
+}
+
+/// Decodes PGM or PNG bytes whose header must pass `limits` (checked before
+/// any pixel is allocated); `origin` names the file in errors.
+pub fn decode_image_for(
+    bytes: &[u8],
+    origin: &str,
+    limits: ImageLimits,
+) -> Result<Image, FormatError> {
     match ImageFormat::sniff(bytes, origin)? {
-        ImageFormat::Pgm => decode_pgm(bytes, origin),
-        ImageFormat::Png => decode_png(bytes, origin),
+        ImageFormat::Pgm => pgm_with(bytes, origin, limits),
+        ImageFormat::Png => png_with(bytes, origin, limits),
     }
 }
 
@@ -207,8 +302,12 @@ impl Header<'_> {
     }
 }
 
-/// Decodes a binary PGM (`P5`).
+/// Decodes a binary PGM (`P5`) of any size up to [`ImageLimits::Any`].
 pub fn decode_pgm(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
+    pgm_with(bytes, origin, ImageLimits::Any)
+}
+
+fn pgm_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, FormatError> {
     if !bytes.starts_with(b"P5") {
         return ImageFormat::sniff(bytes, origin).and(Err(FormatError::UnsupportedImage {
             origin: origin.into(),
@@ -226,6 +325,7 @@ pub fn decode_pgm(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
     let width = h.number("width", u32::MAX as u64)? as u32;
     let height = h.number("height", u32::MAX as u64)? as u32;
     let maxval = h.number("maxval", 65535)? as u16;
+    limits.check(width, height, origin)?;
     // Exactly one whitespace byte separates maxval from the raster.
     match bytes.get(h.at) {
         None => return Err(h.truncated("the pixel data")),
@@ -373,8 +473,12 @@ fn png_error(origin: &str, e: png::DecodingError, header: bool) -> FormatError {
     }
 }
 
-/// Decodes a greyscale PNG.
+/// Decodes a greyscale PNG of any size up to [`ImageLimits::Any`].
 pub fn decode_png(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
+    png_with(bytes, origin, ImageLimits::Any)
+}
+
+fn png_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, FormatError> {
     if !bytes.starts_with(PNG_MAGIC) {
         return ImageFormat::sniff(bytes, origin).and(Err(FormatError::UnsupportedImage {
             origin: origin.into(),
@@ -414,6 +518,14 @@ pub fn decode_png(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
                 .into(),
         });
     }
+    // Size and depth from the header, before the pixel buffer exists.
+    if !matches!(depth, png::BitDepth::Eight | png::BitDepth::Sixteen) {
+        return Err(FormatError::UnsupportedImage {
+            origin: origin.into(),
+            what: format!("PNG bit depth {depth:?}"),
+        });
+    }
+    limits.check(width, height, origin)?;
     let mut buf = vec![0; reader.output_buffer_size()];
     reader
         .next_frame(&mut buf)
@@ -666,7 +778,10 @@ mod tests {
             assert_eq!(load_image(&p).unwrap(), img);
         }
         let e = load_image(&dir.join("nope.pgm")).unwrap_err().to_string();
-        assert!(e.ends_with("nope.pgm: no such file"), "{e}");
+        assert!(
+            e.ends_with("nope.pgm: cannot read the image file: no such file"),
+            "{e}"
+        );
         let e = save_image(&dir.join("c.tif"), &img)
             .unwrap_err()
             .to_string();
@@ -701,5 +816,104 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("pixel (1, 0) = 101 exceeds"), "{e}");
+    }
+
+    /// A hand-made 62-byte greyscale PNG whose header declares
+    /// `width × height` pixels of `depth` bits.
+    pub(crate) fn tiny_png(width: u32, height: u32, depth: u8) -> Vec<u8> {
+        fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+            out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+            let start = out.len();
+            out.extend_from_slice(kind);
+            out.extend_from_slice(data);
+            let crc = crc32fast::hash(&out[start..]);
+            out.extend_from_slice(&crc.to_be_bytes());
+        }
+        let mut out = PNG_MAGIC.to_vec();
+        let mut ihdr = Vec::new();
+        ihdr.extend_from_slice(&width.to_be_bytes());
+        ihdr.extend_from_slice(&height.to_be_bytes());
+        ihdr.extend_from_slice(&[depth, 0, 0, 0, 0]); // grey, deflate, no filter, no interlace
+        chunk(&mut out, b"IHDR", &ihdr);
+        // The start of a zlib stream; never decoded.
+        chunk(&mut out, b"IDAT", &[0x78, 0x9c, 0x63, 0x60, 0]);
+        chunk(&mut out, b"IEND", &[]);
+        out
+    }
+
+    fn camera_1300() -> Camera {
+        Camera::new(
+            Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            Distortion::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_tiny_png_declaring_a_huge_image_is_refused_before_allocation() {
+        for depth in [8, 16] {
+            let bytes = tiny_png(100_000, 100_000, depth);
+            assert_eq!(bytes.len(), 62);
+            // Against the camera: the sensor's size is named.
+            let e =
+                decode_image_for(&bytes, "huge.png", ImageLimits::of(&camera_1300())).unwrap_err();
+            assert_eq!(
+                e.to_string(),
+                "huge.png: image is 100000×100000, camera file says 1300×1030"
+            );
+            // Without a camera: the hard maximum.
+            let e = decode_image(&bytes, "huge.png").unwrap_err().to_string();
+            assert!(
+                e.starts_with("huge.png: corrupt image header: 100000×100000 is larger"),
+                "{e}"
+            );
+        }
+        // Within the side limit but too many pixels.
+        let e = decode_image(&tiny_png(65_535, 65_535, 8), "big.png")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("65535×65535 is larger"), "{e}");
+        // A supported size in the header reaches the decoder (which finds
+        // the data bad), showing the header check is what refused the rest.
+        let e = decode_image(&tiny_png(4, 4, 8), "small.png").unwrap_err();
+        assert!(matches!(e, FormatError::ImageData { .. }), "{e}");
+    }
+
+    #[test]
+    fn a_pgm_declaring_a_huge_image_is_refused_by_its_header() {
+        let bytes = b"P5\n100000 100000\n65535\n\0\0\0\0";
+        let e = decode_image_for(bytes, "huge.pgm", ImageLimits::of(&camera_1300()))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "huge.pgm: image is 100000×100000, camera file says 1300×1030"
+        );
+        let e = decode_image(bytes, "huge.pgm").unwrap_err().to_string();
+        assert!(e.contains("100000×100000 is larger"), "{e}");
+        // The camera's size passes the header and is then found truncated.
+        let e = decode_image_for(
+            b"P5\n1300 1030\n255\n\0",
+            "short.pgm",
+            ImageLimits::of(&camera_1300()),
+        )
+        .unwrap_err();
+        assert!(matches!(e, FormatError::Truncated { .. }), "{e}");
+    }
+
+    #[test]
+    fn the_file_limit_follows_the_sensor() {
+        let limits = ImageLimits::of(&camera_1300());
+        assert_eq!(limits.file_limit(), 4 * 1300 * 1030 + (1 << 20));
+        assert_eq!(ImageLimits::Any.file_limit(), FileKind::Image.limit());
     }
 }

@@ -1,18 +1,23 @@
 //! photopose-formats: reading and writing the project's files.
 //!
 //! Owns the camera TOML file, loading of test-field CSV files, the
-//! observation CSV (`id,col,row`) and image files (greyscale PGM and PNG). Parsing functions take text and an origin
-//! (file name) for error messages; `load_*` functions read the file first.
+//! observation CSV (`id,col,row`) and image files (greyscale PGM and PNG),
+//! and reading files with limits ([`file`](mod@file): every file photopose reads goes
+//! through [`read_text`] or [`read_bytes`]). Parsing functions take text and
+//! an origin (file name) for error messages; `load_*` functions read the file
+//! first.
 
 pub mod camera;
+pub mod file;
 pub mod hand_eye;
 pub mod image;
 pub mod observations;
 
 pub use camera::{camera_to_toml, default_camera, load_camera, parse_camera};
+pub use file::{read_bytes, read_bytes_limited, read_text, FileError, FileKind};
 pub use image::{
-    check_size, decode_image, decode_pgm, decode_png, encode_pgm, encode_png, load_image,
-    save_image, ImageFormat,
+    check_size, decode_image, decode_image_for, decode_pgm, decode_png, encode_pgm, encode_png,
+    load_image, load_image_for, save_image, ImageFormat, ImageLimits,
 };
 pub use observations::{load_observations, parse_observations, PixelObservation};
 
@@ -21,21 +26,12 @@ use thiserror::Error;
 
 /// A file that could not be used, with what and where.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum FormatError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The path.
-        path: String,
-        /// The IO error.
-        source: std::io::Error,
-    },
-    /// The file does not exist.
-    #[error("{path}: no such file")]
-    Missing {
-        /// The path.
-        path: String,
-    },
+    /// The file could not be read (missing, not a regular file, too large,
+    /// not text, IO error).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// The file could not be written.
     #[error("{path}: cannot write: {source}")]
     Write {
@@ -128,17 +124,9 @@ pub enum FormatError {
     },
 }
 
-/// Reads a text file, naming it in the error.
-pub fn read_text(path: &Path) -> Result<String, FormatError> {
-    std::fs::read_to_string(path).map_err(|source| FormatError::Io {
-        path: path.display().to_string(),
-        source,
-    })
-}
-
 /// Loads a test field CSV file.
 pub fn load_field(path: &Path) -> Result<photopose_field::Field, FormatError> {
-    let text = read_text(path)?;
+    let text = read_text(path, FileKind::Field)?;
     Ok(photopose_field::Field::parse_csv(
         &text,
         &path.display().to_string(),

@@ -76,7 +76,7 @@ pub fn parse_observations(text: &str, origin: &str) -> Result<Vec<PixelObservati
 
 /// Loads an observation file.
 pub fn load_observations(path: &Path) -> Result<Vec<PixelObservation>, FormatError> {
-    let text = crate::read_text(path)?;
+    let text = crate::read_text(path, crate::FileKind::Observations)?;
     parse_observations(&text, &path.display().to_string())
 }
 

@@ -242,6 +242,8 @@ pub fn parse_stations(text: &str, origin: &str) -> Result<Vec<StationRow>, HandE
     }
 
     let mut rows: Vec<StationRow> = Vec::new();
+    // Station name → its line: duplicates found in constant time per row.
+    let mut lines_of: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
     for (line, text) in lines {
         let fields: Vec<&str> = text.split(',').map(str::trim).collect();
         if fields.len() != names.len() {
@@ -252,12 +254,13 @@ pub fn parse_stations(text: &str, origin: &str) -> Result<Vec<StationRow>, HandE
         }
         let name = fields[station_col].to_string();
         check_name(&name).map_err(|w| err(line, w))?;
-        if let Some(first) = rows.iter().find(|r| r.name == name) {
+        if let Some(first) = lines_of.get(&name) {
             return Err(err(
                 line,
-                format!("station `{name}` is also on line {}", first.line),
+                format!("station `{name}` is also on line {first}"),
             ));
         }
+        lines_of.insert(name.clone(), line);
         let number = |c: usize| -> Result<Option<f64>, HandEyeError> {
             let f = fields[c];
             if f.is_empty() {

@@ -2,6 +2,7 @@
 //! user, unknown keys rejected, and its validation into [`Config`] with
 //! errors that name the key. `config/photopose.toml` documents every key.
 
+use photopose_formats::file::{read_text, FileError, FileKind};
 use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -9,14 +10,16 @@ use thiserror::Error;
 
 /// A configuration that cannot be used, with the key and why.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The IO error.
-        source: std::io::Error,
+    /// The file, or a file it names, could not be read (missing, not a
+    /// regular file, too large for its kind, not text).
+    #[error("{source}{}", key.map(|k| format!(" (named by `{k}`)")).unwrap_or_default())]
+    File {
+        /// The key that names the file; `None`: the configuration itself.
+        key: Option<&'static str>,
+        /// What went wrong, with the path and the kind of file.
+        source: FileError,
     },
     /// The TOML is malformed or has an unknown or mistyped key.
     #[error("{path}: {message}")]
@@ -158,10 +161,16 @@ struct ReplaySection {
     speed: SpeedToml,
     #[serde(default = "default_passes")]
     passes: u64,
+    #[serde(default = "default_max_bytes")]
+    max_bytes: u64,
 }
 
 fn default_passes() -> u64 {
     1
+}
+
+fn default_max_bytes() -> u64 {
+    FileKind::Recording.limit()
 }
 
 #[derive(Debug, Deserialize, Clone)]
@@ -174,6 +183,9 @@ enum SpeedToml {
 fn default_speed() -> SpeedToml {
     SpeedToml::Word("recorded".into())
 }
+
+/// The largest `source.replay.max_bytes` accepted (1 TiB).
+const MAX_REPLAY_BYTES: u64 = 1 << 40;
 
 /// How fast a recording is replayed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -194,6 +206,8 @@ pub struct Replay {
     /// Times the recording is played, 0 for endless (soak tests); later
     /// passes continue the sequence numbers and camera times.
     pub passes: u64,
+    /// Largest recording read, bytes (the replay holds it in memory).
+    pub max_bytes: u64,
 }
 
 #[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
@@ -389,10 +403,8 @@ pub struct Rsi {
 impl Config {
     /// Loads and validates a configuration file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text = read_text(path, FileKind::Config)
+            .map_err(|source| ConfigError::File { key: None, source })?;
         Self::parse(&text, &path.display().to_string())
     }
 
@@ -516,10 +528,18 @@ impl Config {
                         ))
                     }
                 };
+                if !(1..=MAX_REPLAY_BYTES).contains(&r.max_bytes) {
+                    return Err(bad(
+                        "source.replay.max_bytes",
+                        r.max_bytes.to_string(),
+                        "must be 1..=1099511627776 (1 TiB)",
+                    ));
+                }
                 Source::Replay(Replay {
                     path: r.path.clone(),
                     speed,
                     passes: r.passes,
+                    max_bytes: r.max_bytes,
                 })
             }
         };
@@ -587,12 +607,12 @@ impl Config {
                 source,
             };
             let xml = match &f.rsi.ethernet_config {
-                Some(p) => Some(
-                    std::fs::read_to_string(p).map_err(|source| ConfigError::Io {
-                        path: format!("{} (rsi.ethernet_config)", p.display()),
+                Some(p) => Some(read_text(p, FileKind::ControllerFile).map_err(|source| {
+                    ConfigError::File {
+                        key: Some("rsi.ethernet_config"),
                         source,
-                    })?,
-                ),
+                    }
+                })?),
                 None => None,
             };
             let settings = f.rsi.settings(xml.as_deref()).map_err(rsi_err)?;

@@ -190,6 +190,7 @@ pub struct ReplaySource {
 
 /// Why a replay cannot start.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum ReplayError {
     /// The recording cannot be read.
     #[error(transparent)]
@@ -211,9 +212,12 @@ pub enum ReplayError {
 }
 
 impl ReplaySource {
-    /// Opens a recording for `camera`.
+    /// Opens a recording for `camera`: at most `config.max_bytes`, a
+    /// regular file, every checksum verified (a corrupt file is refused
+    /// here; a frame that does not fit the slot is skipped and counted
+    /// later, as a bad frame).
     pub fn open(camera: &Camera, config: &crate::config::Replay) -> Result<Self, ReplayError> {
-        let recording = photopose_record::Recording::open(&config.path)?;
+        let recording = photopose_record::Recording::open_limited(&config.path, config.max_bytes)?;
         let (_, width, height) = recording.meta(0);
         if (width, height) != (camera.sensor.width, camera.sensor.height) {
             return Err(ReplayError::Size {

@@ -19,7 +19,16 @@
 //! The MCAP message's `log_time` is the host time, `publish_time` the
 //! camera time, `sequence` the low 32 bits of `seq`. We write MCAP without
 //! compression so a recording can be replayed with a plain copy per frame.
+//!
+//! Reading is checked: the file is read as a regular file of at most a
+//! limit (`photopose_formats::file`, kind "recording", 4 GiB unless the
+//! caller gives another), the data section's CRC and every chunk's CRC are
+//! verified, and every frame's header is checked against its length. A file
+//! that fails any of these is refused at [`Recording::open`] with its name;
+//! the whole recording is then held in memory (the replay copies frames out
+//! of it).
 
+use photopose_formats::file::{read_bytes_limited, FileError, FileKind};
 use photopose_frame::{Image, Pixels};
 use std::io::{BufWriter, Write};
 use std::path::Path;
@@ -33,14 +42,28 @@ const HEADER: usize = 35;
 
 /// A recording that cannot be written or read, with the file and why.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum RecordError {
-    /// The file could not be created, written or read.
+    /// The file could not be created or written.
     #[error("{path}: {source}")]
     Io {
         /// The file.
         path: String,
         /// The IO error.
         source: std::io::Error,
+    },
+    /// The file could not be read (missing, not a regular file, larger than
+    /// the limit, IO error).
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// The file's checksums do not match its contents (flipped bits,
+    /// overwritten bytes).
+    #[error("{path}: corrupt recording: {what}")]
+    Corrupt {
+        /// The file.
+        path: String,
+        /// Which checksum failed.
+        what: String,
     },
     /// The MCAP container is invalid.
     #[error("{path}: not a readable MCAP recording: {message}")]
@@ -180,30 +203,49 @@ impl Recorder {
 }
 
 /// A recording read into memory: the frames' byte ranges in file order.
-#[derive(Debug)]
 pub struct Recording {
     path: String,
     frames: Vec<Vec<u8>>,
 }
 
+impl std::fmt::Debug for Recording {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recording")
+            .field("path", &self.path)
+            .field("frames", &self.frames.len())
+            .finish()
+    }
+}
+
 impl Recording {
-    /// Reads and checks a recording.
+    /// Reads and checks a recording of at most the recording kind's limit
+    /// (4 GiB).
     pub fn open(path: &Path) -> Result<Self, RecordError> {
+        Self::open_limited(path, FileKind::Recording.limit())
+    }
+
+    /// Reads and checks a recording of at most `max_bytes`.
+    pub fn open_limited(path: &Path, max_bytes: u64) -> Result<Self, RecordError> {
         let name = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let stream = mcap::MessageStream::new(&bytes).map_err(|e| RecordError::Mcap {
-            path: name.clone(),
-            message: e.to_string(),
-        })?;
-        let mut frames = Vec::new();
-        for message in stream {
-            let m = message.map_err(|e| RecordError::Mcap {
+        let bytes = read_bytes_limited(path, FileKind::Recording, max_bytes)?;
+        let mcap_err = |e: mcap::McapError| match e {
+            mcap::McapError::BadChunkCrc { saved, calculated } => RecordError::Corrupt {
+                path: name.clone(),
+                what: format!("a chunk's CRC is {calculated:08x}, the file stores {saved:08x}"),
+            },
+            e => RecordError::Mcap {
                 path: name.clone(),
                 message: e.to_string(),
-            })?;
+            },
+        };
+        let stream = mcap::MessageStream::new_with_options(
+            &bytes,
+            mcap::read::Options::ValidateChunkCrcs.into(),
+        )
+        .map_err(mcap_err)?;
+        let mut frames = Vec::new();
+        for message in stream {
+            let m = message.map_err(mcap_err)?;
             if m.channel.topic != TOPIC {
                 continue;
             }
@@ -224,6 +266,12 @@ impl Recording {
             })?;
             frames.push(m.data.into_owned());
         }
+        // Chunk CRCs cover the frames; this covers the rest of the data
+        // section (record headers, message indexes).
+        check_data_section_crc(&bytes).map_err(|what| RecordError::Corrupt {
+            path: name.clone(),
+            what,
+        })?;
         if frames.is_empty() {
             return Err(RecordError::Empty { path: name });
         }
@@ -296,6 +344,64 @@ impl Recording {
         }
         Ok(meta)
     }
+}
+
+/// Checks the CRC of the data section (everything before the Data End
+/// record) that the writer stores in the Data End record; a stored 0 means
+/// "not computed". A file whose end cannot be found this way is left to
+/// the MCAP reader's errors.
+fn check_data_section_crc(bytes: &[u8]) -> Result<(), String> {
+    const MAGIC: usize = 8;
+    const FOOTER: usize = 1 + 8 + 8 + 8 + 4;
+    const DATA_END: usize = 1 + 8 + 4;
+    let Some(footer) = bytes.len().checked_sub(MAGIC + FOOTER) else {
+        return Ok(());
+    };
+    if bytes[footer] != mcap::records::op::FOOTER {
+        return Ok(());
+    }
+    let u64_at = |o: usize| {
+        bytes
+            .get(o..o + 8)
+            .map(|b| u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+    };
+    let Some(summary_start) = u64_at(footer + 9) else {
+        return Ok(());
+    };
+    let data_end_end = if summary_start == 0 {
+        footer
+    } else {
+        match usize::try_from(summary_start) {
+            Ok(s) if s <= footer => s,
+            _ => {
+                return Err(format!(
+                    "the footer's summary start {summary_start} lies outside the file"
+                ))
+            }
+        }
+    };
+    let Some(at) = data_end_end.checked_sub(DATA_END) else {
+        return Ok(());
+    };
+    if bytes[at] != mcap::records::op::DATA_END || u64_at(at + 1) != Some(4) {
+        return Ok(());
+    }
+    let saved = u32::from_le_bytes([
+        bytes[at + 9],
+        bytes[at + 10],
+        bytes[at + 11],
+        bytes[at + 12],
+    ]);
+    if saved == 0 {
+        return Ok(());
+    }
+    let calculated = crc32fast::hash(&bytes[..at]);
+    if calculated != saved {
+        return Err(format!(
+            "the data section's CRC is {calculated:08x}, the file stores {saved:08x}"
+        ));
+    }
+    Ok(())
 }
 
 fn check_frame(d: &[u8]) -> Result<(), String> {
