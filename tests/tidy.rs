@@ -122,6 +122,50 @@ fn pure_crates_depend_on_neither_tokio_nor_aravis() {
 }
 
 #[test]
+fn the_binary_without_default_features_links_no_aravis_and_has_tokio() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let tree = |args: &[&str]| {
+        let out = Command::new(&cargo)
+            .current_dir(root())
+            .args([
+                "tree",
+                "--offline",
+                "-e",
+                "normal",
+                "--prefix",
+                "none",
+                "-p",
+                "photopose",
+            ])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let lean = tree(&["--no-default-features"]);
+    for bad in ["aravis", "glib "] {
+        assert!(
+            !lean.lines().any(|l| l.starts_with(bad)),
+            "--no-default-features still has {bad}"
+        );
+    }
+    let full = tree(&[]);
+    assert!(
+        full.lines().any(|l| l.starts_with("tokio ")),
+        "tokio in the binary's tree"
+    );
+    assert!(
+        full.lines().any(|l| l.starts_with("aravis ")),
+        "the default build has GigE"
+    );
+}
+
+#[test]
 fn every_module_says_what_it_owns() {
     let mut files = Vec::new();
     rust_files(&root().join("crates"), &mut files);

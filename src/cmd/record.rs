@@ -36,7 +36,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     let camera = defaults::camera(config.camera_file.as_deref())?;
     let field = defaults::field(config.field_file.as_deref())?;
-    let mut source = run::open_source(&config, &camera, &field)?;
+    let mut source = photopose_pipeline::source::open(&config.source, &camera, &field)?;
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(sig, stop.clone()).context("cannot install signal handlers")?;

@@ -8,7 +8,6 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use photopose_pipeline::config::Source;
 use photopose_pipeline::run::Wedge;
-use photopose_pipeline::source::{ReplaySource, SyntheticSource};
 use photopose_pipeline::{Config, Pipeline, Supervision};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -40,24 +39,6 @@ pub fn load(path: Option<&std::path::Path>) -> Result<Config> {
     Ok(match path {
         Some(p) => Config::load(p)?,
         None => Config::parse(DEFAULT_CONFIG, "<built-in config/photopose.toml>")?,
-    })
-}
-
-/// The configured frame source.
-pub fn open_source(
-    config: &Config,
-    camera: &photopose_geometry::Camera,
-    field: &photopose_field::Field,
-) -> Result<Box<dyn photopose_pipeline::FrameSource>> {
-    Ok(match &config.source {
-        Source::Synthetic(s) => {
-            Box::new(SyntheticSource::new(*camera, field, s.clone()).context("synthetic source")?)
-        }
-        Source::Replay(r) => Box::new(ReplaySource::open(camera, r)?),
-        Source::Gige(g) => Box::new(
-            photopose_acquire::GigeSource::new("gige", g.clone())
-                .context("GigE source: [source.gige]")?,
-        ),
     })
 }
 
@@ -98,7 +79,7 @@ pub fn prepare_config(config: Config) -> Result<Prepared> {
         photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye).context("rsi.hand_eye")?;
         warnings.extend(rsi.settings.warnings.iter().map(|w| format!("rsi: {w}")));
     }
-    let source = open_source(&config, &camera, &field)?;
+    let source = photopose_pipeline::source::open(&config.source, &camera, &field)?;
     Ok(Prepared {
         config,
         camera,

@@ -11,16 +11,22 @@
 //!
 //! Invariants: no allocation per frame once the ring is built; the camera
 //! is never touched on the frame path once lost; the only `unsafe` code is
-//! in the private `ffi` module. This is the only crate that links aravis.
+//! in the private `ffi` module. This is the only crate that links aravis,
+//! and only with its `gige` feature (on by default): without it the crate
+//! builds with no system library, and the GigE source is not there.
 
+#[cfg(feature = "gige")]
 pub mod fake;
+#[cfg(feature = "gige")]
 #[allow(unsafe_code)]
 mod ffi;
+#[cfg(feature = "gige")]
 pub mod gige;
 pub mod grabber;
 pub mod ring;
 pub mod source;
 
+#[cfg(feature = "gige")]
 pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
 pub use grabber::{spawn_grabber, spawn_grabber_with, Grabber, GrabberExit};
 pub use ring::{Consumer, FrameHandle, Overflow, Producer, Published, Ring, Slot};

@@ -1,0 +1,133 @@
+//! The GigE Vision source (`[source.gige]`, the `gige` feature): the keys
+//! of the section and their checks, mapped onto `photopose-acquire`'s
+//! [`GigeConfig`], whose `Default` holds the one set of defaults. Opening
+//! and reconnecting the camera is the acquisition crate's.
+
+use super::Bad;
+use crate::config::ConfigError;
+use photopose_acquire::{GigeConfig, PixelDepth, Roi};
+use serde::Deserialize;
+
+/// `[source.gige]` as written: every key optional, an absent one takes
+/// [`GigeConfig::default`]'s value.
+#[derive(Debug, Deserialize, Clone, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct GigeSection {
+    camera: Option<String>,
+    pixel_format: Option<PixelFormatToml>,
+    exposure_us: Option<f64>,
+    gain: Option<f64>,
+    frame_rate: Option<f64>,
+    roi: Option<[u32; 4]>,
+    packet_size: Option<u32>,
+    packet_socket: Option<bool>,
+    buffers: Option<u32>,
+    lost_after_ms: Option<f64>,
+    backoff_initial_ms: Option<f64>,
+    backoff_max_ms: Option<f64>,
+}
+
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+enum PixelFormatToml {
+    Mono8,
+    Mono16,
+}
+
+/// Validates `[source.gige]` into the acquisition crate's settings.
+pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, ConfigError> {
+    let d = GigeConfig::default();
+    let buffers = g.buffers.unwrap_or(d.buffers as u32);
+    let millis =
+        |v: Option<f64>, default: std::time::Duration| v.unwrap_or(default.as_secs_f64() * 1000.0);
+    let lost_after_ms = millis(g.lost_after_ms, d.lost_after);
+    let backoff_initial_ms = millis(g.backoff_initial_ms, d.backoff_initial);
+    let backoff_max_ms = millis(g.backoff_max_ms, d.backoff_max);
+    let positive = |key: &'static str, v: Option<f64>| match v {
+        Some(x) if !(x.is_finite() && x > 0.0) => Err(bad(key, x.to_string(), "must be > 0")),
+        _ => Ok(v),
+    };
+    let ms = |key: &'static str, v: f64, max: f64| {
+        if v.is_finite() && v > 0.0 && v <= max {
+            Ok(std::time::Duration::from_secs_f64(v / 1000.0))
+        } else {
+            Err(bad(key, v.to_string(), "must be in (0, 600000] ms"))
+        }
+    };
+    if g.camera.as_deref().is_some_and(|c| c.trim().is_empty()) {
+        return Err(bad(
+            "source.gige.camera",
+            "\"\"".into(),
+            "must name a device id, address or serial (omit it for the first camera found)",
+        ));
+    }
+    if let Some(gain) = g.gain {
+        if !gain.is_finite() {
+            return Err(bad("source.gige.gain", gain.to_string(), "must be finite"));
+        }
+    }
+    let roi = match g.roi {
+        Some([x, y, width, height]) => {
+            if width == 0 || height == 0 || x.max(y).max(width).max(height) > 65_535 {
+                return Err(bad(
+                    "source.gige.roi",
+                    format!("{:?}", [x, y, width, height]),
+                    "must be [x, y, width, height] with a non-empty size below 65536",
+                ));
+            }
+            Some(Roi {
+                x,
+                y,
+                width,
+                height,
+            })
+        }
+        None => None,
+    };
+    if let Some(p) = g.packet_size {
+        if !(576..=16_384).contains(&p) {
+            return Err(bad(
+                "source.gige.packet_size",
+                p.to_string(),
+                "must be 576..=16384 bytes",
+            ));
+        }
+    }
+    if !(2..=256).contains(&buffers) {
+        return Err(bad(
+            "source.gige.buffers",
+            buffers.to_string(),
+            "must be 2..=256",
+        ));
+    }
+    let config = GigeConfig {
+        camera: g.camera,
+        pixel: match g.pixel_format {
+            None => d.pixel,
+            Some(PixelFormatToml::Mono8) => PixelDepth::Mono8,
+            Some(PixelFormatToml::Mono16) => PixelDepth::Mono16,
+        },
+        exposure_us: positive("source.gige.exposure_us", g.exposure_us)?,
+        gain: g.gain,
+        frame_rate: positive("source.gige.frame_rate", g.frame_rate)?,
+        roi,
+        packet_size: g.packet_size,
+        packet_socket: g.packet_socket.unwrap_or(d.packet_socket),
+        buffers: buffers as usize,
+        lost_after: ms("source.gige.lost_after_ms", lost_after_ms, 600_000.0)?,
+        backoff_initial: ms(
+            "source.gige.backoff_initial_ms",
+            backoff_initial_ms,
+            600_000.0,
+        )?,
+        backoff_max: ms("source.gige.backoff_max_ms", backoff_max_ms, 600_000.0)?,
+    };
+    if config.backoff_max < config.backoff_initial {
+        return Err(bad(
+            "source.gige.backoff_max_ms",
+            backoff_max_ms.to_string(),
+            "must be ≥ backoff_initial_ms",
+        ));
+    }
+    Ok(config)
+}

@@ -1,0 +1,172 @@
+//! The source seam of the daemon: every frame source implements
+//! `photopose-acquire`'s [`FrameSource`] and owns its `[source.X]` section —
+//! keys, defaults, checks — in its own module; [`Source`] is the validated
+//! choice and [`open`] builds the source it names.
+//!
+//! - [`synthetic`]: frames rendered of the plate (no hardware; the default);
+//! - [`replay`]: recordings, as recorded or as fast as the workers take them;
+//! - `gige` (the `gige` feature): a GigE Vision camera through aravis.
+//!
+//! Adding a source: a module here with its section type, its `validate`
+//! and its `FrameSource`; one variant in [`SourceKind`], [`SourceSection`]
+//! and [`Source`], one arm in [`Source::from_section`] and in [`open`].
+
+#[cfg(feature = "gige")]
+pub mod gige;
+pub mod replay;
+pub mod synthetic;
+
+use crate::config::ConfigError;
+pub use photopose_acquire::{FrameSource, Slot, SourceError};
+use photopose_field::Field;
+use photopose_frame::{Image, Pixels};
+use photopose_geometry::Camera;
+pub use replay::{Replay, ReplayError, ReplaySource, Speed};
+use serde::Deserialize;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+pub use synthetic::{Synthetic, SyntheticSource};
+use thiserror::Error;
+
+/// How a section reports a bad value: the key, the value, the valid range.
+pub(crate) type Bad<'a> = &'a dyn Fn(&'static str, String, &'static str) -> ConfigError;
+
+/// `source.kind`.
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub(crate) enum SourceKind {
+    Synthetic,
+    Replay,
+    Gige,
+}
+
+/// `[source]` as written: the kind and each source's own section.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct SourceSection {
+    kind: SourceKind,
+    synthetic: Option<synthetic::SyntheticSection>,
+    replay: Option<replay::ReplaySection>,
+    #[cfg(feature = "gige")]
+    gige: Option<gige::GigeSection>,
+    /// Read (a configuration written for a build with GigE still parses)
+    /// but refused by kind in a build without it.
+    #[cfg(not(feature = "gige"))]
+    #[allow(dead_code)]
+    gige: Option<toml::Value>,
+}
+
+impl Default for SourceSection {
+    fn default() -> Self {
+        SourceSection {
+            kind: SourceKind::Synthetic,
+            synthetic: None,
+            replay: None,
+            gige: None,
+        }
+    }
+}
+
+/// Where frames come from (validated).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Source {
+    /// Rendered frames of the plate.
+    Synthetic(Synthetic),
+    /// Recorded frames.
+    Replay(Replay),
+    /// A GigE Vision camera (aravis).
+    #[cfg(feature = "gige")]
+    Gige(photopose_acquire::GigeConfig),
+}
+
+impl Source {
+    /// Validates `[source]`: the section of the chosen kind, by its module.
+    pub(crate) fn from_section(
+        section: SourceSection,
+        bad: Bad<'_>,
+    ) -> Result<Source, ConfigError> {
+        Ok(match section.kind {
+            SourceKind::Synthetic => {
+                Source::Synthetic(synthetic::validate(section.synthetic, bad)?)
+            }
+            SourceKind::Replay => Source::Replay(replay::validate(section.replay.as_ref(), bad)?),
+            #[cfg(feature = "gige")]
+            SourceKind::Gige => {
+                Source::Gige(gige::validate(section.gige.unwrap_or_default(), bad)?)
+            }
+            #[cfg(not(feature = "gige"))]
+            SourceKind::Gige => {
+                return Err(bad(
+                    "source.kind",
+                    "\"gige\"".into(),
+                    "this build has no GigE Vision support (cargo feature `gige`)",
+                ))
+            }
+        })
+    }
+}
+
+/// Why a configured source could not be built.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum OpenError {
+    /// The synthetic source's renderer refused the camera or field.
+    #[error("synthetic source: {0}")]
+    Synthetic(#[from] photopose_render::RenderError),
+    /// The recording cannot be replayed.
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    /// The GigE source refused its settings.
+    #[error("GigE source ([source.gige]): {0}")]
+    Gige(SourceError),
+}
+
+/// Builds the source `source` names for `camera` (not started: the
+/// grabber starts it).
+pub fn open(
+    source: &Source,
+    camera: &Camera,
+    field: &Field,
+) -> Result<Box<dyn FrameSource>, OpenError> {
+    Ok(match source {
+        Source::Synthetic(s) => Box::new(SyntheticSource::new(*camera, field, s.clone())?),
+        Source::Replay(r) => Box::new(ReplaySource::open(camera, r)?),
+        #[cfg(feature = "gige")]
+        Source::Gige(g) => Box::new(
+            photopose_acquire::GigeSource::new("gige", g.clone()).map_err(OpenError::Gige)?,
+        ),
+    })
+}
+
+/// Makes `slot`'s image an 8-bit `width`×`height` one (allocates only if
+/// it was not: slots are built at the camera's size).
+pub(crate) fn ensure_mono8(slot: &mut Slot, width: u32, height: u32) {
+    if slot.image.width() != width
+        || slot.image.height() != height
+        || !matches!(slot.image.pixels(), Pixels::Mono8(_))
+    {
+        slot.image = Image::new_mono8(width, height);
+    }
+}
+
+/// Sleeps until `due`, or for `timeout` if that is sooner; `false` if the
+/// frame is not due yet after the wait.
+pub(crate) fn wait_until(due: Instant, timeout: Duration) -> bool {
+    let now = Instant::now();
+    if due > now {
+        if due - now > timeout {
+            std::thread::sleep(timeout);
+            return false;
+        }
+        std::thread::sleep(due - now);
+    }
+    true
+}
+
+/// Host time now, ns since the Unix epoch (the output stage's stamp of a
+/// stale message).
+pub fn host_time_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
