@@ -13,7 +13,7 @@
 //! 15 s to 45 s). The 10-minute soak of the safety acceptance is the same
 //! test with `PHOTOPOSE_SOAK_SECS=600` (camera away 30 s in every 2 minutes):
 //!
-//!     PHOTOPOSE_SOAK_SECS=600 cargo test --release --test soak_abuse -- --nocapture
+//!     PHOTOPOSE_SOAK_SECS=600 cargo test --test soak_abuse -- --nocapture
 //!
 //! It prints its figures with `--nocapture`.
 
