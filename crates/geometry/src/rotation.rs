@@ -133,7 +133,14 @@ pub fn quaternion_wxyz_from_matrix(m: &Matrix3<f64>) -> Option<[f64; 4]> {
     if !is_rotation(m, 1e-6) {
         return None;
     }
-    let q = unit_quaternion_from_matrix(m)?;
+    // A rotation to working precision (an adjustment's `R`) is read as it
+    // is, so the streamed quaternion stays the same bit for bit; a looser
+    // one is orthonormalised first.
+    let q = if is_rotation(m, 1e-12) {
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*m))
+    } else {
+        unit_quaternion_from_matrix(m)?
+    };
     let s = if q.w < 0.0 { -1.0 } else { 1.0 };
     Some([s * q.w, s * q.i, s * q.j, s * q.k])
 }
