@@ -1,0 +1,171 @@
+//! Opening and closing a GigE Vision camera through aravis: discovery
+//! (serialised, it is global state), configuration, the stream with its
+//! buffers; closing a camera that may be dead (each register access then
+//! blocks about 2.5 s) — done on the source's helper threads, never on the
+//! frame path.
+
+use super::config::{GigeConfig, PixelDepth};
+use crate::ffi;
+use aravis::prelude::*;
+use aravis::{AcquisitionMode, Buffer, Camera, DeviceError, PixelFormat, Stream};
+use glib::prelude::Cast;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// Aravis' device discovery is global state: one opening at a time.
+static OPEN_LOCK: Mutex<()> = Mutex::new(());
+
+/// An opened, streaming camera.
+pub(super) struct Opened {
+    pub(super) camera: Camera,
+    pub(super) stream: Stream,
+    pub(super) control_lost: Arc<AtomicBool>,
+    pub(super) id: String,
+    pub(super) took: Duration,
+}
+
+pub(super) enum OpenError {
+    /// Not there (or not answering): try again later.
+    Absent(String),
+    /// The camera refuses the configuration: fatal.
+    Config { what: String, reason: String },
+}
+
+pub(super) fn transient(e: &glib::Error) -> bool {
+    matches!(
+        e.kind::<DeviceError>(),
+        Some(
+            DeviceError::Timeout
+                | DeviceError::TransferError
+                | DeviceError::NotConnected
+                | DeviceError::NotFound
+                | DeviceError::ProtocolError
+        )
+    )
+}
+
+pub(super) fn setting(what: &str) -> impl Fn(glib::Error) -> OpenError + '_ {
+    move |e| {
+        if transient(&e) {
+            OpenError::Absent(format!("{what}: {e}"))
+        } else {
+            OpenError::Config {
+                what: what.into(),
+                reason: e.to_string(),
+            }
+        }
+    }
+}
+
+pub(super) fn open(
+    config: &GigeConfig,
+    resolved: &mut Option<String>,
+) -> Result<Opened, OpenError> {
+    let t0 = Instant::now();
+    let guard = OPEN_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
+    // A serial number is resolved to its device id by one discovery (about
+    // 1 s); the id found is kept, so reopening the same camera is fast.
+    let t_find = Instant::now();
+    let name = match (resolved.clone(), config.camera.as_deref()) {
+        (Some(id), _) => Some(id),
+        (None, Some(want)) => {
+            Some(ffi::device_id_of_serial(want).unwrap_or_else(|| want.to_string()))
+        }
+        (None, None) => None,
+    };
+    let find_ms = t_find.elapsed().as_millis() as u64;
+    let camera = Camera::new(name.as_deref()).map_err(|e| {
+        OpenError::Absent(format!(
+            "opening {}: {e}",
+            name.as_deref().unwrap_or("the first camera")
+        ))
+    })?;
+    if config.camera.is_some() {
+        resolved.clone_from(&name);
+    }
+    tracing::debug!(
+        ?name,
+        find_ms,
+        open_ms = t0.elapsed().as_millis() as u64,
+        "camera found"
+    );
+    drop(guard);
+    let id = camera
+        .device_id()
+        .map(|s| s.to_string())
+        .unwrap_or_else(|_| config.camera.clone().unwrap_or_default());
+
+    let format = match config.pixel {
+        PixelDepth::Mono8 => PixelFormat::MONO_8,
+        PixelDepth::Mono16 => PixelFormat::MONO_16,
+    };
+    camera
+        .set_pixel_format(format)
+        .map_err(setting("pixel format"))?;
+    if let Some(r) = config.roi {
+        camera
+            .set_region(r.x as i32, r.y as i32, r.width as i32, r.height as i32)
+            .map_err(setting("roi"))?;
+    }
+    if let Some(us) = config.exposure_us {
+        camera.set_exposure_time(us).map_err(setting("exposure"))?;
+    }
+    if let Some(g) = config.gain {
+        camera.set_gain(g).map_err(setting("gain"))?;
+    }
+    if let Some(fps) = config.frame_rate {
+        camera.set_frame_rate(fps).map_err(setting("frame rate"))?;
+    }
+    if camera.is_gv_device() {
+        if let Some(p) = config.packet_size {
+            camera
+                .gv_set_packet_size(p as i32)
+                .map_err(setting("packet size"))?;
+        }
+        if !config.packet_socket {
+            // Must precede create_stream.
+            camera.gv_set_stream_options(aravis::GvStreamOption::PACKET_SOCKET_DISABLED);
+        }
+    }
+    camera
+        .set_acquisition_mode(AcquisitionMode::Continuous)
+        .map_err(setting("acquisition mode"))?;
+    let payload = camera.payload().map_err(setting("payload"))? as usize;
+
+    let stream = camera.create_stream().map_err(setting("stream"))?;
+    if let Some(gv) = stream.downcast_ref::<aravis::GvStream>() {
+        gv.set_socket_buffer(aravis::GvStreamSocketBuffer::Auto);
+    }
+    for _ in 0..config.buffers {
+        stream.push_buffer(Buffer::new_allocate(payload));
+    }
+
+    let control_lost = Arc::new(AtomicBool::new(false));
+    if let Some(device) = camera.device() {
+        let flag = Arc::clone(&control_lost);
+        device.connect_control_lost(move |_| flag.store(true, Ordering::Release));
+    }
+    camera.start_acquisition().map_err(setting("start"))?;
+    Ok(Opened {
+        camera,
+        stream,
+        control_lost,
+        id,
+        took: t0.elapsed(),
+    })
+}
+
+/// Stops (unless `lost`) and drops a camera: slow if the camera is dead,
+/// so never on the acquisition path. A lost camera gets no "stop": its
+/// address may already serve a restarted camera, which a stale handle
+/// would talk to.
+pub(super) fn close(o: Opened, lost: bool) {
+    let t0 = Instant::now();
+    if !lost {
+        let _ = o.camera.stop_acquisition();
+    }
+    drop(o.stream);
+    drop(o.camera);
+    tracing::debug!(camera = %o.id, lost, took_ms = t0.elapsed().as_millis() as u64, "camera closed");
+}
