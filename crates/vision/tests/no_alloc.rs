@@ -4,35 +4,13 @@
 //! windows of varying size below the capacity (of the frames and of a
 //! larger frame), with the window's own threshold or a given one.
 
-// A global allocator needs `unsafe impl`; it only forwards to `System`.
-#![allow(unsafe_code)]
-
 use photopose_field::codes;
 use photopose_frame::{Image, ImageView, Pixels};
+use photopose_testkit::{allocations, CountingAllocator};
 use photopose_vision::{CodeSet, Detector, DetectorOptions, TargetKind};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 const W: usize = 400;
 const H: usize = 300;
@@ -147,14 +125,14 @@ fn detect_allocates_nothing_once_warm() {
     );
     assert!(!first.rejected.is_empty());
 
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     let mut found = 0;
     for _ in 0..3 {
         for f in &frames {
             found += detector.detect(f.view()).unwrap().targets.len();
         }
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = allocations();
     assert_eq!(after - before, 0, "allocations during detection");
     assert_eq!(found, 3 * 6 * 16);
 
@@ -184,7 +162,7 @@ fn detect_allocates_nothing_once_warm() {
         (57, 3, 8, 8),
         (390, 290, 10, 10),
     ];
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     let mut n_windows = 0;
     for (f, t) in frames.iter().zip(&thresholds) {
         for &(x, y, w, h) in &windows {
@@ -204,7 +182,7 @@ fn detect_allocates_nothing_once_warm() {
             .targets
             .len();
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = allocations();
     assert_eq!(after - before, 0, "allocations during detection in windows");
     assert!(n_windows == frames.len() * windows.len() && found > 3 * 6 * 16);
     // The whole frame placed in the larger one is still the same frame.
