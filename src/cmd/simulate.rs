@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_geometry::precision::{predict, visible_points, Prediction};
 use photopose_geometry::rng::SplitMix64;
-use photopose_geometry::{Camera, Exterior, Observation, Resection, ResectionOptions};
+use photopose_geometry::{Camera, Exterior};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -79,6 +79,7 @@ fn parse_sigma(s: &str) -> Result<f64> {
     Ok(v)
 }
 
+/// The Monte Carlo figures of the report (degrees for rotations).
 fn monte_carlo(
     camera: &Camera,
     truth: &Exterior,
@@ -87,64 +88,15 @@ fn monte_carlo(
     trials: usize,
     rng: &mut SplitMix64,
 ) -> MonteCarlo {
-    let mut rs = Resection::new(camera, ResectionOptions::default());
-    let mut obs = Vec::with_capacity(points.len());
-    let mut sum = [0.0f64; 6];
-    let mut sum2 = [0.0f64; 6];
-    let mut ok = 0usize;
-    for _ in 0..trials {
-        obs.clear();
-        for (id, p) in points {
-            let px = truth
-                .project_pixel(camera, p)
-                .expect("visible points project");
-            obs.push(Observation::from_pixel(
-                camera,
-                *id,
-                *p,
-                px.x + sigma * rng.normal(),
-                px.y + sigma * rng.normal(),
-            ));
-        }
-        let Ok(r) = rs.solve(&obs) else { continue };
-        ok += 1;
-        let d = r.exterior.center - truth.center;
-        let dr = truth.rotation.transpose() * r.exterior.rotation;
-        let w = [
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        ];
-        let e = [d.x, d.y, d.z, w[0], w[1], w[2]];
-        for k in 0..6 {
-            sum[k] += e[k];
-            sum2[k] += e[k] * e[k];
-        }
-    }
-    let n = ok.max(2) as f64;
-    let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
-    let std: Vec<f64> = (0..6)
-        .map(|k| {
-            ((sum2[k] - n * mean[k] * mean[k]) / (n - 1.0))
-                .max(0.0)
-                .sqrt()
-        })
-        .collect();
+    let r = photopose_geometry::simulation::monte_carlo(camera, truth, points, sigma, trials, rng);
+    let deg = |v: [f64; 3]| v.map(f64::to_degrees);
     MonteCarlo {
-        trials: ok,
-        failed: trials - ok,
-        std_center: [std[0], std[1], std[2]],
-        std_rotation_deg: [
-            std[3].to_degrees(),
-            std[4].to_degrees(),
-            std[5].to_degrees(),
-        ],
-        mean_error_center: [mean[0], mean[1], mean[2]],
-        mean_error_rotation_deg: [
-            mean[3].to_degrees(),
-            mean[4].to_degrees(),
-            mean[5].to_degrees(),
-        ],
+        trials: r.solved,
+        failed: r.failed,
+        std_center: r.std_center,
+        std_rotation_deg: deg(r.std_rotation),
+        mean_error_center: r.mean_error_center,
+        mean_error_rotation_deg: deg(r.mean_error_rotation),
     }
 }
 

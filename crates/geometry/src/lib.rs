@@ -29,6 +29,7 @@ pub mod precision;
 pub mod resection;
 pub mod rng;
 pub mod rotation;
+pub mod simulation;
 
 pub use camera::{Camera, Distortion, Interior, Sensor};
 pub use error::GeometryError;
