@@ -6,7 +6,6 @@
 use crate::cmd::defaults;
 use anyhow::{Context, Result};
 use clap::Parser;
-use photopose_pipeline::config::Source;
 use photopose_pipeline::run::Wedge;
 use photopose_pipeline::{Config, Pipeline, Supervision};
 use std::path::PathBuf;
@@ -22,8 +21,7 @@ pub struct Args {
     /// built-in configuration (synthetic camera over the default plate).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Stop after this many frames of the synthetic source (overrides
-    /// `source.synthetic.frames`).
+    /// Stop after this many frames, whatever the source.
     #[arg(long)]
     pub frames: Option<u64>,
     /// Print the histogram of the frame-to-pose latency at the end.
@@ -63,11 +61,11 @@ pub struct Prepared {
 /// Loads and validates `path` (or the built-in configuration) with every
 /// file it names; `frames` overrides the frame count of the source.
 pub fn prepare(path: Option<&std::path::Path>, frames: Option<u64>) -> Result<Prepared> {
-    let mut config = load(path)?;
-    if let (Some(n), Source::Synthetic(s)) = (frames, &mut config.source) {
-        s.frames = n;
+    let mut prepared = prepare_config(load(path)?)?;
+    if let Some(n) = frames {
+        prepared.source = photopose_pipeline::source::limit(prepared.source, n);
     }
-    prepare_config(config)
+    Ok(prepared)
 }
 
 /// [`prepare`] for a configuration already loaded.

@@ -89,7 +89,9 @@ struct CameraSection {
 struct PipelineSection {
     workers: u32,
     slots: u32,
-    overflow: Overflow,
+    /// `None`: `block` for a replay at speed `max` (complete and
+    /// deterministic), `drop-newest` for every other source.
+    overflow: Option<Overflow>,
     max_age_ms: f64,
 }
 
@@ -98,7 +100,7 @@ impl Default for PipelineSection {
         PipelineSection {
             workers: 2,
             slots: 8,
-            overflow: Overflow::DropNewest,
+            overflow: None,
             max_age_ms: 200.0,
         }
     }
@@ -222,6 +224,10 @@ impl Config {
             why,
         };
         let source = crate::source::Source::from_section(f.source, &bad)?;
+        let overflow = f.pipeline.overflow.unwrap_or(match &source {
+            Source::Replay(r) if r.speed == Speed::Max => Overflow::Block,
+            _ => Overflow::DropNewest,
+        });
         let p = &f.pipeline;
         if !(1..=64).contains(&p.workers) {
             return Err(bad(
@@ -314,7 +320,7 @@ impl Config {
             source,
             workers: p.workers as usize,
             slots: p.slots as usize,
-            overflow: p.overflow,
+            overflow,
             max_age_ms: p.max_age_ms,
             udp,
             tcp_listen,
@@ -362,6 +368,27 @@ mod tests {
     use super::*;
 
     const EXAMPLE: &str = include_str!("../../../config/photopose.toml");
+
+    #[test]
+    fn a_replay_at_full_speed_blocks_unless_told_otherwise() {
+        let replay = |extra: &str| {
+            Config::parse(
+                &format!(
+                    "[source]\nkind = \"replay\"\n[source.replay]\npath = \"r.mcap\"\nspeed = \"max\"\n{extra}"
+                ),
+                "test",
+            )
+            .unwrap()
+            .overflow
+        };
+        assert_eq!(replay(""), Overflow::Block);
+        assert_eq!(
+            replay("[pipeline]\noverflow = \"drop-oldest\"\n"),
+            Overflow::DropOldest
+        );
+        let synthetic = Config::parse("[source]\nkind = \"synthetic\"\n", "test").unwrap();
+        assert_eq!(synthetic.overflow, Overflow::DropNewest);
+    }
 
     #[test]
     fn the_shipped_example_is_valid() {

@@ -137,6 +137,51 @@ pub fn open(
     })
 }
 
+/// A source that ends after `frames` frames (`photopose run --frames N`,
+/// `photopose record --frames N`, whatever the source).
+pub fn limit(source: Box<dyn FrameSource>, frames: u64) -> Box<dyn FrameSource> {
+    Box::new(Limited {
+        inner: source,
+        left: frames,
+    })
+}
+
+struct Limited {
+    inner: Box<dyn FrameSource>,
+    left: u64,
+}
+
+impl FrameSource for Limited {
+    fn start(&mut self) -> Result<(), SourceError> {
+        self.inner.start()
+    }
+
+    fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
+        if self.left == 0 {
+            return Err(SourceError::Ended);
+        }
+        self.inner.next_frame(slot, timeout)?;
+        self.left -= 1;
+        Ok(())
+    }
+
+    fn stop(&mut self) {
+        self.inner.stop();
+    }
+
+    fn describe(&self) -> String {
+        format!("{} (the next {} frames)", self.inner.describe(), self.left)
+    }
+
+    fn stats(&self) -> photopose_acquire::SourceStats {
+        self.inner.stats()
+    }
+
+    fn shared_counters(&self) -> Option<std::sync::Arc<photopose_acquire::SourceCounters>> {
+        self.inner.shared_counters()
+    }
+}
+
 /// Makes `slot`'s image an 8-bit `width`×`height` one (allocates only if
 /// it was not: slots are built at the camera's size).
 pub(crate) fn ensure_mono8(slot: &mut Slot, width: u32, height: u32) {
