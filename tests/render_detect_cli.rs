@@ -94,6 +94,19 @@ fn render_png_16_bit_then_detect_finds_the_true_ids() {
     let v = lines(&out);
     assert_eq!(v.len(), 1);
     check_against_truth(&v[0], &truth);
+    // Named outcomes and units, no Rust Debug text.
+    for t in v[0]["targets"].as_array().unwrap() {
+        let code = t["code"].as_str().unwrap();
+        assert!(
+            ["read", "no_ring", "not_in_field"].contains(&code) || code.starts_with("uncertain_"),
+            "{t}"
+        );
+        assert!(!code.contains(' ') && !code.contains('{'), "{t}");
+        assert!(t["angle_rad"].is_f64() && t.get("angle").is_none(), "{t}");
+        if code == "read" {
+            assert!(t["code_value"].is_u64(), "{t}");
+        }
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -46,11 +46,14 @@ struct TargetLine {
     /// Semi-axes of the dot's ellipse, pixels, and angle (radians, from +col towards +row).
     semi_major: f64,
     semi_minor: f64,
-    angle: f64,
+    angle_rad: f64,
     /// Used in the final pose.
     used: bool,
     /// Outcome of reading the code ring.
-    code: String,
+    code: &'static str,
+    /// The canonical 12-bit value read from the ring (certain readings
+    /// only).
+    code_value: Option<u16>,
 }
 
 #[derive(Serialize)]
@@ -99,7 +102,7 @@ fn detect_one<'a>(
     let status = match loc.status {
         PoseStatus::Ok => "ok".to_string(),
         PoseStatus::TooFewTargets { .. } => "too_few_targets".to_string(),
-        PoseStatus::Frame(s) => format!("{s:?}").to_lowercase(),
+        PoseStatus::Frame(s) => s.name().to_string(),
         PoseStatus::NoPose(_) => "no_pose".to_string(),
     };
     let mut targets = Vec::with_capacity(loc.detections.targets.len());
@@ -117,9 +120,10 @@ fn detect_one<'a>(
             blob_row: d.row,
             semi_major: d.semi_major,
             semi_minor: d.semi_minor,
-            angle: d.angle,
+            angle_rad: d.angle,
             used: ident.is_some_and(|t| t.used),
-            code: format!("{:?}", d.code),
+            code: d.code.name(),
+            code_value: d.code.value(),
         });
     }
     Ok(ImageLine {

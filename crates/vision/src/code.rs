@@ -138,6 +138,34 @@ pub enum CodeStatus {
 }
 
 impl CodeStatus {
+    /// The outcome's name in outputs: `read`, `no_ring`, `not_in_field`,
+    /// or the reason a reading was uncertain (`uncertain_low_contrast` …).
+    pub fn name(&self) -> &'static str {
+        match self {
+            CodeStatus::NoRing => "no_ring",
+            CodeStatus::Read { .. } => "read",
+            CodeStatus::NotInField { .. } => "not_in_field",
+            CodeStatus::Uncertain(u) => match u {
+                Uncertainty::OutsideImage => "uncertain_outside_image",
+                Uncertainty::LowContrast => "uncertain_low_contrast",
+                Uncertainty::GapNotDark => "uncertain_gap_not_dark",
+                Uncertainty::QuietZoneNotDark => "uncertain_quiet_zone_not_dark",
+                Uncertainty::NoPhase => "uncertain_no_phase",
+                Uncertainty::MarginalSector => "uncertain_marginal_sector",
+                Uncertainty::SectorDisagrees => "uncertain_sector_disagrees",
+                Uncertainty::RadiiDisagree => "uncertain_radii_disagree",
+            },
+        }
+    }
+
+    /// The canonical 12-bit value read, if the reading was certain.
+    pub fn value(&self) -> Option<u16> {
+        match self {
+            CodeStatus::Read { value, .. } | CodeStatus::NotInField { value } => Some(*value),
+            _ => None,
+        }
+    }
+
     /// The id, if one was read.
     pub fn id(&self) -> Option<u64> {
         match self {

@@ -71,6 +71,19 @@ pub enum FrameStatus {
     Cluttered,
 }
 
+impl FrameStatus {
+    /// The status's name in outputs: `normal`, `empty`, `saturated`,
+    /// `cluttered`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            FrameStatus::Normal => "normal",
+            FrameStatus::Empty => "empty",
+            FrameStatus::Saturated => "saturated",
+            FrameStatus::Cluttered => "cluttered",
+        }
+    }
+}
+
 /// Result of the threshold stage.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThresholdResult {
