@@ -8,8 +8,8 @@
 //! - `gige` (the `gige` feature): a GigE Vision camera through aravis.
 //!
 //! Adding a source: a module here with its section type, its `validate`
-//! and its `FrameSource`; one variant in [`SourceKind`], [`SourceSection`]
-//! and [`Source`], one arm in [`Source::from_section`] and in [`open`].
+//! and its `FrameSource`; one variant in `SourceKind`, `SourceSection`
+//! and [`Source`], one arm in `Source::from_section` and in [`open`].
 
 #[cfg(feature = "gige")]
 pub mod gige;
