@@ -5,6 +5,7 @@
 
 use crate::ring::{Producer, Published};
 use crate::source::{FrameSource, SourceError};
+use photopose_telemetry::{Collect, Scrape};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -39,6 +40,41 @@ impl GrabberCounters {
             + self.losses.load(Ordering::Relaxed)
             + self.unavailable.load(Ordering::Relaxed)
             + self.bad_frames.load(Ordering::Relaxed)
+    }
+}
+
+impl Collect for GrabberCounters {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        for (name, help, c) in [
+            (
+                "photopose_grabber_frames_published_total",
+                "Frames the grabber published into the ring.",
+                &self.published,
+            ),
+            (
+                "photopose_grabber_timeouts_total",
+                "Frame requests to the source that timed out.",
+                &self.timeouts,
+            ),
+            (
+                "photopose_grabber_losses_total",
+                "Camera losses the source reported to the grabber.",
+                &self.losses,
+            ),
+            (
+                "photopose_grabber_unavailable_total",
+                "Frame requests answered \"camera unavailable\".",
+                &self.unavailable,
+            ),
+            (
+                "photopose_grabber_bad_frames_total",
+                "Frames the source could not deliver (skipped).",
+                &self.bad_frames,
+            ),
+        ] {
+            out.counter(name, help, c.load(Ordering::Relaxed))?;
+        }
+        Ok(())
     }
 }
 
@@ -119,12 +155,25 @@ pub fn spawn_grabber<S: FrameSource + 'static>(
 /// queued frames dropped by `drop-oldest` this way.
 pub fn spawn_grabber_with<S: FrameSource + 'static>(
     name: &str,
+    source: S,
+    producer: Producer,
+    stop: Arc<AtomicBool>,
+    observer: impl FnMut(Published) + Send + 'static,
+) -> std::io::Result<Grabber<S>> {
+    let counters = Arc::new(GrabberCounters::default());
+    spawn_grabber_counted(name, source, producer, stop, counters, observer)
+}
+
+/// [`spawn_grabber_with`] counting into `counters` (made before the thread,
+/// e.g. to be registered for metrics first).
+pub fn spawn_grabber_counted<S: FrameSource + 'static>(
+    name: &str,
     mut source: S,
     mut producer: Producer,
     stop: Arc<AtomicBool>,
+    counters: Arc<GrabberCounters>,
     mut observer: impl FnMut(Published) + Send + 'static,
 ) -> std::io::Result<Grabber<S>> {
-    let counters = Arc::new(GrabberCounters::default());
     let c = Arc::clone(&counters);
     let flag = Arc::clone(&stop);
     let thread_name = name.to_string();

@@ -7,6 +7,7 @@
 
 use crate::ring::Slot;
 use photopose_frame::Image;
+use photopose_telemetry::{Collect, Scrape};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -163,6 +164,46 @@ impl SourceCounters {
             opens: self.opens.load(Ordering::Relaxed),
             connected: self.connected.load(Ordering::Relaxed),
         }
+    }
+}
+
+impl Collect for SourceCounters {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        let st = self.snapshot();
+        for (name, help, v) in [
+            (
+                "photopose_source_frames_total",
+                "Frames the camera source delivered into slots.",
+                st.frames,
+            ),
+            (
+                "photopose_source_missing_frames_total",
+                "Frames the camera sent that never arrived (gaps in its frame ids).",
+                st.missing,
+            ),
+            (
+                "photopose_source_incomplete_frames_total",
+                "Frames that arrived incomplete or damaged (not processed).",
+                st.incomplete,
+            ),
+            (
+                "photopose_source_losses_total",
+                "Times the camera was lost.",
+                st.losses,
+            ),
+            (
+                "photopose_source_opens_total",
+                "Times the camera was (re)opened.",
+                st.opens,
+            ),
+        ] {
+            out.counter(name, help, v)?;
+        }
+        out.gauge(
+            "photopose_source_connected",
+            "Camera state: 1 while the camera is connected and streaming, else 0.",
+            f64::from(u8::from(st.connected)),
+        )
     }
 }
 

@@ -373,7 +373,10 @@ mod tests {
             }
         }
         assert!(text.contains("photopose_rsi_cycles_total 1\n"), "{text}");
-        assert!(text.contains("photopose_rsi_state{state=\"tracking\"} 1"), "{text}");
+        assert!(
+            text.contains("photopose_rsi_state{state=\"tracking\"} 1"),
+            "{text}"
+        );
         assert!(
             text.contains("photopose_rsi_state{state=\"waiting_for_controller\"} 0"),
             "{text}"

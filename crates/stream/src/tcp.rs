@@ -10,6 +10,7 @@
 use crate::edge::{line_feed, EdgeHandle, FeedReceiver, FeedSender};
 use crate::StreamError;
 use bytes::Bytes;
+use photopose_telemetry::{Collect, Scrape};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -64,6 +65,47 @@ pub struct TcpStats {
     pub lines_dropped: AtomicU64,
     /// Clients connected now.
     pub connected: AtomicU64,
+}
+
+impl Collect for TcpStats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        out.gauge(
+            "photopose_stream_clients",
+            "TCP pose stream clients connected now.",
+            g(&self.connected) as f64,
+        )?;
+        for (name, help, v) in [
+            (
+                "photopose_stream_clients_accepted_total",
+                "TCP pose stream clients accepted (and served).",
+                &self.accepted,
+            ),
+            (
+                "photopose_stream_clients_dropped_total",
+                "TCP clients dropped because their queue was full (too slow).",
+                &self.dropped,
+            ),
+            (
+                "photopose_stream_clients_disconnected_total",
+                "TCP clients that left (closed, reset, write failed).",
+                &self.disconnected,
+            ),
+            (
+                "photopose_stream_clients_refused_total",
+                "TCP connections closed at once: the client limit was reached.",
+                &self.refused,
+            ),
+            (
+                "photopose_stream_lines_dropped_total",
+                "Pose lines not streamed over TCP because the edge runtime was behind.",
+                &self.lines_dropped,
+            ),
+        ] {
+            out.counter(name, help, g(v))?;
+        }
+        Ok(())
+    }
 }
 
 /// A TCP server streaming pose lines to its clients from the edge runtime.

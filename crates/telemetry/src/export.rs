@@ -126,12 +126,7 @@ impl Scrape<'_> {
         let mut m = self
             .encoder
             .encode_descriptor(name, help, None, MetricType::Histogram)?;
-        m.encode_histogram::<NoLabelSet>(
-            h.sum_seconds(),
-            count,
-            &buckets,
-            None,
-        )
+        m.encode_histogram::<NoLabelSet>(h.sum_seconds(), count, &buckets, None)
     }
 
     /// An info metric named `…_info`: value 1, the facts in its labels.

@@ -135,7 +135,11 @@ mod tests {
         for ns in (1_001..50_000_000u64).step_by(997) {
             let k = bucket_of(ns);
             let (lo, hi) = (
-                if k == 0 { 0.0 } else { upper_edge_seconds(k - 1) },
+                if k == 0 {
+                    0.0
+                } else {
+                    upper_edge_seconds(k - 1)
+                },
                 upper_edge_seconds(k),
             );
             let s = ns as f64 * 1e-9;
