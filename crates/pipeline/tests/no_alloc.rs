@@ -10,7 +10,6 @@ use photopose_pipeline::source::SyntheticSource;
 use photopose_pipeline::{Config, Pipeline, Supervision};
 use photopose_testkit::{allocations, CountingAllocator};
 use std::net::UdpSocket;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 #[global_allocator]

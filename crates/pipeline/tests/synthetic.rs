@@ -9,7 +9,6 @@ use photopose_pipeline::source::SyntheticSource;
 use photopose_pipeline::{Config, Pipeline};
 use std::io::{BufRead, BufReader};
 use std::net::{TcpStream, UdpSocket};
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 fn config(udp: &str, overflow: &str, frames: u64, rate: f64) -> Config {
