@@ -170,6 +170,8 @@ fn a_scrape_with_rsi_running_passes_promtool() {
         "# TYPE photopose_grabber_frames_published_total counter",
         "# TYPE photopose_ring_frames_delivered_total counter",
         "# TYPE photopose_stream_clients gauge",
+        "photopose_source_connected 1",
+        "# TYPE photopose_last_frame_age_seconds gauge",
     ] {
         assert!(body.contains(family), "{family} missing:\n{body}");
     }

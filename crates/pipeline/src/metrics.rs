@@ -42,6 +42,8 @@ pub struct Counters {
     pub position_std_m: Gauge,
     /// When the last pose was sent: ns after `epoch`, plus one (0: none yet).
     pub(crate) last_pose: AtomicU64,
+    /// When the last frame came from the source, the same way.
+    pub(crate) last_frame: AtomicU64,
     pub(crate) epoch: Instant,
     /// The grabber's counters (the pipeline hands them to its grabber).
     pub grabber: Arc<GrabberCounters>,
@@ -70,6 +72,7 @@ impl Default for Counters {
             targets: Gauge::new(0.0),
             position_std_m: Gauge::new(f64::NAN),
             last_pose: AtomicU64::new(0),
+            last_frame: AtomicU64::new(0),
             epoch: Instant::now(),
             grabber: Arc::default(),
             ring: None,
@@ -103,16 +106,36 @@ impl Counters {
             self.position_std_m
                 .set((x * x + y * y + z * z).sqrt() / 1000.0);
         }
+        self.stamp(&self.last_pose);
+    }
+
+    /// Counts a frame delivered by the source now.
+    pub fn record_frame_in(&self) {
+        self.frames_in.inc();
+        self.stamp(&self.last_frame);
+    }
+
+    fn stamp(&self, at: &AtomicU64) {
         let ns = u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(u64::MAX - 1);
-        self.last_pose.store(ns + 1, Ordering::Relaxed);
+        at.store(ns + 1, Ordering::Relaxed);
+    }
+
+    fn age_seconds(&self, at: &AtomicU64) -> Option<f64> {
+        match at.load(Ordering::Relaxed) {
+            0 => None,
+            t => Some((self.epoch.elapsed().as_secs_f64() - (t - 1) as f64 / 1e9).max(0.0)),
+        }
     }
 
     /// Seconds since the last pose was sent (`None` before the first).
     pub fn last_pose_age_seconds(&self) -> Option<f64> {
-        match self.last_pose.load(Ordering::Relaxed) {
-            0 => None,
-            t => Some(self.epoch.elapsed().as_secs_f64() - (t - 1) as f64 / 1e9),
-        }
+        self.age_seconds(&self.last_pose)
+    }
+
+    /// Seconds since the source delivered its last frame (`None` before
+    /// the first).
+    pub fn last_frame_age_seconds(&self) -> Option<f64> {
+        self.age_seconds(&self.last_frame)
     }
 }
 
@@ -182,12 +205,25 @@ impl Collect for Counters {
             "Time since the last pose message was sent (NaN before the first).",
             self.last_pose_age_seconds().unwrap_or(f64::NAN),
         )?;
+        let frame_age = self.last_frame_age_seconds();
+        out.gauge(
+            "photopose_last_frame_age_seconds",
+            "Time since the source delivered its last frame (NaN before the first).",
+            frame_age.unwrap_or(f64::NAN),
+        )?;
         self.grabber.collect(out)?;
         if let Some(ring) = &self.ring {
             ring.collect(out)?;
         }
-        if let Some(src) = &self.source {
-            src.collect(out)?;
+        match &self.source {
+            // A camera that knows its connection (GigE) says it.
+            Some(src) => src.collect(out)?,
+            // Other sources: connected while frames arrive.
+            None => out.gauge(
+                "photopose_source_connected",
+                "Camera state: 1 while the camera is connected and streaming (sources without a connection: a frame within the last second), else 0.",
+                f64::from(u8::from(frame_age.is_some_and(|a| a < 1.0))),
+            )?,
         }
         if let Some(tcp) = &self.tcp {
             tcp.collect(out)?;
@@ -268,8 +304,12 @@ mod tests {
         assert!(body.contains("photopose_frames_in_total 42"), "{body}");
         assert!(body.contains("photopose_latency_seconds_count 0"), "{body}");
         assert!(
-            !body.contains("photopose_source_"),
+            !body.contains("photopose_source_missing"),
             "no source counters: {body}"
+        );
+        assert!(
+            body.contains("photopose_source_connected 0"),
+            "no frame yet: {body}"
         );
         let mut s = std::net::TcpStream::connect(server.local_addr()).unwrap();
         s.write_all(b"GET /other HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
@@ -306,5 +346,63 @@ mod tests {
         ] {
             assert!(body.lines().any(|l| l == line), "{line} missing:\n{body}");
         }
+    }
+
+    #[test]
+    fn every_metric_has_help_and_follows_the_naming_scheme() {
+        let (_producer, consumer) =
+            photopose_acquire::Ring::build(2, photopose_acquire::Overflow::DropNewest, || {
+                photopose_frame::Image::new_mono8(4, 4)
+            });
+        let c = Counters {
+            source: Some(Arc::default()),
+            tcp: Some(Arc::default()),
+            rsi: Some(Arc::new(photopose_rsi::monitor::Stats::new())),
+            ring: Some(consumer.shared_counters()),
+            ..Counters::default()
+        };
+        c.latency.record_ns(2_000_000);
+        c.record_pose(Some(0.1), 12, Some([0.01, 0.02, 0.02]));
+        let body = render(Arc::new(c));
+        let mut helped = std::collections::HashSet::new();
+        let mut typed = std::collections::HashMap::new();
+        for l in body.lines() {
+            if let Some(h) = l.strip_prefix("# HELP ") {
+                let (name, help) = h.split_once(' ').unwrap();
+                assert!(!help.trim().is_empty(), "{l}");
+                assert!(helped.insert(name.to_string()), "twice: {l}");
+            } else if let Some(t) = l.strip_prefix("# TYPE ") {
+                let (name, kind) = t.split_once(' ').unwrap();
+                typed.insert(name.to_string(), kind.to_string());
+            } else {
+                let name = l.split(['{', ' ']).next().unwrap();
+                let family = ["_bucket", "_sum", "_count"]
+                    .iter()
+                    .find_map(|x| name.strip_suffix(x))
+                    .filter(|f| typed.get(*f).is_some_and(|k| k == "histogram"))
+                    .unwrap_or(name);
+                assert!(helped.contains(family), "no HELP: {l}");
+                assert!(family.starts_with("photopose_"), "{l}");
+                assert_eq!(
+                    typed[family] == "counter",
+                    family.ends_with("_total"),
+                    "counters and only counters end in _total: {l}"
+                );
+                for abbreviated in ["_us", "_ms", "_ns", "_mm", "_px", "_secs"] {
+                    assert!(!family.contains(abbreviated), "{l}");
+                }
+            }
+        }
+        for family in [
+            "photopose_latency_seconds",
+            "photopose_rsi_reply_latency_seconds",
+        ] {
+            assert_eq!(typed[family], "histogram", "{body}");
+        }
+        assert!(body.contains("photopose_pose_targets 12"), "{body}");
+        assert!(
+            body.contains("photopose_latency_seconds_count 1\n"),
+            "{body}"
+        );
     }
 }

@@ -430,7 +430,7 @@ impl Pipeline {
 /// Counts what became of a published frame; a queued frame evicted by
 /// `drop-oldest` is announced to the output stage so it does not wait for it.
 fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) {
-    counters.frames_in.inc();
+    counters.record_frame_in();
     match published {
         Published::Queued => {}
         Published::DroppedNewest => {
