@@ -7,8 +7,8 @@
 
 use crate::ring::Slot;
 use photopose_frame::Image;
-use photopose_telemetry::{Collect, Scrape};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use photopose_telemetry::{Collect, Counter, Scrape};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use thiserror::Error;
@@ -140,15 +140,15 @@ pub struct SourceStats {
 #[derive(Debug, Default)]
 pub struct SourceCounters {
     /// See [`SourceStats::frames`].
-    pub frames: AtomicU64,
+    pub frames: Counter,
     /// See [`SourceStats::missing`].
-    pub missing: AtomicU64,
+    pub missing: Counter,
     /// See [`SourceStats::incomplete`].
-    pub incomplete: AtomicU64,
+    pub incomplete: Counter,
     /// See [`SourceStats::losses`].
-    pub losses: AtomicU64,
+    pub losses: Counter,
     /// See [`SourceStats::opens`].
-    pub opens: AtomicU64,
+    pub opens: Counter,
     /// See [`SourceStats::connected`].
     pub connected: AtomicBool,
 }
@@ -157,11 +157,11 @@ impl SourceCounters {
     /// A snapshot (relaxed reads).
     pub fn snapshot(&self) -> SourceStats {
         SourceStats {
-            frames: self.frames.load(Ordering::Relaxed),
-            missing: self.missing.load(Ordering::Relaxed),
-            incomplete: self.incomplete.load(Ordering::Relaxed),
-            losses: self.losses.load(Ordering::Relaxed),
-            opens: self.opens.load(Ordering::Relaxed),
+            frames: self.frames.get(),
+            missing: self.missing.get(),
+            incomplete: self.incomplete.get(),
+            losses: self.losses.get(),
+            opens: self.opens.get(),
             connected: self.connected.load(Ordering::Relaxed),
         }
     }

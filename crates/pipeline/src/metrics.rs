@@ -324,8 +324,8 @@ mod tests {
     #[test]
     fn source_and_stream_counters_appear_when_present() {
         let src = Arc::new(photopose_acquire::SourceCounters::default());
-        src.missing.store(3, Ordering::Relaxed);
-        src.losses.store(1, Ordering::Relaxed);
+        src.missing.add(3);
+        src.losses.add(1);
         src.connected.store(true, Ordering::Relaxed);
         let tcp = Arc::new(photopose_stream::TcpStats::default());
         tcp.connected.store(2, Ordering::Relaxed);
