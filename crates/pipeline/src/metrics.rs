@@ -9,7 +9,7 @@
 
 use photopose_acquire::grabber::GrabberCounters;
 use photopose_acquire::ring::RingCounters;
-use photopose_stream::{EdgeHandle, HttpLimits, StreamError, TextEndpoint};
+use photopose_stream::{EdgeHandle, HttpLimits, HttpStats, StreamError, TextEndpoint};
 use photopose_telemetry::{Collect, Counter, Exposition, Gauge, Histogram, Scrape};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -259,14 +259,17 @@ impl MetricsServer {
         listen: SocketAddr,
         counters: Arc<Counters>,
     ) -> Result<Self, StreamError> {
+        let stats = Arc::new(HttpStats::default());
         let mut exposition = Exposition::new();
         exposition.register(counters);
-        let endpoint = TextEndpoint::start(
+        exposition.register(stats.clone());
+        let endpoint = TextEndpoint::start_counted(
             edge,
             listen,
             "/metrics",
             Arc::new(move || exposition.render()),
             HttpLimits::default(),
+            stats,
         )?;
         Ok(MetricsServer { endpoint })
     }

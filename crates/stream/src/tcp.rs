@@ -10,7 +10,7 @@
 use crate::edge::{line_feed, EdgeHandle, FeedReceiver, FeedSender};
 use crate::StreamError;
 use bytes::Bytes;
-use photopose_telemetry::{Collect, Scrape};
+use photopose_telemetry::{Collect, Counter, Scrape};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -54,15 +54,15 @@ impl Default for TcpLimits {
 #[derive(Debug, Default)]
 pub struct TcpStats {
     /// Clients accepted (and served).
-    pub accepted: AtomicU64,
+    pub accepted: Counter,
     /// Clients dropped because their queue was full (they read too slowly).
-    pub dropped: AtomicU64,
+    pub dropped: Counter,
     /// Clients that left (closed, reset, or a write failed).
-    pub disconnected: AtomicU64,
+    pub disconnected: Counter,
     /// Connections refused (closed at once) because the client limit was reached.
-    pub refused: AtomicU64,
+    pub refused: Counter,
     /// Lines not sent to anyone because the edge runtime was behind.
-    pub lines_dropped: AtomicU64,
+    pub lines_dropped: Counter,
     /// Clients connected now.
     pub connected: AtomicU64,
 }
@@ -102,7 +102,7 @@ impl Collect for TcpStats {
                 &self.lines_dropped,
             ),
         ] {
-            out.counter(name, help, g(v))?;
+            out.counter(name, help, v.get())?;
         }
         Ok(())
     }
@@ -176,7 +176,7 @@ impl TcpServer {
     /// warm. When the edge is behind the line is dropped and counted.
     pub fn publish(&mut self, line: &[u8]) {
         if !self.feed.send(line) {
-            self.stats.lines_dropped.fetch_add(1, Ordering::Relaxed);
+            self.stats.lines_dropped.inc();
         }
     }
 
@@ -250,7 +250,7 @@ impl Hub {
         // Forget clients that have left.
         self.clients.retain(|c| !c.lines.is_closed());
         if self.clients.len() >= self.limits.max_clients {
-            self.stats.refused.fetch_add(1, Ordering::Relaxed);
+            self.stats.refused.inc();
             drop(stream);
             let r = &mut self.refusals;
             r.since_log += 1;
@@ -271,7 +271,7 @@ impl Hub {
         let _ = stream.set_nodelay(true);
         let (tx, rx) = mpsc::channel(self.limits.client_queue);
         let kick = CancellationToken::new();
-        self.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        self.stats.accepted.inc();
         self.stats.connected.fetch_add(1, Ordering::Relaxed);
         tracing::info!(client = %peer, "TCP pose client connected");
         let ended = Ended {
@@ -303,7 +303,7 @@ impl Hub {
                     Err(mpsc::error::TrySendError::Closed(_)) => false,
                     Err(mpsc::error::TrySendError::Full(_)) => {
                         c.kick.cancel();
-                        stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        stats.dropped.inc();
                         tracing::info!(
                             client = %c.peer,
                             queue,
@@ -340,7 +340,7 @@ async fn serve_client(
     ended: Ended,
 ) {
     if let Some(reason) = write_lines(stream, lines, kick).await {
-        ended.stats.disconnected.fetch_add(1, Ordering::Relaxed);
+        ended.stats.disconnected.inc();
         tracing::info!(client = %peer, %reason, "TCP pose client disconnected");
     }
     drop(ended);
