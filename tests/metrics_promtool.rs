@@ -171,6 +171,7 @@ fn a_scrape_with_rsi_running_passes_promtool() {
         "# TYPE photopose_ring_frames_delivered_total counter",
         "# TYPE photopose_stream_clients gauge",
         "# TYPE photopose_metrics_requests_total counter",
+        "# TYPE photopose_stream_udp_datagrams_sent_total counter",
         "photopose_source_connected 1",
         "# TYPE photopose_last_frame_age_seconds gauge",
     ] {

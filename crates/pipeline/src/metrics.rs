@@ -54,6 +54,8 @@ pub struct Counters {
     pub source: Option<Arc<photopose_acquire::SourceCounters>>,
     /// The TCP pose stream's counters (clients), when one is configured.
     pub tcp: Option<Arc<photopose_stream::TcpStats>>,
+    /// The UDP destinations' counters, when there are any.
+    pub udp: Option<Arc<photopose_stream::UdpStats>>,
     /// The RSI server's counters, when it runs.
     pub rsi: Option<Arc<photopose_rsi::monitor::Stats>>,
 }
@@ -78,6 +80,7 @@ impl Default for Counters {
             ring: None,
             source: None,
             tcp: None,
+            udp: None,
             rsi: None,
         }
     }
@@ -227,6 +230,9 @@ impl Collect for Counters {
         }
         if let Some(tcp) = &self.tcp {
             tcp.collect(out)?;
+        }
+        if let Some(udp) = &self.udp {
+            udp.collect(out)?;
         }
         if let Some(rsi) = &self.rsi {
             rsi.collect(out)?;

@@ -235,6 +235,7 @@ impl Pipeline {
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
             tcp: sinks.tcp.clone(),
+            udp: sinks.udp.clone(),
             rsi: sinks.rsi.clone(),
             ring: Some(consumer.shared_counters()),
             ..Counters::default()
