@@ -24,7 +24,6 @@ use std::io::{IsTerminal, Write};
 use std::net::UdpSocket;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Arguments of `photopose demo`.
@@ -218,10 +217,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let secs = started.elapsed().as_secs_f64();
     println!(
         "{} frames in {:.1} s: {} poses ok, {} dropped; latency p50 {:.2} ms, p99 {:.2} ms",
-        counters.frames_in.load(Ordering::Relaxed),
+        counters.frames_in.get(),
         secs,
-        counters.poses_ok.load(Ordering::Relaxed),
-        counters.frames_dropped.load(Ordering::Relaxed),
+        counters.poses_ok.get(),
+        counters.frames_dropped.get(),
         counters.latency_quantile_us(0.5).unwrap_or(f64::NAN) / 1000.0,
         counters.latency_quantile_us(0.99).unwrap_or(f64::NAN) / 1000.0
     );

@@ -169,10 +169,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
         if last_report.elapsed() >= Duration::from_secs(10) {
             let c = pipeline.counters();
             tracing::info!(
-                frames_in = c.frames_in.load(Ordering::Relaxed),
-                dropped = c.frames_dropped.load(Ordering::Relaxed),
-                poses_ok = c.poses_ok.load(Ordering::Relaxed),
-                poses_failed = c.poses_failed.load(Ordering::Relaxed),
+                frames_in = c.frames_in.get(),
+                dropped = c.frames_dropped.get(),
+                poses_ok = c.poses_ok.get(),
+                poses_failed = c.poses_failed.get(),
                 "pipeline progress"
             );
             last_report = Instant::now();
@@ -216,10 +216,7 @@ fn reload(
     tracing::info!(config = %path.display(), "reloading: restarting the pipeline");
     running.stop();
     let old = running.join();
-    tracing::info!(
-        poses_ok = old.poses_ok.load(Ordering::Relaxed),
-        "previous pipeline stopped"
-    );
+    tracing::info!(poses_ok = old.poses_ok.get(), "previous pipeline stopped");
     let started = match start(prepared, wedge) {
         Ok(started) => {
             tracing::info!(config = %path.display(), "configuration reloaded");
@@ -238,8 +235,8 @@ fn reload(
 
 /// The closing figures of a run.
 fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
-    let ok = c.poses_ok.load(Ordering::Relaxed);
-    let done = ok + c.poses_failed.load(Ordering::Relaxed);
+    let ok = c.poses_ok.get();
+    let done = ok + c.poses_failed.get();
     let q = |p: f64| c.latency_quantile_us(p).map_or(f64::NAN, |us| us / 1000.0);
     println!(
         "latency (frame handed over → pose sent): p50 {:.2} ms, p99 {:.2} ms, p99.9 {:.2} ms",
@@ -249,13 +246,13 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
     );
     println!(
         "{} frames in, {} dropped, {} poses ({} ok) in {:.1} s ({:.1} poses/s), mean latency {:.2} ms",
-        c.frames_in.load(Ordering::Relaxed),
-        c.frames_dropped.load(Ordering::Relaxed),
+        c.frames_in.get(),
+        c.frames_dropped.get(),
         done,
         ok,
         secs,
         done as f64 / secs.max(1e-9),
-        c.latency_us_sum.load(Ordering::Relaxed) as f64 / done.max(1) as f64 / 1000.0
+        c.latency.sum_seconds() / done.max(1) as f64 * 1000.0
     );
     if histogram {
         print_histogram(c);
@@ -275,9 +272,9 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
         );
     }
     tracing::info!(
-        frames_in = c.frames_in.load(Ordering::Relaxed),
-        dropped = c.frames_dropped.load(Ordering::Relaxed),
-        poses_ok = c.poses_ok.load(Ordering::Relaxed),
+        frames_in = c.frames_in.get(),
+        dropped = c.frames_dropped.get(),
+        poses_ok = c.poses_ok.get(),
         "photopose stopped"
     );
 }
@@ -285,27 +282,19 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
 /// Prints the non-empty buckets of the latency histogram (upper edges,
 /// eight buckets per octave) with a bar each.
 fn print_histogram(c: &photopose_pipeline::Counters) {
-    use photopose_pipeline::run::LATENCY_BASE_US;
-    let counts: Vec<u64> = c
-        .latency_histogram
-        .iter()
-        .map(|b| b.load(Ordering::Relaxed))
-        .collect();
-    let total: u64 = counts.iter().sum();
-    let (Some(first), Some(last)) = (
-        counts.iter().position(|&n| n > 0),
-        counts.iter().rposition(|&n| n > 0),
-    ) else {
+    let buckets: Vec<(f64, u64)> = c.latency.nonempty_buckets().collect();
+    let total: u64 = buckets.iter().map(|b| b.1).sum();
+    let most = buckets.iter().map(|b| b.1).max().unwrap_or(1).max(1);
+    if total == 0 {
         return;
-    };
-    let most = counts.iter().copied().max().unwrap_or(1).max(1);
+    }
     println!("latency histogram (frame handed over → pose sent):");
     let mut below = 0u64;
-    for (k, &n) in counts.iter().enumerate().take(last + 1).skip(first) {
+    for (edge_s, n) in buckets {
         below += n;
         println!(
             "  ≤ {:>9.3} ms {:>8} {:>6.2} % {}",
-            LATENCY_BASE_US * 2f64.powf(k as f64 / 8.0) / 1000.0,
+            edge_s * 1000.0,
             n,
             100.0 * below as f64 / total as f64,
             "#".repeat((n * 50).div_ceil(most) as usize)

@@ -5,7 +5,8 @@
 
 use crate::ring::{Producer, Published};
 use crate::source::{FrameSource, SourceError};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use photopose_telemetry::{Collect, Counter, Scrape};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -14,19 +15,20 @@ use std::time::{Duration, Instant};
 /// within about this delay.
 pub const POLL: Duration = Duration::from_millis(100);
 
-/// Counters of a grabber (relaxed atomics, shared with the spawner).
+/// Counters of a grabber (`photopose-telemetry` counters, shared with the
+/// spawner).
 #[derive(Debug, Default)]
 pub struct GrabberCounters {
     /// Frames published into the ring.
-    pub published: AtomicU64,
+    pub published: Counter,
     /// `next_frame` calls that timed out.
-    pub timeouts: AtomicU64,
+    pub timeouts: Counter,
     /// Losses reported by the source.
-    pub losses: AtomicU64,
+    pub losses: Counter,
     /// `next_frame` calls answered "unavailable".
-    pub unavailable: AtomicU64,
+    pub unavailable: Counter,
     /// Frames the source could not deliver (skipped).
-    pub bad_frames: AtomicU64,
+    pub bad_frames: Counter,
 }
 
 impl GrabberCounters {
@@ -34,11 +36,46 @@ impl GrabberCounters {
     /// exactly one of the counters, so their sum advances while the thread
     /// is alive and polling, with or without a camera.
     pub fn turns(&self) -> u64 {
-        self.published.load(Ordering::Relaxed)
-            + self.timeouts.load(Ordering::Relaxed)
-            + self.losses.load(Ordering::Relaxed)
-            + self.unavailable.load(Ordering::Relaxed)
-            + self.bad_frames.load(Ordering::Relaxed)
+        self.published.get()
+            + self.timeouts.get()
+            + self.losses.get()
+            + self.unavailable.get()
+            + self.bad_frames.get()
+    }
+}
+
+impl Collect for GrabberCounters {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        for (name, help, c) in [
+            (
+                "photopose_grabber_frames_published_total",
+                "Frames the grabber published into the ring.",
+                &self.published,
+            ),
+            (
+                "photopose_grabber_timeouts_total",
+                "Frame requests to the source that timed out.",
+                &self.timeouts,
+            ),
+            (
+                "photopose_grabber_losses_total",
+                "Camera losses the source reported to the grabber.",
+                &self.losses,
+            ),
+            (
+                "photopose_grabber_unavailable_total",
+                "Frame requests answered \"camera unavailable\".",
+                &self.unavailable,
+            ),
+            (
+                "photopose_grabber_bad_frames_total",
+                "Frames the source could not deliver (skipped).",
+                &self.bad_frames,
+            ),
+        ] {
+            out.counter(name, help, c.get())?;
+        }
+        Ok(())
     }
 }
 
@@ -119,12 +156,25 @@ pub fn spawn_grabber<S: FrameSource + 'static>(
 /// queued frames dropped by `drop-oldest` this way.
 pub fn spawn_grabber_with<S: FrameSource + 'static>(
     name: &str,
+    source: S,
+    producer: Producer,
+    stop: Arc<AtomicBool>,
+    observer: impl FnMut(Published) + Send + 'static,
+) -> std::io::Result<Grabber<S>> {
+    let counters = Arc::new(GrabberCounters::default());
+    spawn_grabber_counted(name, source, producer, stop, counters, observer)
+}
+
+/// [`spawn_grabber_with`] counting into `counters` (made before the thread,
+/// e.g. to be registered for metrics first).
+pub fn spawn_grabber_counted<S: FrameSource + 'static>(
+    name: &str,
     mut source: S,
     mut producer: Producer,
     stop: Arc<AtomicBool>,
+    counters: Arc<GrabberCounters>,
     mut observer: impl FnMut(Published) + Send + 'static,
 ) -> std::io::Result<Grabber<S>> {
-    let counters = Arc::new(GrabberCounters::default());
     let c = Arc::clone(&counters);
     let flag = Arc::clone(&stop);
     let thread_name = name.to_string();
@@ -183,18 +233,18 @@ fn run<S: FrameSource>(
                         drops_logged = dropped;
                     }
                 }
-                c.published.fetch_add(1, Ordering::Relaxed);
+                c.published.inc();
             }
             Err(SourceError::Timeout(_)) => {
-                c.timeouts.fetch_add(1, Ordering::Relaxed);
+                c.timeouts.inc();
             }
             Err(SourceError::Lost { reason }) => {
-                c.losses.fetch_add(1, Ordering::Relaxed);
+                c.losses.inc();
                 tracing::warn!(grabber = %name, %reason, "camera lost; reconnecting");
                 state = State::Down;
             }
             Err(SourceError::Unavailable { reason }) => {
-                c.unavailable.fetch_add(1, Ordering::Relaxed);
+                c.unavailable.inc();
                 if state != State::Waiting && state != State::Down {
                     tracing::warn!(grabber = %name, %reason, "camera unavailable; retrying");
                 }
@@ -204,7 +254,8 @@ fn run<S: FrameSource>(
             }
             Err(SourceError::Frame { reason }) => {
                 // One bad frame: skipped, counted, logged; the next may be fine.
-                let n = c.bad_frames.fetch_add(1, Ordering::Relaxed) + 1;
+                c.bad_frames.inc();
+                let n = c.bad_frames.get();
                 if n.is_power_of_two() {
                     tracing::warn!(grabber = %name, %reason, bad_frames = n, "frame skipped");
                 }

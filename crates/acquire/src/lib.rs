@@ -28,6 +28,8 @@ pub mod source;
 
 #[cfg(feature = "gige")]
 pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
-pub use grabber::{spawn_grabber, spawn_grabber_with, Grabber, GrabberExit};
+pub use grabber::{
+    spawn_grabber, spawn_grabber_counted, spawn_grabber_with, Grabber, GrabberCounters, GrabberExit,
+};
 pub use ring::{Consumer, FrameHandle, Overflow, Producer, Published, Ring, Slot};
 pub use source::{FrameSource, SourceCounters, SourceError, SourceStats};

@@ -48,6 +48,7 @@
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
 use crossbeam_queue::ArrayQueue;
 use photopose_frame::{FrameMeta, Image};
+use photopose_telemetry::{Collect, Scrape};
 use std::ops::{Deref, DerefMut};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -135,9 +136,35 @@ impl RingCounters {
     }
 }
 
+impl Collect for RingCounters {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        let st = self.snapshot();
+        out.counter(
+            "photopose_ring_frames_in_total",
+            "Frames published into the ring by the grabber.",
+            st.frames_in,
+        )?;
+        out.counter(
+            "photopose_ring_frames_dropped_total",
+            "Frames the ring discarded by its overflow policy.",
+            st.dropped,
+        )?;
+        out.counter(
+            "photopose_ring_frames_delivered_total",
+            "Frames the ring handed to a detection worker.",
+            st.delivered,
+        )?;
+        out.gauge(
+            "photopose_ring_frames_queued",
+            "Frames waiting in the ring for a detection worker.",
+            st.queued() as f64,
+        )
+    }
+}
+
 struct Shared {
     free: ArrayQueue<Box<Slot>>,
-    counters: RingCounters,
+    counters: Arc<RingCounters>,
     slots: usize,
 }
 
@@ -167,7 +194,7 @@ impl Ring {
         }
         let shared = Arc::new(Shared {
             free,
-            counters: RingCounters::default(),
+            counters: Arc::default(),
             slots,
         });
         let (tx, rx) = crossbeam_channel::bounded(slots);
@@ -296,6 +323,11 @@ impl Producer {
         &self.shared.counters
     }
 
+    /// The ring's counters, to keep (metrics) without keeping the slots.
+    pub fn shared_counters(&self) -> Arc<RingCounters> {
+        Arc::clone(&self.shared.counters)
+    }
+
     /// The overflow policy.
     pub fn policy(&self) -> Overflow {
         self.policy
@@ -356,6 +388,11 @@ impl Consumer {
     /// The ring's counters.
     pub fn counters(&self) -> &RingCounters {
         &self.shared.counters
+    }
+
+    /// The ring's counters, to keep (metrics) without keeping the slots.
+    pub fn shared_counters(&self) -> Arc<RingCounters> {
+        Arc::clone(&self.shared.counters)
     }
 
     /// Slots in the free pool now (neither queued, held nor in hand).
@@ -456,6 +493,25 @@ mod tests {
         assert_eq!(c.free_slots(), 3);
         let st = c.counters().snapshot();
         assert_eq!((st.frames_in, st.delivered, st.dropped), (3, 3, 0));
+    }
+
+    #[test]
+    fn the_ring_counters_are_exported() {
+        let (mut p, c) = ring(1, Overflow::DropNewest);
+        publish_seq(&mut p, 0);
+        publish_seq(&mut p, 1);
+        let mut e = photopose_telemetry::Exposition::new();
+        e.register(c.shared_counters());
+        let text = e.render();
+        for line in [
+            "photopose_ring_frames_in_total 2",
+            "photopose_ring_frames_dropped_total 1",
+            "photopose_ring_frames_delivered_total 0",
+            "photopose_ring_frames_queued 1.0",
+        ] {
+            assert!(text.lines().any(|l| l == line), "{line} missing:\n{text}");
+        }
+        assert_eq!(text.matches("# HELP ").count(), 4, "{text}");
     }
 
     #[test]

@@ -7,7 +7,8 @@
 
 use crate::ring::Slot;
 use photopose_frame::Image;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use photopose_telemetry::{Collect, Counter, Scrape};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use thiserror::Error;
@@ -139,15 +140,15 @@ pub struct SourceStats {
 #[derive(Debug, Default)]
 pub struct SourceCounters {
     /// See [`SourceStats::frames`].
-    pub frames: AtomicU64,
+    pub frames: Counter,
     /// See [`SourceStats::missing`].
-    pub missing: AtomicU64,
+    pub missing: Counter,
     /// See [`SourceStats::incomplete`].
-    pub incomplete: AtomicU64,
+    pub incomplete: Counter,
     /// See [`SourceStats::losses`].
-    pub losses: AtomicU64,
+    pub losses: Counter,
     /// See [`SourceStats::opens`].
-    pub opens: AtomicU64,
+    pub opens: Counter,
     /// See [`SourceStats::connected`].
     pub connected: AtomicBool,
 }
@@ -156,13 +157,53 @@ impl SourceCounters {
     /// A snapshot (relaxed reads).
     pub fn snapshot(&self) -> SourceStats {
         SourceStats {
-            frames: self.frames.load(Ordering::Relaxed),
-            missing: self.missing.load(Ordering::Relaxed),
-            incomplete: self.incomplete.load(Ordering::Relaxed),
-            losses: self.losses.load(Ordering::Relaxed),
-            opens: self.opens.load(Ordering::Relaxed),
+            frames: self.frames.get(),
+            missing: self.missing.get(),
+            incomplete: self.incomplete.get(),
+            losses: self.losses.get(),
+            opens: self.opens.get(),
             connected: self.connected.load(Ordering::Relaxed),
         }
+    }
+}
+
+impl Collect for SourceCounters {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        let st = self.snapshot();
+        for (name, help, v) in [
+            (
+                "photopose_source_frames_total",
+                "Frames the camera source delivered into slots.",
+                st.frames,
+            ),
+            (
+                "photopose_source_missing_frames_total",
+                "Frames the camera sent that never arrived (gaps in its frame ids).",
+                st.missing,
+            ),
+            (
+                "photopose_source_incomplete_frames_total",
+                "Frames that arrived incomplete or damaged (not processed).",
+                st.incomplete,
+            ),
+            (
+                "photopose_source_losses_total",
+                "Times the camera was lost.",
+                st.losses,
+            ),
+            (
+                "photopose_source_opens_total",
+                "Times the camera was (re)opened.",
+                st.opens,
+            ),
+        ] {
+            out.counter(name, help, v)?;
+        }
+        out.gauge(
+            "photopose_source_connected",
+            "Camera state: 1 while the camera is connected and streaming, else 0.",
+            f64::from(u8::from(st.connected)),
+        )
     }
 }
 

@@ -258,7 +258,7 @@ fn waits_for_an_absent_camera() {
     wait_for(
         "camera reported unavailable",
         Duration::from_secs(10),
-        || grabber.counters().unavailable.load(Ordering::Relaxed) > 0,
+        || grabber.counters().unavailable.get() > 0,
     );
     std::thread::sleep(Duration::from_secs(1));
     assert_eq!(counters.snapshot().frames, 0);
@@ -318,7 +318,7 @@ fn survives_losing_the_camera() {
     fake.kill();
     let killed = Instant::now();
     let detect = wait_for("loss reported", Duration::from_secs(10), || {
-        grabber.counters().losses.load(Ordering::Relaxed) >= 1
+        grabber.counters().losses.get() >= 1
     });
     assert!(!counters.snapshot().connected);
     // Absent for a while: the source keeps trying, the grabber keeps running.

@@ -9,13 +9,13 @@ use crate::sink::{Outgoing, Sinks};
 use crate::source::host_time_ns;
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
 use photopose_acquire::ring::RecvError;
-use photopose_acquire::{spawn_grabber_with, FrameSource, Published, Ring, Slot};
+use photopose_acquire::{spawn_grabber_counted, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
 use photopose_geometry::Camera;
 use photopose_locate::{LocateOptions, Locator};
 use photopose_stream::{Edge, PoseMessage, PoseStatus};
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -47,91 +47,7 @@ pub enum PipelineError {
     },
 }
 
-/// Counters of a running pipeline (read them any time).
-#[derive(Debug)]
-pub struct Counters {
-    /// Frames delivered by the source.
-    pub frames_in: AtomicU64,
-    /// Frames dropped by the overflow policy.
-    pub frames_dropped: AtomicU64,
-    /// Frames processed by the workers.
-    pub frames_processed: AtomicU64,
-    /// Messages with a pose.
-    pub poses_ok: AtomicU64,
-    /// Messages without a pose (too few targets, error).
-    pub poses_failed: AtomicU64,
-    /// Stale messages sent while no frame came.
-    pub stale: AtomicU64,
-    /// Sum of latencies (frame hand-over → message sent), µs.
-    pub latency_us_sum: AtomicU64,
-    /// Histogram of the latencies: bucket `k` counts latencies below
-    /// `LATENCY_BASE_US · 2^(k / 8)` µs (eight buckets per octave).
-    pub latency_histogram: [AtomicU64; LATENCY_BUCKETS],
-    /// The source's own counters (GigE: missing and incomplete frames,
-    /// losses, openings, connection), when it keeps them.
-    pub source: Option<Arc<photopose_acquire::SourceCounters>>,
-    /// The TCP pose stream's counters (clients), when one is configured.
-    pub tcp: Option<Arc<photopose_stream::TcpStats>>,
-    /// The RSI server's counters, when it runs.
-    pub rsi: Option<Arc<photopose_rsi::monitor::Stats>>,
-}
-
-/// Buckets of the latency histogram (10 µs to about 40 s).
-pub const LATENCY_BUCKETS: usize = 176;
-/// Upper edge of the first latency bucket, µs.
-pub const LATENCY_BASE_US: f64 = 10.0;
-
-impl Counters {
-    fn record_latency(&self, us: f64) {
-        let k = if us <= LATENCY_BASE_US {
-            0
-        } else {
-            ((8.0 * (us / LATENCY_BASE_US).log2()).ceil() as usize).min(LATENCY_BUCKETS - 1)
-        };
-        self.latency_histogram[k].fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// The latency below which a share `q` (0..=1) of the messages were
-    /// sent, µs (the upper edge of the bucket; within 9 %).
-    pub fn latency_quantile_us(&self, q: f64) -> Option<f64> {
-        let counts: Vec<u64> = self
-            .latency_histogram
-            .iter()
-            .map(|c| c.load(Ordering::Relaxed))
-            .collect();
-        let total: u64 = counts.iter().sum();
-        if total == 0 {
-            return None;
-        }
-        let want = (q.clamp(0.0, 1.0) * total as f64).ceil().max(1.0) as u64;
-        let mut seen = 0;
-        for (k, c) in counts.iter().enumerate() {
-            seen += c;
-            if seen >= want {
-                return Some(LATENCY_BASE_US * 2f64.powf(k as f64 / 8.0));
-            }
-        }
-        None
-    }
-}
-
-impl Default for Counters {
-    fn default() -> Self {
-        Counters {
-            frames_in: AtomicU64::new(0),
-            frames_dropped: AtomicU64::new(0),
-            frames_processed: AtomicU64::new(0),
-            poses_ok: AtomicU64::new(0),
-            poses_failed: AtomicU64::new(0),
-            stale: AtomicU64::new(0),
-            latency_us_sum: AtomicU64::new(0),
-            latency_histogram: std::array::from_fn(|_| AtomicU64::new(0)),
-            source: None,
-            tcp: None,
-            rsi: None,
-        }
-    }
-}
+pub use crate::metrics::Counters;
 
 /// One worker result, or the notice that an admitted frame was dropped.
 // Moved by value through a bounded channel: boxing the large variant would
@@ -319,7 +235,9 @@ impl Pipeline {
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
             tcp: sinks.tcp.clone(),
+            udp: sinks.udp.clone(),
             rsi: sinks.rsi.clone(),
+            ring: Some(consumer.shared_counters()),
             ..Counters::default()
         });
         let metrics = match (config.metrics_listen, &edge) {
@@ -357,7 +275,7 @@ impl Pipeline {
                     return;
                 }
                 let result = locate(&mut locator, &camera_id, &frame);
-                counters.frames_processed.fetch_add(1, Ordering::Relaxed);
+                counters.frames_processed.inc();
                 let outcome = Outcome::Message {
                     order: frame.order,
                     result,
@@ -373,11 +291,12 @@ impl Pipeline {
         // logs connection changes and applies the overflow policy).
         let grabber = {
             let (counters, out_tx) = (counters.clone(), out_tx.clone());
-            spawn_grabber_with(
+            spawn_grabber_counted(
                 "grabber",
                 source,
                 producer,
                 stop.clone(),
+                Arc::clone(&counters.grabber),
                 move |published| observe(published, &counters, &out_tx),
             )
             .map_err(|source| PipelineError::Thread {
@@ -512,14 +431,14 @@ impl Pipeline {
 /// Counts what became of a published frame; a queued frame evicted by
 /// `drop-oldest` is announced to the output stage so it does not wait for it.
 fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) {
-    counters.frames_in.fetch_add(1, Ordering::Relaxed);
+    counters.record_frame_in();
     match published {
         Published::Queued => {}
         Published::DroppedNewest => {
-            counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            counters.frames_dropped.inc();
         }
         Published::QueuedDroppedOldest { dropped_order } => {
-            counters.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            counters.frames_dropped.inc();
             let _ = out_tx.send(Outcome::Skipped {
                 order: dropped_order,
             });
@@ -544,8 +463,8 @@ fn status_line(counters: Arc<Counters>) -> impl FnMut() -> String + Send + 'stat
     let mut last = (Instant::now(), 0u64, 0u64);
     move || {
         let now = Instant::now();
-        let poses = counters.poses_ok.load(Ordering::Relaxed);
-        let frames = counters.frames_in.load(Ordering::Relaxed);
+        let poses = counters.poses_ok.get();
+        let frames = counters.frames_in.get();
         let secs = now.duration_since(last.0).as_secs_f64().max(1e-3);
         let rate = (poses - last.1) as f64 / secs;
         let camera = match &counters.source {
@@ -616,15 +535,17 @@ fn output_loop(
                         crate::sink::annotate(&mut message, sinks.rsi.as_deref());
                         let latency = result.times.handover.elapsed();
                         message.latency_us = latency.as_secs_f64() * 1e6;
-                        counters.record_latency(message.latency_us);
-                        counters
-                            .latency_us_sum
-                            .fetch_add(latency.as_micros() as u64, Ordering::Relaxed);
+                        counters.latency.record(latency);
                         if result.status == ResultStatus::Ok {
-                            counters.poses_ok.fetch_add(1, Ordering::Relaxed);
+                            counters.poses_ok.inc();
                         } else {
-                            counters.poses_failed.fetch_add(1, Ordering::Relaxed);
+                            counters.poses_failed.inc();
                         }
+                        counters.record_pose(
+                            message.sigma0_px,
+                            message.n_targets,
+                            message.std_center,
+                        );
                         emit(Some(&result), &message, &mut sinks);
                         last_message = Some(message);
                         last_sent = Instant::now();
@@ -640,7 +561,7 @@ fn output_loop(
                         s.host_time_ns = host_time_ns();
                         crate::sink::annotate(&mut s, sinks.rsi.as_deref());
                         emit(None, &s, &mut sinks);
-                        counters.stale.fetch_add(1, Ordering::Relaxed);
+                        counters.stale.inc();
                         last_sent = Instant::now();
                         tracing::debug!("no fresh pose: stale message sent");
                     }
@@ -653,27 +574,9 @@ fn output_loop(
         s.finish();
     }
     tracing::info!(
-        poses_ok = counters.poses_ok.load(Ordering::Relaxed),
-        poses_failed = counters.poses_failed.load(Ordering::Relaxed),
-        dropped = counters.frames_dropped.load(Ordering::Relaxed),
+        poses_ok = counters.poses_ok.get(),
+        poses_failed = counters.poses_failed.get(),
+        dropped = counters.frames_dropped.get(),
         "pose output stopped"
     );
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn latency_quantiles_come_from_the_histogram() {
-        let c = Counters::default();
-        for us in 1..=1000 {
-            c.record_latency(us as f64 * 10.0);
-        }
-        let p50 = c.latency_quantile_us(0.5).unwrap();
-        let p99 = c.latency_quantile_us(0.99).unwrap();
-        assert!((5000.0..=5000.0 * 1.1).contains(&p50), "{p50}");
-        assert!((9900.0..=9900.0 * 1.1).contains(&p99), "{p99}");
-        assert_eq!(Counters::default().latency_quantile_us(0.5), None);
-    }
 }

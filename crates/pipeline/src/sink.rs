@@ -55,6 +55,8 @@ pub struct Sinks {
     pub tcp_addr: Option<std::net::SocketAddr>,
     /// The TCP stream's counters, when it runs.
     pub tcp: Option<std::sync::Arc<photopose_stream::TcpStats>>,
+    /// The UDP destinations' counters, when there are any.
+    pub udp: Option<std::sync::Arc<photopose_stream::UdpStats>>,
 }
 
 impl std::fmt::Debug for Sinks {
@@ -78,7 +80,9 @@ pub fn build(
     if let Some(r) = rsi {
         sinks.push(Box::new(r));
     }
+    let mut udp = None;
     if let Some(u) = udp::UdpSink::from_config(config)? {
+        udp = Some(u.stats());
         sinks.push(Box::new(u));
     }
     let (mut tcp_addr, mut tcp) = (None, None);
@@ -91,6 +95,7 @@ pub fn build(
         rsi: stats,
         tcp_addr,
         tcp,
+        udp,
     })
 }
 

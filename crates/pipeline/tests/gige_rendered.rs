@@ -112,6 +112,6 @@ fn poses_from_rendered_frames_over_gige_agree_with_the_truth() {
     }
     pipeline.stop();
     let counters = pipeline.join();
-    assert!(counters.poses_ok.load(std::sync::atomic::Ordering::Relaxed) >= 15);
+    assert!(counters.poses_ok.get() >= 15);
     drop(fake);
 }

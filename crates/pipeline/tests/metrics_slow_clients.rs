@@ -11,7 +11,6 @@ use photopose_pipeline::metrics::MetricsServer;
 use photopose_pipeline::Counters;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -42,7 +41,7 @@ fn slowest_of(addr: SocketAddr, n: usize) -> Duration {
 #[test]
 fn idle_half_requests_do_not_delay_a_scrape() {
     let counters = Arc::new(Counters::default());
-    counters.frames_in.store(7, Ordering::Relaxed);
+    counters.frames_in.add(7);
     let edge = photopose_stream::Edge::start(1).unwrap();
     let server =
         MetricsServer::start(edge.handle(), "127.0.0.1:0".parse().unwrap(), counters).unwrap();

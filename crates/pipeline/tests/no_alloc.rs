@@ -10,7 +10,6 @@ use photopose_pipeline::source::SyntheticSource;
 use photopose_pipeline::{Config, Pipeline, Supervision};
 use photopose_testkit::{allocations, CountingAllocator};
 use std::net::UdpSocket;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 #[global_allocator]
@@ -66,10 +65,10 @@ udp = ["{}"]
     // Warm: every buffer, queue and cache has grown to its size.
     receive(60);
     let before = allocations();
-    let poses_before = pipeline.counters().poses_ok.load(Ordering::Relaxed);
+    let poses_before = pipeline.counters().poses_ok.get();
     receive(100);
     let allocated = allocations() - before;
-    let poses = pipeline.counters().poses_ok.load(Ordering::Relaxed) - poses_before;
+    let poses = pipeline.counters().poses_ok.get() - poses_before;
     pipeline.stop();
     pipeline.join();
     assert!(poses >= 90, "{poses} poses measured in the window");

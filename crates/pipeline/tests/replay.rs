@@ -42,10 +42,7 @@ fn replay_once(path: &std::path::Path, frames: usize) -> Vec<serde_json::Value> 
         out.push(serde_json::from_slice::<serde_json::Value>(&buf[..n]).unwrap());
     }
     let c = pipeline.join();
-    assert_eq!(
-        c.frames_dropped.load(std::sync::atomic::Ordering::Relaxed),
-        0
-    );
+    assert_eq!(c.frames_dropped.get(), 0);
     out
 }
 

@@ -9,7 +9,6 @@ use photopose_pipeline::source::SyntheticSource;
 use photopose_pipeline::{Config, Pipeline};
 use std::io::{BufRead, BufReader};
 use std::net::{TcpStream, UdpSocket};
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 fn config(udp: &str, overflow: &str, frames: u64, rate: f64) -> Config {
@@ -79,13 +78,13 @@ fn poses_stream_in_order_and_agree_with_the_truth() {
         }
     }
     let counters = pipeline.join();
-    assert_eq!(counters.frames_in.load(Ordering::Relaxed), frames);
+    assert_eq!(counters.frames_in.get(), frames);
     assert_eq!(
-        counters.frames_dropped.load(Ordering::Relaxed),
+        counters.frames_dropped.get(),
         0,
         "block policy drops nothing"
     );
-    assert_eq!(counters.poses_ok.load(Ordering::Relaxed), frames);
+    assert_eq!(counters.poses_ok.get(), frames);
     assert_eq!(
         udp_seqs,
         (0..frames).collect::<Vec<_>>(),
@@ -154,15 +153,11 @@ fn a_stopped_pipeline_ends_cleanly_and_drop_newest_counts_what_it_drops() {
     std::thread::sleep(Duration::from_millis(1500));
     pipeline.stop();
     let c = pipeline.join();
-    let (inn, dropped, ok) = (
-        c.frames_in.load(Ordering::Relaxed),
-        c.frames_dropped.load(Ordering::Relaxed),
-        c.poses_ok.load(Ordering::Relaxed),
-    );
+    let (inn, dropped, ok) = (c.frames_in.get(), c.frames_dropped.get(), c.poses_ok.get());
     assert!(inn > 0 && ok > 0, "in {inn}, ok {ok}");
     assert_eq!(
         inn,
-        dropped + c.frames_processed.load(Ordering::Relaxed),
+        dropped + c.frames_processed.get(),
         "every frame is processed or counted as dropped"
     );
 }

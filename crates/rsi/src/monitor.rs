@@ -2,140 +2,47 @@
 //! received → reply sent), inter-arrival times, IPOC steps, the controller's
 //! `Delay`, corrections applied, clamp and slew hits, dropped datagrams by
 //! reason, the controller session's restarts, frozen-invalid cycles.
-//! Atomics written by the RSI thread and read from any other thread
-//! (metrics, logs) without locking; one naming scheme
-//! (`photopose_rsi_*`) for export.
+//! Atomics and histograms of `photopose-telemetry`, written by the RSI
+//! thread and read from any other thread (metrics, logs) without locking;
+//! exported as `photopose_rsi_*` through its [`Collect`] implementation.
 
+use photopose_telemetry::{Collect, Counter, Scrape};
 use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 
-/// Fine buckets of 1 µs below this, µs.
-const FINE_US: u64 = 2_000;
-/// Coarse buckets of 100 µs up to this, µs.
-const COARSE_END_US: u64 = 100_000;
-const COARSE_STEP: u64 = 100;
-const BUCKETS: usize = FINE_US as usize + ((COARSE_END_US - FINE_US) / COARSE_STEP) as usize + 1;
-
-/// A histogram of durations in µs: 1 µs buckets to 2 ms, 100 µs buckets to
-/// 100 ms, one overflow bucket. Lock-free; allocated once.
-#[derive(Debug)]
-pub struct Histogram {
-    buckets: Vec<AtomicU64>,
-    count: AtomicU64,
-    max: AtomicU64,
-}
-
-impl Default for Histogram {
-    fn default() -> Self {
-        Histogram {
-            buckets: (0..BUCKETS).map(|_| AtomicU64::new(0)).collect(),
-            count: AtomicU64::new(0),
-            max: AtomicU64::new(0),
-        }
-    }
-}
-
-fn bucket_of(us: u64) -> usize {
-    if us < FINE_US {
-        us as usize
-    } else if us < COARSE_END_US {
-        FINE_US as usize + ((us - FINE_US) / COARSE_STEP) as usize
-    } else {
-        BUCKETS - 1
-    }
-}
-
-fn upper_edge(b: usize) -> u64 {
-    if b < FINE_US as usize {
-        b as u64 + 1
-    } else if b < BUCKETS - 1 {
-        FINE_US + (b as u64 - FINE_US + 1) * COARSE_STEP
-    } else {
-        u64::MAX
-    }
-}
-
-impl Histogram {
-    /// Records one duration in nanoseconds.
-    pub fn record_ns(&self, ns: u64) {
-        let us = ns / 1000;
-        self.buckets[bucket_of(us)].fetch_add(1, Ordering::Relaxed);
-        self.count.fetch_add(1, Ordering::Relaxed);
-        self.max.fetch_max(ns, Ordering::Relaxed);
-    }
-
-    /// Number of recorded values.
-    pub fn count(&self) -> u64 {
-        self.count.load(Ordering::Relaxed)
-    }
-
-    /// Largest recorded value, ns.
-    pub fn max_ns(&self) -> u64 {
-        self.max.load(Ordering::Relaxed)
-    }
-
-    /// The `p` quantile (0..=1) as the upper edge of its bucket, µs
-    /// (`None` when empty; the overflow bucket reports the maximum).
-    pub fn quantile_us(&self, p: f64) -> Option<f64> {
-        let n = self.count();
-        if n == 0 {
-            return None;
-        }
-        let rank = ((p.clamp(0.0, 1.0) * n as f64).ceil() as u64).max(1);
-        let mut acc = 0;
-        for (b, c) in self.buckets.iter().enumerate() {
-            acc += c.load(Ordering::Relaxed);
-            if acc >= rank {
-                let e = upper_edge(b);
-                return Some(if e == u64::MAX {
-                    self.max_ns() as f64 / 1000.0
-                } else {
-                    e as f64
-                });
-            }
-        }
-        Some(self.max_ns() as f64 / 1000.0)
-    }
-
-    /// Number of values at or above `us` microseconds (bucket resolution).
-    pub fn count_at_least_us(&self, us: u64) -> u64 {
-        let from = bucket_of(us);
-        self.buckets[from..]
-            .iter()
-            .map(|c| c.load(Ordering::Relaxed))
-            .sum()
-    }
-}
+/// The daemon's one latency histogram (eight buckets per octave, 1 µs to
+/// about 134 s): recording is lock-free and allocation-free.
+pub use photopose_telemetry::Histogram;
 
 /// The server's live counters.
 #[derive(Debug, Default)]
 pub struct Stats {
     /// Datagrams read from the socket, whatever they held.
-    pub received: AtomicU64,
+    pub received: Counter,
     /// Controller cycles answered (new, larger IPOCs of the session).
-    pub cycles: AtomicU64,
+    pub cycles: Counter,
     /// Replies sent.
-    pub replies: AtomicU64,
+    pub replies: Counter,
     /// Datagrams dropped because they did not parse (garbage, truncated,
     /// oversized).
-    pub garbage: AtomicU64,
+    pub garbage: Counter,
     /// Datagrams dropped because their sender is not a configured controller.
-    pub unlisted: AtomicU64,
+    pub unlisted: Counter,
     /// Older queued datagrams skipped in favour of a newer one.
-    pub drained: AtomicU64,
+    pub drained: Counter,
     /// Datagrams from a listed address but not the session's port, dropped.
-    pub foreign_port: AtomicU64,
+    pub foreign_port: Counter,
     /// Datagrams of the session with an IPOC older than the last, dropped.
-    pub stale_ipoc: AtomicU64,
+    pub stale_ipoc: Counter,
     /// Datagrams of the session repeating the last IPOC (answered with the
     /// same reply, never a new step).
-    pub repeated: AtomicU64,
+    pub repeated: Counter,
     /// Controller sessions opened after the first (RSI restarted).
-    pub session_restarts: AtomicU64,
+    pub session_restarts: Counter,
     /// Cycles frozen because the correction was not finite or outside the
     /// limits (`frozen_invalid`).
-    pub invalid_cycles: AtomicU64,
+    pub invalid_cycles: Counter,
     /// Replies the socket refused to send.
-    pub send_errors: AtomicU64,
+    pub send_errors: Counter,
     /// Last `Delay D` the controller reported.
     pub delay_last: AtomicU64,
     /// Largest `Delay D` seen.
@@ -143,16 +50,16 @@ pub struct Stats {
     /// Last IPOC step (difference to the previous answered IPOC).
     pub ipoc_step_last: AtomicU64,
     /// IPOC steps that differ from the first step seen (missed cycles).
-    pub ipoc_irregular: AtomicU64,
+    pub ipoc_irregular: Counter,
     /// Cycles with a non-zero correction sent (relative) or a changed total
     /// (absolute).
-    pub corrections_applied: AtomicU64,
+    pub corrections_applied: Counter,
     /// Cycles where the total clamp cut the target.
-    pub clamp_hits: AtomicU64,
+    pub clamp_hits: Counter,
     /// Cycles where the slew limit cut the step.
-    pub slew_hits: AtomicU64,
+    pub slew_hits: Counter,
     /// Cycles with a stale measurement (correction frozen).
-    pub stale_cycles: AtomicU64,
+    pub stale_cycles: Counter,
     /// [`crate::law::LawStatus::code`] of the last cycle (255 before the first).
     pub status: AtomicU8,
     /// Reply latency: datagram received → reply sent.
@@ -197,39 +104,41 @@ impl Stats {
     /// A plain copy for reports and metrics.
     pub fn snapshot(&self) -> StatsSnapshot {
         let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let us = |s: Option<f64>| s.map(|s| s * 1e6);
         StatsSnapshot {
-            received: g(&self.received),
-            cycles: g(&self.cycles),
-            replies: g(&self.replies),
-            garbage: g(&self.garbage),
-            unlisted: g(&self.unlisted),
-            drained: g(&self.drained),
-            foreign_port: g(&self.foreign_port),
-            stale_ipoc: g(&self.stale_ipoc),
-            repeated: g(&self.repeated),
-            session_restarts: g(&self.session_restarts),
-            invalid_cycles: g(&self.invalid_cycles),
-            send_errors: g(&self.send_errors),
+            received: self.received.get(),
+            cycles: self.cycles.get(),
+            replies: self.replies.get(),
+            garbage: self.garbage.get(),
+            unlisted: self.unlisted.get(),
+            drained: self.drained.get(),
+            foreign_port: self.foreign_port.get(),
+            stale_ipoc: self.stale_ipoc.get(),
+            repeated: self.repeated.get(),
+            session_restarts: self.session_restarts.get(),
+            invalid_cycles: self.invalid_cycles.get(),
+            send_errors: self.send_errors.get(),
             delay_last: g(&self.delay_last),
             delay_max: g(&self.delay_max),
             ipoc_step_last: g(&self.ipoc_step_last),
-            ipoc_irregular: g(&self.ipoc_irregular),
-            corrections_applied: g(&self.corrections_applied),
-            clamp_hits: g(&self.clamp_hits),
-            slew_hits: g(&self.slew_hits),
-            stale_cycles: g(&self.stale_cycles),
-            latency_p50_us: self.latency.quantile_us(0.5),
-            latency_p99_us: self.latency.quantile_us(0.99),
-            latency_p999_us: self.latency.quantile_us(0.999),
+            ipoc_irregular: self.ipoc_irregular.get(),
+            corrections_applied: self.corrections_applied.get(),
+            clamp_hits: self.clamp_hits.get(),
+            slew_hits: self.slew_hits.get(),
+            stale_cycles: self.stale_cycles.get(),
+            latency_p50_us: us(self.latency.quantile_seconds(0.5)),
+            latency_p99_us: us(self.latency.quantile_seconds(0.99)),
+            latency_p999_us: us(self.latency.quantile_seconds(0.999)),
             latency_max_us: self.latency.max_ns() as f64 / 1000.0,
-            interarrival_p50_us: self.interarrival.quantile_us(0.5),
-            interarrival_p999_us: self.interarrival.quantile_us(0.999),
+            interarrival_p50_us: us(self.interarrival.quantile_seconds(0.5)),
+            interarrival_p999_us: us(self.interarrival.quantile_seconds(0.999)),
             interarrival_max_us: self.interarrival.max_ns() as f64 / 1000.0,
         }
     }
 }
 
-/// A copy of [`Stats`] with the histograms reduced to quantiles.
+/// A copy of [`Stats`] with the histograms reduced to quantiles (µs, the
+/// upper edges of their buckets: at most 9.05 % high), for reports.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[allow(missing_docs)] // the fields mirror [`Stats`]
 pub struct StatsSnapshot {
@@ -262,104 +171,219 @@ pub struct StatsSnapshot {
     pub interarrival_max_us: f64,
 }
 
-impl StatsSnapshot {
-    /// `(metric name, value)` pairs named `photopose_rsi_*` (counters end
-    /// in `_total`), for the daemon's metrics endpoint.
-    pub fn metrics(&self) -> Vec<(&'static str, f64)> {
-        let mut m = vec![
-            ("photopose_rsi_cycles_total", self.cycles as f64),
-            ("photopose_rsi_replies_total", self.replies as f64),
-            ("photopose_rsi_garbage_dropped_total", self.garbage as f64),
-            ("photopose_rsi_unlisted_dropped_total", self.unlisted as f64),
-            ("photopose_rsi_received_total", self.received as f64),
-            ("photopose_rsi_drained_total", self.drained as f64),
+impl Collect for Stats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        for (name, help, c) in [
+            (
+                "photopose_rsi_received_total",
+                "Datagrams read from the RSI socket, whatever they held.",
+                &self.received,
+            ),
+            (
+                "photopose_rsi_cycles_total",
+                "Controller cycles answered (new, larger IPOCs of the session).",
+                &self.cycles,
+            ),
+            (
+                "photopose_rsi_replies_total",
+                "RSI replies sent.",
+                &self.replies,
+            ),
+            (
+                "photopose_rsi_garbage_dropped_total",
+                "Datagrams dropped because they did not parse (garbage, truncated, oversized).",
+                &self.garbage,
+            ),
+            (
+                "photopose_rsi_unlisted_dropped_total",
+                "Datagrams dropped because their sender is not a configured controller.",
+                &self.unlisted,
+            ),
+            (
+                "photopose_rsi_drained_total",
+                "Older queued datagrams skipped in favour of a newer one.",
+                &self.drained,
+            ),
             (
                 "photopose_rsi_foreign_port_dropped_total",
-                self.foreign_port as f64,
+                "Datagrams from a listed address but not the session's port, dropped.",
+                &self.foreign_port,
             ),
             (
                 "photopose_rsi_stale_ipoc_dropped_total",
-                self.stale_ipoc as f64,
+                "Datagrams of the session with an IPOC older than the last, dropped.",
+                &self.stale_ipoc,
             ),
-            ("photopose_rsi_repeated_ipoc_total", self.repeated as f64),
+            (
+                "photopose_rsi_repeated_ipoc_total",
+                "Datagrams repeating the last IPOC (answered with the same reply).",
+                &self.repeated,
+            ),
             (
                 "photopose_rsi_session_restarts_total",
-                self.session_restarts as f64,
+                "Controller sessions opened after the first (RSI restarted).",
+                &self.session_restarts,
             ),
             (
                 "photopose_rsi_invalid_cycles_total",
-                self.invalid_cycles as f64,
+                "Cycles frozen because the correction was not finite or outside the limits.",
+                &self.invalid_cycles,
             ),
-            ("photopose_rsi_send_errors_total", self.send_errors as f64),
-            ("photopose_rsi_controller_delay", self.delay_last as f64),
-            ("photopose_rsi_controller_delay_max", self.delay_max as f64),
-            ("photopose_rsi_ipoc_step", self.ipoc_step_last as f64),
+            (
+                "photopose_rsi_send_errors_total",
+                "RSI replies the socket refused to send.",
+                &self.send_errors,
+            ),
             (
                 "photopose_rsi_ipoc_irregular_total",
-                self.ipoc_irregular as f64,
+                "IPOC steps that differ from the first step seen (missed cycles).",
+                &self.ipoc_irregular,
             ),
             (
                 "photopose_rsi_corrections_applied_total",
-                self.corrections_applied as f64,
-            ),
-            ("photopose_rsi_clamp_hits_total", self.clamp_hits as f64),
-            ("photopose_rsi_slew_hits_total", self.slew_hits as f64),
-            ("photopose_rsi_stale_cycles_total", self.stale_cycles as f64),
-            ("photopose_rsi_reply_latency_max_us", self.latency_max_us),
-            (
-                "photopose_rsi_interarrival_max_us",
-                self.interarrival_max_us,
-            ),
-        ];
-        for (name, v) in [
-            ("photopose_rsi_reply_latency_p50_us", self.latency_p50_us),
-            ("photopose_rsi_reply_latency_p99_us", self.latency_p99_us),
-            ("photopose_rsi_reply_latency_p999_us", self.latency_p999_us),
-            (
-                "photopose_rsi_interarrival_p50_us",
-                self.interarrival_p50_us,
+                "Cycles with a non-zero correction sent (relative) or a changed total (absolute).",
+                &self.corrections_applied,
             ),
             (
-                "photopose_rsi_interarrival_p999_us",
-                self.interarrival_p999_us,
+                "photopose_rsi_clamp_hits_total",
+                "Cycles where the total clamp cut the target.",
+                &self.clamp_hits,
+            ),
+            (
+                "photopose_rsi_slew_hits_total",
+                "Cycles where the slew limit cut the step.",
+                &self.slew_hits,
+            ),
+            (
+                "photopose_rsi_stale_cycles_total",
+                "Cycles with a stale measurement (correction frozen).",
+                &self.stale_cycles,
             ),
         ] {
-            if let Some(v) = v {
-                m.push((name, v));
-            }
+            out.counter(name, help, c.get())?;
         }
-        m
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        out.counter(
+            "photopose_rsi_robot_pose_cycles_total",
+            "Cycles whose datagram carried the robot's actual pose (RIst).",
+            g(&self.rist_cycles),
+        )?;
+        out.counter(
+            "photopose_rsi_loop_turns_total",
+            "Turns of the RSI thread's loop (a datagram or a receive timeout each).",
+            g(&self.loops),
+        )?;
+        out.gauge(
+            "photopose_rsi_controller_delay",
+            "Late or missing replies the controller counts now (its Delay D).",
+            g(&self.delay_last) as f64,
+        )?;
+        out.gauge(
+            "photopose_rsi_controller_delay_max",
+            "Largest Delay D the controller reported.",
+            g(&self.delay_max) as f64,
+        )?;
+        out.gauge(
+            "photopose_rsi_ipoc_step",
+            "Last IPOC step (difference to the previous answered IPOC, controller ticks).",
+            g(&self.ipoc_step_last) as f64,
+        )?;
+        let code = self.status.load(Ordering::Relaxed);
+        let mut states = [("waiting_for_controller", 0.0); 9];
+        for (k, s) in states.iter_mut().enumerate().skip(1) {
+            let st = crate::law::LawStatus::from_code(k as u8 - 1);
+            *s = (
+                st.map_or("unknown", |st| st.name()),
+                f64::from(u8::from(code == k as u8 - 1)),
+            );
+        }
+        states[0].1 = f64::from(u8::from(crate::law::LawStatus::from_code(code).is_none()));
+        out.gauge_family(
+            "photopose_rsi_state",
+            "State of the correction law in the last cycle: 1 for the current state.",
+            "state",
+            &states,
+        )?;
+        out.histogram(
+            "photopose_rsi_reply_latency_seconds",
+            "RSI reply latency: datagram received to reply sent.",
+            &self.latency,
+        )?;
+        out.gauge(
+            "photopose_rsi_reply_latency_max_seconds",
+            "Largest RSI reply latency since start.",
+            self.latency.max_ns() as f64 / 1e9,
+        )?;
+        out.histogram(
+            "photopose_rsi_interarrival_seconds",
+            "Time between answered controller datagrams.",
+            &self.interarrival,
+        )?;
+        out.gauge(
+            "photopose_rsi_interarrival_max_seconds",
+            "Largest time between answered controller datagrams since start.",
+            self.interarrival.max_ns() as f64 / 1e9,
+        )
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Arc;
 
     #[test]
-    fn quantiles_of_a_known_histogram() {
-        let h = Histogram::default();
-        assert_eq!(h.quantile_us(0.5), None);
+    fn snapshot_quantiles_come_from_the_histogram() {
+        let s = Stats::new();
+        assert_eq!(s.snapshot().latency_p50_us, None);
         for us in 1..=1000u64 {
-            h.record_ns(us * 1000 - 500);
+            s.latency.record_ns(us * 1000 - 500);
         }
-        h.record_ns(50_000_000);
-        h.record_ns(500_000_000);
-        assert_eq!(h.count(), 1002);
-        assert_eq!(h.quantile_us(0.5), Some(501.0));
-        assert_eq!(h.quantile_us(0.99), Some(992.0));
-        assert_eq!(h.quantile_us(0.9985), Some(50_100.0));
-        assert_eq!(h.quantile_us(1.0), Some(500_000.0));
-        assert_eq!(h.count_at_least_us(1000), 2);
-        assert_eq!(h.max_ns(), 500_000_000);
+        let snap = s.snapshot();
+        let p50 = snap.latency_p50_us.unwrap();
+        let p99 = snap.latency_p99_us.unwrap();
+        assert!((500.0..=500.0 * 1.0906).contains(&p50), "{p50}");
+        assert!((990.0..=990.0 * 1.0906).contains(&p99), "{p99}");
+        assert_eq!(snap.latency_max_us, 999.5);
     }
 
     #[test]
-    fn metric_names_follow_the_scheme() {
-        let s = Stats::new();
-        s.latency.record_ns(10_000);
-        for (name, _) in s.snapshot().metrics() {
-            assert!(name.starts_with("photopose_rsi_"), "{name}");
+    fn every_metric_has_help_and_follows_the_scheme() {
+        let s = Arc::new(Stats::new());
+        s.cycles.inc();
+        s.latency.record_ns(250_000);
+        s.status.store(0, Ordering::Relaxed);
+        let mut e = photopose_telemetry::Exposition::new();
+        e.register(s);
+        let text = e.render();
+        let mut helped = std::collections::HashSet::new();
+        for l in text.lines() {
+            if let Some(h) = l.strip_prefix("# HELP ") {
+                helped.insert(h.split(' ').next().unwrap().to_string());
+            } else if !l.starts_with('#') {
+                let name = l.split(['{', ' ']).next().unwrap();
+                assert!(name.starts_with("photopose_rsi_"), "{l}");
+                assert!(!name.contains("_us"), "{l}");
+                let family = ["_bucket", "_sum", "_count"]
+                    .iter()
+                    .find_map(|x| name.strip_suffix(x))
+                    .filter(|f| helped.contains(*f))
+                    .unwrap_or(name);
+                assert!(helped.contains(family), "no HELP for {l}");
+            }
         }
+        assert!(text.contains("photopose_rsi_cycles_total 1\n"), "{text}");
+        assert!(
+            text.contains("photopose_rsi_state{state=\"tracking\"} 1"),
+            "{text}"
+        );
+        assert!(
+            text.contains("photopose_rsi_state{state=\"waiting_for_controller\"} 0"),
+            "{text}"
+        );
+        assert!(
+            text.contains("photopose_rsi_reply_latency_seconds_count 1\n"),
+            "{text}"
+        );
     }
 }

@@ -373,9 +373,9 @@ impl Worker {
         repeat: &mut bool,
     ) {
         let s = &self.stats;
-        s.received.fetch_add(1, Ordering::Relaxed);
+        s.received.inc();
         if !self.allowed(from.ip()) {
-            s.unlisted.fetch_add(1, Ordering::Relaxed);
+            s.unlisted.inc();
             self.log.warn("unlisted", t, || {
                 format!("dropped a datagram from {from}: not a configured controller")
             });
@@ -383,7 +383,7 @@ impl Worker {
         }
         let now_s = self.clock.at(t);
         if self.session.is_foreign(from, now_s) {
-            s.foreign_port.fetch_add(1, Ordering::Relaxed);
+            s.foreign_port.inc();
             let peer = self.session.peer();
             self.log.warn("foreign_port", t, || {
                 format!(
@@ -401,7 +401,7 @@ impl Worker {
         let frame = match frame {
             Ok(f) => f,
             Err(e) => {
-                s.garbage.fetch_add(1, Ordering::Relaxed);
+                s.garbage.inc();
                 self.log.warn(e.kind(), t, || {
                     format!("dropped a datagram of {n} bytes from {from}: {e}")
                 });
@@ -413,7 +413,7 @@ impl Worker {
         match verdict {
             Verdict::Open | Verdict::Advance | Verdict::Restart => {
                 if pending.is_some() {
-                    s.drained.fetch_add(1, Ordering::Relaxed);
+                    s.drained.inc();
                 }
                 // A restart earlier in this drain still applies.
                 let restart =
@@ -438,19 +438,19 @@ impl Worker {
                 *repeat = false;
             }
             Verdict::Repeat => {
-                s.repeated.fetch_add(1, Ordering::Relaxed);
+                s.repeated.inc();
                 if pending.is_none() {
                     *repeat = true;
                 }
             }
             Verdict::Older => {
-                s.stale_ipoc.fetch_add(1, Ordering::Relaxed);
+                s.stale_ipoc.inc();
                 self.log.warn("stale_ipoc", t, || {
                     format!("dropped a datagram from {from}: IPOC {ipoc} is older than the session's last")
                 });
             }
             Verdict::Foreign => {
-                s.foreign_port.fetch_add(1, Ordering::Relaxed);
+                s.foreign_port.inc();
             }
         }
     }
@@ -499,14 +499,14 @@ impl Worker {
                 self.repeat_reply();
             }
         }
-        tracing::info!(target: "photopose::rsi", "RSI server stopped after {} cycles", self.stats.cycles.load(Ordering::Relaxed));
+        tracing::info!(target: "photopose::rsi", "RSI server stopped after {} cycles", self.stats.cycles.get());
     }
 
     /// The session's last IPOC came again: the same reply, unchanged.
     fn repeat_reply(&mut self) {
         if let Some((n, to)) = self.last_reply {
             if let Err(e) = self.socket.send_to(&self.tx[..n], to) {
-                self.stats.send_errors.fetch_add(1, Ordering::Relaxed);
+                self.stats.send_errors.inc();
                 self.log.warn("send_error", Instant::now(), || {
                     format!("reply to {to}: {e}")
                 });
@@ -517,7 +517,7 @@ impl Worker {
     fn answer(&mut self, p: &Pending) {
         let (frame, to, t_rx) = (&p.frame, p.to, p.t_rx);
         if p.restart {
-            self.stats.session_restarts.fetch_add(1, Ordering::Relaxed);
+            self.stats.session_restarts.inc();
             self.law.reset();
             self.last_ipoc = None;
             self.first_step = None;
@@ -557,16 +557,16 @@ impl Worker {
         let s = &self.stats;
         match sent {
             Ok(_) => {
-                s.replies.fetch_add(1, Ordering::Relaxed);
+                s.replies.inc();
                 s.latency.record_ns((t_tx - t_rx).as_nanos() as u64);
             }
             Err(e) => {
-                s.send_errors.fetch_add(1, Ordering::Relaxed);
+                s.send_errors.inc();
                 self.log
                     .warn("send_error", t_tx, || format!("reply to {to}: {e}"));
             }
         }
-        s.cycles.fetch_add(1, Ordering::Relaxed);
+        s.cycles.inc();
         if let Some(prev) = self.last_rx.replace(t_rx) {
             s.interarrival.record_ns((t_rx - prev).as_nanos() as u64);
         }
@@ -587,7 +587,7 @@ impl Worker {
             match self.first_step {
                 None => self.first_step = Some(step),
                 Some(f) if f != step => {
-                    s.ipoc_irregular.fetch_add(1, Ordering::Relaxed);
+                    s.ipoc_irregular.inc();
                 }
                 Some(_) => {}
             }
@@ -606,19 +606,19 @@ impl Worker {
             CorrectionMode::Absolute => out.total != *before,
         };
         if applied {
-            s.corrections_applied.fetch_add(1, Ordering::Relaxed);
+            s.corrections_applied.inc();
         }
         if out.clamped {
-            s.clamp_hits.fetch_add(1, Ordering::Relaxed);
+            s.clamp_hits.inc();
         }
         if out.slew_limited {
-            s.slew_hits.fetch_add(1, Ordering::Relaxed);
+            s.slew_hits.inc();
         }
         if matches!(out.status, LawStatus::Stale(_)) {
-            s.stale_cycles.fetch_add(1, Ordering::Relaxed);
+            s.stale_cycles.inc();
         }
         if out.status == LawStatus::FrozenInvalid {
-            s.invalid_cycles.fetch_add(1, Ordering::Relaxed);
+            s.invalid_cycles.inc();
         }
         s.status.store(out.status.code(), Ordering::Relaxed);
         if self.last_status != Some(out.status) {

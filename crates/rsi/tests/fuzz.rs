@@ -18,7 +18,6 @@ use photopose_rsi::server::{RsiClock, RsiServer};
 use photopose_rsi::{latest_slot, Measurement};
 use std::collections::HashMap;
 use std::net::{SocketAddr, UdpSocket};
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// SplitMix64: a tiny seeded generator, enough for test content.
@@ -203,11 +202,11 @@ impl Rig {
     /// Waits until the server has read everything sent (bounded).
     fn settle(&self) {
         let t = Instant::now();
-        while self.server.stats().received.load(Ordering::Relaxed) < self.sent {
+        while self.server.stats().received.get() < self.sent {
             assert!(
                 t.elapsed() < Duration::from_secs(10),
                 "server read {} of {}",
-                self.server.stats().received.load(Ordering::Relaxed),
+                self.server.stats().received.get(),
                 self.sent
             );
             std::thread::sleep(Duration::from_micros(50));

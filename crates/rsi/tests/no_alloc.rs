@@ -2,11 +2,13 @@
 //! ones), classify it against the controller session, read the slot, run
 //! the correction law with its checks (including a frozen-invalid cycle),
 //! check the values once more, write `<Sen>`, decide whether a drop is
-//! logged — allocates nothing: a counting global allocator watches (the
-//! socket calls around it are system calls).
+//! logged, count the cycle and record its latencies — allocates nothing: a
+//! counting global allocator watches (the socket calls around it are system
+//! calls).
 
 use photopose_rsi::codec::{parse_rob, SenFormat};
 use photopose_rsi::law::{pose_to_isometry, LawConfig, LawStatus};
+use photopose_rsi::monitor::Stats;
 use photopose_rsi::server::RateLog;
 use photopose_rsi::session::Session;
 use photopose_rsi::{latest_slot, CorrectionLaw, HandEye, Measurement};
@@ -57,6 +59,7 @@ fn a_cycle_allocates_nothing() {
     let other: SocketAddr = "[::ffff:127.0.0.1]:6001".parse().unwrap();
     let mut session = Session::new(0.1);
     let mut log = RateLog::new(Duration::from_secs(10));
+    let stats = Stats::new();
     let t0 = Instant::now();
     let mut bad = m(0);
     bad.plate_from_camera.translation.vector.x = f64::NAN;
@@ -97,6 +100,12 @@ fn a_cycle_allocates_nothing() {
             };
             let n = fmt.write(&send, &f.ipoc, &mut out).unwrap();
             assert!(n > 0);
+            // The cycle's bookkeeping: counters and histograms.
+            stats.received.inc();
+            stats.cycles.inc();
+            stats.replies.inc();
+            stats.latency.record_ns(20_000 + k * 37);
+            stats.interarrival.record_ns(4_000_000 + k);
         }
     };
     run(0);

@@ -96,7 +96,7 @@ fn silent(sock: &UdpSocket, wait: Duration) -> bool {
 /// Waits (bounded) until the server has read `n` datagrams.
 fn settle(server: &RsiServer, n: u64) {
     let t = Instant::now();
-    while server.stats().received.load(Ordering::Relaxed) < n {
+    while server.stats().received.get() < n {
         assert!(t.elapsed() < Duration::from_secs(10), "server stalled");
         std::thread::sleep(Duration::from_micros(100));
     }

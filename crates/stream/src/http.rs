@@ -14,9 +14,9 @@ use hyper::body::Incoming;
 use hyper::header::{HeaderValue, ALLOW, CONTENT_TYPE};
 use hyper::{Method, Request, Response, StatusCode};
 use hyper_util::rt::{TokioIo, TokioTimer};
+use photopose_telemetry::{Collect, Counter, Scrape};
 use std::convert::Infallible;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::Semaphore;
@@ -53,11 +53,31 @@ impl Default for HttpLimits {
 #[derive(Debug, Default)]
 pub struct HttpStats {
     /// Connections served.
-    pub accepted: AtomicU64,
+    pub accepted: Counter,
     /// Connections closed at once because the limit was reached.
-    pub refused: AtomicU64,
+    pub refused: Counter,
     /// Requests answered.
-    pub requests: AtomicU64,
+    pub requests: Counter,
+}
+
+impl Collect for HttpStats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        out.counter(
+            "photopose_metrics_connections_accepted_total",
+            "Connections the metrics endpoint served.",
+            self.accepted.get(),
+        )?;
+        out.counter(
+            "photopose_metrics_connections_refused_total",
+            "Connections to the metrics endpoint closed at once: its connection limit was reached.",
+            self.refused.get(),
+        )?;
+        out.counter(
+            "photopose_metrics_requests_total",
+            "Requests the metrics endpoint answered.",
+            self.requests.get(),
+        )
+    }
 }
 
 /// A running text endpoint; [`TextEndpoint::stop`] or the edge's stop ends it.
@@ -84,8 +104,20 @@ impl TextEndpoint {
         render: Render,
         limits: HttpLimits,
     ) -> Result<Self, StreamError> {
+        Self::start_counted(edge, listen, path, render, limits, Arc::default())
+    }
+
+    /// [`TextEndpoint::start`] counting into `stats` (made first, e.g. so
+    /// that the metrics it serves include its own).
+    pub fn start_counted(
+        edge: &EdgeHandle,
+        listen: SocketAddr,
+        path: &'static str,
+        render: Render,
+        limits: HttpLimits,
+        stats: Arc<HttpStats>,
+    ) -> Result<Self, StreamError> {
         let (listener, addr) = edge.listen(listen, "cannot listen for HTTP on")?;
-        let stats = Arc::new(HttpStats::default());
         let stop = edge.stop_token();
         let mut http = hyper::server::conn::http1::Builder::new();
         http.timer(TokioTimer::new())
@@ -111,7 +143,8 @@ impl TextEndpoint {
                         },
                     };
                     let Ok(slot) = Arc::clone(&slots).try_acquire_owned() else {
-                        let n = stats.refused.fetch_add(1, Ordering::Relaxed) + 1;
+                        stats.refused.inc();
+                        let n = stats.refused.get();
                         drop(stream);
                         if last_refusal_log.is_none_or(|t| t.elapsed() >= REFUSAL_LOG_INTERVAL) {
                             tracing::warn!(client = %peer, %addr, refused_total = n,
@@ -120,11 +153,11 @@ impl TextEndpoint {
                         }
                         continue;
                     };
-                    stats.accepted.fetch_add(1, Ordering::Relaxed);
+                    stats.accepted.inc();
                     let service = {
                         let (render, stats) = (Arc::clone(&render), Arc::clone(&stats));
                         hyper::service::service_fn(move |req: Request<Incoming>| {
-                            stats.requests.fetch_add(1, Ordering::Relaxed);
+                            stats.requests.inc();
                             let response = respond(&req, path, &render);
                             async move { Ok::<_, Infallible>(response) }
                         })

@@ -19,10 +19,10 @@ pub mod tcp;
 pub mod udp;
 
 pub use edge::{Edge, EdgeHandle};
-pub use http::{HttpLimits, TextEndpoint};
+pub use http::{HttpLimits, HttpStats, TextEndpoint};
 pub use message::{PoseMessage, PoseStatus};
 pub use tcp::{TcpLimits, TcpServer, TcpStats};
-pub use udp::UdpSender;
+pub use udp::{DestinationStats, UdpSender, UdpStats};
 
 use thiserror::Error;
 

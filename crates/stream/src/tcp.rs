@@ -10,6 +10,7 @@
 use crate::edge::{line_feed, EdgeHandle, FeedReceiver, FeedSender};
 use crate::StreamError;
 use bytes::Bytes;
+use photopose_telemetry::{Collect, Counter, Scrape};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -53,17 +54,58 @@ impl Default for TcpLimits {
 #[derive(Debug, Default)]
 pub struct TcpStats {
     /// Clients accepted (and served).
-    pub accepted: AtomicU64,
+    pub accepted: Counter,
     /// Clients dropped because their queue was full (they read too slowly).
-    pub dropped: AtomicU64,
+    pub dropped: Counter,
     /// Clients that left (closed, reset, or a write failed).
-    pub disconnected: AtomicU64,
+    pub disconnected: Counter,
     /// Connections refused (closed at once) because the client limit was reached.
-    pub refused: AtomicU64,
+    pub refused: Counter,
     /// Lines not sent to anyone because the edge runtime was behind.
-    pub lines_dropped: AtomicU64,
+    pub lines_dropped: Counter,
     /// Clients connected now.
     pub connected: AtomicU64,
+}
+
+impl Collect for TcpStats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        out.gauge(
+            "photopose_stream_clients",
+            "TCP pose stream clients connected now.",
+            g(&self.connected) as f64,
+        )?;
+        for (name, help, v) in [
+            (
+                "photopose_stream_clients_accepted_total",
+                "TCP pose stream clients accepted (and served).",
+                &self.accepted,
+            ),
+            (
+                "photopose_stream_clients_dropped_total",
+                "TCP clients dropped because their queue was full (too slow).",
+                &self.dropped,
+            ),
+            (
+                "photopose_stream_clients_disconnected_total",
+                "TCP clients that left (closed, reset, write failed).",
+                &self.disconnected,
+            ),
+            (
+                "photopose_stream_clients_refused_total",
+                "TCP connections closed at once: the client limit was reached.",
+                &self.refused,
+            ),
+            (
+                "photopose_stream_lines_dropped_total",
+                "Pose lines not streamed over TCP because the edge runtime was behind.",
+                &self.lines_dropped,
+            ),
+        ] {
+            out.counter(name, help, v.get())?;
+        }
+        Ok(())
+    }
 }
 
 /// A TCP server streaming pose lines to its clients from the edge runtime.
@@ -134,7 +176,7 @@ impl TcpServer {
     /// warm. When the edge is behind the line is dropped and counted.
     pub fn publish(&mut self, line: &[u8]) {
         if !self.feed.send(line) {
-            self.stats.lines_dropped.fetch_add(1, Ordering::Relaxed);
+            self.stats.lines_dropped.inc();
         }
     }
 
@@ -208,7 +250,7 @@ impl Hub {
         // Forget clients that have left.
         self.clients.retain(|c| !c.lines.is_closed());
         if self.clients.len() >= self.limits.max_clients {
-            self.stats.refused.fetch_add(1, Ordering::Relaxed);
+            self.stats.refused.inc();
             drop(stream);
             let r = &mut self.refusals;
             r.since_log += 1;
@@ -229,7 +271,7 @@ impl Hub {
         let _ = stream.set_nodelay(true);
         let (tx, rx) = mpsc::channel(self.limits.client_queue);
         let kick = CancellationToken::new();
-        self.stats.accepted.fetch_add(1, Ordering::Relaxed);
+        self.stats.accepted.inc();
         self.stats.connected.fetch_add(1, Ordering::Relaxed);
         tracing::info!(client = %peer, "TCP pose client connected");
         let ended = Ended {
@@ -261,7 +303,7 @@ impl Hub {
                     Err(mpsc::error::TrySendError::Closed(_)) => false,
                     Err(mpsc::error::TrySendError::Full(_)) => {
                         c.kick.cancel();
-                        stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        stats.dropped.inc();
                         tracing::info!(
                             client = %c.peer,
                             queue,
@@ -298,7 +340,7 @@ async fn serve_client(
     ended: Ended,
 ) {
     if let Some(reason) = write_lines(stream, lines, kick).await {
-        ended.stats.disconnected.fetch_add(1, Ordering::Relaxed);
+        ended.stats.disconnected.inc();
         tracing::info!(client = %peer, %reason, "TCP pose client disconnected");
     }
     drop(ended);

@@ -5,7 +5,9 @@
 //! blocks.
 
 use crate::StreamError;
+use photopose_telemetry::{Collect, Counter, Scrape};
 use std::net::{SocketAddr, UdpSocket};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// A failing destination counts as reachable again after this long
@@ -17,6 +19,7 @@ pub const RECOVERY: Duration = Duration::from_secs(1);
 #[derive(Debug)]
 pub struct UdpSender {
     destinations: Vec<Destination>,
+    stats: Arc<UdpStats>,
 }
 
 #[derive(Debug)]
@@ -25,10 +28,66 @@ struct Destination {
     addr: SocketAddr,
     /// Time of the last error while the destination counts as failing.
     failing: Option<Instant>,
-    sent: u64,
-    errors: u64,
+}
+
+/// Counters of a [`UdpSender`], one set per destination (in the order
+/// given), shared with other threads (metrics).
+#[derive(Debug, Default)]
+pub struct UdpStats {
+    destinations: Vec<DestinationStats>,
+}
+
+/// The counters of one UDP destination.
+#[derive(Debug)]
+pub struct DestinationStats {
+    /// The destination.
+    pub addr: SocketAddr,
+    label: String,
+    /// Datagrams sent.
+    pub sent: Counter,
+    /// Sends that failed.
+    pub errors: Counter,
     /// Times the destination went from reachable to failing (logged once each).
-    outages: u64,
+    pub outages: Counter,
+}
+
+impl UdpStats {
+    /// The destinations' counters.
+    pub fn destinations(&self) -> &[DestinationStats] {
+        &self.destinations
+    }
+}
+
+impl Collect for UdpStats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        type Read = fn(&DestinationStats) -> u64;
+        let families: [(&str, &str, Read); 3] = [
+            (
+                "photopose_stream_udp_datagrams_sent_total",
+                "Pose datagrams sent, per UDP destination.",
+                |d| d.sent.get(),
+            ),
+            (
+                "photopose_stream_udp_send_errors_total",
+                "Pose datagrams the socket refused to send (destination unreachable), per UDP destination.",
+                |d| d.errors.get(),
+            ),
+            (
+                "photopose_stream_udp_outages_total",
+                "Times a UDP destination went from reachable to failing.",
+                |d| d.outages.get(),
+            ),
+        ];
+        for (name, help, read) in families {
+            let series: Vec<(&str, u64)> = self
+                .destinations
+                .iter()
+                .map(|d| (d.label.as_str(), read(d)))
+                .collect();
+            out.counter_family(name, help, "destination", &series)?;
+        }
+        Ok(())
+    }
 }
 
 impl UdpSender {
@@ -54,29 +113,41 @@ impl UdpSender {
                 socket,
                 addr,
                 failing: None,
-                sent: 0,
-                errors: 0,
-                outages: 0,
             });
         }
-        Ok(UdpSender { destinations: out })
+        let stats = Arc::new(UdpStats {
+            destinations: out
+                .iter()
+                .map(|d| DestinationStats {
+                    addr: d.addr,
+                    label: d.addr.to_string(),
+                    sent: Counter::new(),
+                    errors: Counter::new(),
+                    outages: Counter::new(),
+                })
+                .collect(),
+        });
+        Ok(UdpSender {
+            destinations: out,
+            stats,
+        })
     }
 
     /// Sends `line` to every destination.
     pub fn send(&mut self, line: &[u8]) {
-        for d in &mut self.destinations {
+        for (d, c) in self.destinations.iter_mut().zip(&self.stats.destinations) {
             match d.socket.send(line) {
                 Ok(_) => {
-                    d.sent += 1;
+                    c.sent.inc();
                     if d.failing.is_some_and(|t| t.elapsed() >= RECOVERY) {
                         d.failing = None;
-                        tracing::info!(destination = %d.addr, errors = d.errors, "UDP pose destination reachable again");
+                        tracing::info!(destination = %d.addr, errors = c.errors.get(), "UDP pose destination reachable again");
                     }
                 }
                 Err(e) => {
-                    d.errors += 1;
+                    c.errors.inc();
                     if d.failing.is_none() {
-                        d.outages += 1;
+                        c.outages.inc();
                         tracing::warn!(destination = %d.addr, error = %e, "UDP pose destination unreachable; counting and going on");
                     }
                     d.failing = Some(Instant::now());
@@ -87,7 +158,15 @@ impl UdpSender {
 
     /// `(destination, datagrams sent, send errors)` per destination.
     pub fn stats(&self) -> impl Iterator<Item = (SocketAddr, u64, u64)> + '_ {
-        self.destinations.iter().map(|d| (d.addr, d.sent, d.errors))
+        self.stats
+            .destinations
+            .iter()
+            .map(|d| (d.addr, d.sent.get(), d.errors.get()))
+    }
+
+    /// The counters, to keep (metrics).
+    pub fn shared_stats(&self) -> Arc<UdpStats> {
+        Arc::clone(&self.stats)
     }
 }
 
@@ -107,9 +186,18 @@ mod tests {
             tx.send(b"{}\n");
             std::thread::sleep(Duration::from_millis(2));
         }
-        let d = &tx.destinations[0];
-        assert!(d.errors >= 10, "the refusals are counted: {}", d.errors);
-        assert_eq!(d.outages, 1, "one outage, logged once");
-        assert!(d.failing.is_some());
+        let c = &tx.stats.destinations[0];
+        assert!(
+            c.errors.get() >= 10,
+            "the refusals are counted: {:?}",
+            c.errors
+        );
+        assert_eq!(c.outages.get(), 1, "one outage, logged once");
+        assert!(tx.destinations[0].failing.is_some());
+        let mut e = photopose_telemetry::Exposition::new();
+        e.register(tx.shared_stats());
+        let text = e.render();
+        let line = format!("photopose_stream_udp_outages_total{{destination=\"{port}\"}} 1");
+        assert!(text.lines().any(|l| l == line), "{line} missing:\n{text}");
     }
 }

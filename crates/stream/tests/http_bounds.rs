@@ -6,7 +6,6 @@
 use photopose_stream::{Edge, HttpLimits, TextEndpoint};
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -66,7 +65,7 @@ fn the_endpoint_keeps_its_limits() {
     // Four idle clients hold every place; the fifth is closed at once.
     let idle: Vec<TcpStream> = (0..4).map(|_| TcpStream::connect(addr).unwrap()).collect();
     let t0 = Instant::now();
-    while endpoint.stats().accepted.load(Ordering::Relaxed) < 8 {
+    while endpoint.stats().accepted.get() < 8 {
         assert!(
             t0.elapsed() < Duration::from_secs(5),
             "the idle clients were not accepted"
@@ -75,7 +74,7 @@ fn the_endpoint_keeps_its_limits() {
     }
     let extra = ask(addr, &get("/metrics"));
     assert_eq!(extra, "", "a connection beyond the limit gets nothing");
-    assert_eq!(endpoint.stats().refused.load(Ordering::Relaxed), 1);
+    assert_eq!(endpoint.stats().refused.get(), 1);
     // The header timeout closes the idle ones and frees their places.
     let t0 = Instant::now();
     for mut s in idle {

@@ -28,7 +28,7 @@ fn footprint() -> (u64, u64, u64) {
 }
 
 fn handled(s: &TcpStats) -> u64 {
-    s.accepted.load(Ordering::Relaxed) + s.refused.load(Ordering::Relaxed)
+    s.accepted.get() + s.refused.get()
 }
 
 /// `n` clients connect and leave at once; a line is published now and then.
@@ -80,8 +80,8 @@ fn ten_thousand_reconnects_leave_memory_and_threads_where_they_were() {
     let after = footprint();
     let stats = server.shared_stats();
     eprintln!("(VmRSS kB, VmSize kB, threads): {before:?} → {after:?}; {stats:?}");
-    assert_eq!(stats.accepted.load(Ordering::Relaxed), 13_000);
-    assert_eq!(stats.disconnected.load(Ordering::Relaxed), 13_000);
+    assert_eq!(stats.accepted.get(), 13_000);
+    assert_eq!(stats.disconnected.get(), 13_000);
     let within = |a: u64, b: u64| (b as f64) <= a as f64 * 1.05;
     assert!(
         within(before.0, after.0),

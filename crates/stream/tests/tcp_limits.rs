@@ -56,15 +56,15 @@ fn only_the_client_limit_is_served_the_rest_are_closed_and_counted() {
     .unwrap();
     let addr = server.local_addr();
     let stats = server.shared_stats();
-    let handled = || stats.accepted.load(Ordering::Relaxed) + stats.refused.load(Ordering::Relaxed);
+    let handled = || stats.accepted.get() + stats.refused.get();
     // One at a time, so which ones are refused is known.
     let mut clients = Vec::new();
     for k in 0..limit + 5 {
         clients.push(TcpStream::connect(addr).unwrap());
         wait_for("the connection handled", || handled() == k as u64 + 1);
     }
-    assert_eq!(stats.accepted.load(Ordering::Relaxed), limit as u64);
-    assert_eq!(stats.refused.load(Ordering::Relaxed), 5);
+    assert_eq!(stats.accepted.get(), limit as u64);
+    assert_eq!(stats.refused.get(), 5);
     assert_eq!(stats.connected.load(Ordering::Relaxed), limit as u64);
     let mut buf = Vec::new();
     for seq in 0..5 {
@@ -94,11 +94,11 @@ fn only_the_client_limit_is_served_the_rest_are_closed_and_counted() {
         .map(|_| TcpStream::connect(addr).unwrap())
         .collect();
     wait_for("new clients served", || {
-        stats.accepted.load(Ordering::Relaxed) == 2 * limit as u64
+        stats.accepted.get() == 2 * limit as u64
     });
-    assert_eq!(stats.refused.load(Ordering::Relaxed), 5);
-    assert_eq!(stats.disconnected.load(Ordering::Relaxed), limit as u64);
-    assert_eq!(stats.dropped.load(Ordering::Relaxed), 0);
+    assert_eq!(stats.refused.get(), 5);
+    assert_eq!(stats.disconnected.get(), limit as u64);
+    assert_eq!(stats.dropped.get(), 0);
     drop(again);
     server.shutdown();
     edge.stop();
@@ -149,7 +149,7 @@ fn a_client_that_never_reads_is_dropped_when_its_queue_fills_and_freed() {
     let mut buf = Vec::new();
     let mut seq = 0u64;
     let t0 = Instant::now();
-    while stats.dropped.load(Ordering::Relaxed) == 0 {
+    while stats.dropped.get() == 0 {
         assert!(
             seq < 200_000 && t0.elapsed() < Duration::from_secs(30),
             "the slow client was never dropped ({seq} lines)"
@@ -170,8 +170,8 @@ fn a_client_that_never_reads_is_dropped_when_its_queue_fills_and_freed() {
         got < seq as usize * buf.len(),
         "the slow client did not get everything: {got} bytes"
     );
-    assert_eq!(stats.dropped.load(Ordering::Relaxed), 1);
-    assert_eq!(stats.disconnected.load(Ordering::Relaxed), 0);
+    assert_eq!(stats.dropped.get(), 1);
+    assert_eq!(stats.disconnected.get(), 0);
     // The healthy client is still served, and gets the rest at shutdown.
     for _ in 0..10 {
         line(seq, &mut buf);
@@ -180,7 +180,7 @@ fn a_client_that_never_reads_is_dropped_when_its_queue_fills_and_freed() {
     }
     server.shutdown();
     let n = reader.join().unwrap();
-    let lost = stats.lines_dropped.load(Ordering::Relaxed);
+    let lost = stats.lines_dropped.get();
     assert_eq!(
         n + lost,
         seq,

@@ -192,7 +192,7 @@ impl GigeSource {
             tracing::warn!(source = %self.name, camera = %live.opened.id, %reason, "camera lost");
             self.reap(live.opened, true);
         }
-        self.counters.losses.fetch_add(1, Ordering::Relaxed);
+        self.counters.losses.inc();
         self.backoff = self.config.backoff_initial;
         self.failures_logged = false;
         self.link = Link::Waiting {
@@ -207,7 +207,7 @@ impl GigeSource {
             Ok(opened) => {
                 tracing::info!(source = %self.name, camera = %opened.id,
                     took_ms = opened.took.as_millis() as u64, "camera opened, streaming");
-                self.counters.opens.fetch_add(1, Ordering::Relaxed);
+                self.counters.opens.inc();
                 self.counters.connected.store(true, Ordering::Relaxed);
                 self.backoff = self.config.backoff_initial;
                 self.failures_logged = false;
@@ -280,7 +280,7 @@ impl GigeSource {
                 if let Some(last) = live.last_frame_id {
                     let gap = id_gap(last, frame_id);
                     if gap > 0 {
-                        self.counters.missing.fetch_add(gap, Ordering::Relaxed);
+                        self.counters.missing.add(gap);
                         self.next_seq += gap;
                     }
                 }
@@ -290,11 +290,11 @@ impl GigeSource {
                 slot.meta.camera_time_ns = camera_time_ns;
                 slot.meta.host_time_ns = host_time_ns;
                 self.next_seq += 1;
-                self.counters.frames.fetch_add(1, Ordering::Relaxed);
+                self.counters.frames.inc();
                 Ok(())
             }
             Err(Copy::Incomplete) => {
-                self.counters.incomplete.fetch_add(1, Ordering::Relaxed);
+                self.counters.incomplete.inc();
                 Err(SourceError::Timeout(timeout))
             }
             Err(Copy::Format(raw)) => Err(SourceError::Config {

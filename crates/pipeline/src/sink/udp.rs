@@ -21,6 +21,13 @@ impl UdpSink {
     }
 }
 
+impl UdpSink {
+    /// The counters of the destinations.
+    pub fn stats(&self) -> std::sync::Arc<photopose_stream::UdpStats> {
+        self.0.shared_stats()
+    }
+}
+
 impl PoseSink for UdpSink {
     fn name(&self) -> &'static str {
         "udp"
