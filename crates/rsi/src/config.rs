@@ -314,6 +314,16 @@ impl RsiConfig {
                 }
                 let e = EthernetConfig::parse(xml)?;
                 warnings.extend(e.warnings(self.mode));
+                // Where the controller sends against where the daemon
+                // listens (a wildcard bind hears every address).
+                if let Some(Ok(target)) = e.ip_number.as_deref().map(str::parse::<IpAddr>) {
+                    if !bind_ip.is_unspecified() && target.to_canonical() != bind_ip {
+                        warnings.push(RsiWarning::IpNumber {
+                            ip_number: target.to_string(),
+                            bind: ip,
+                        });
+                    }
+                }
                 (e.port, e.sen_format(self.decimals)?)
             }
             (None, _) => {
