@@ -112,8 +112,8 @@ pub struct KitLimits {
     /// POSCORR `MaxRotAngle`, degrees (`poscorr_limit_deg`).
     pub poscorr_deg: f64,
     /// POSCORRMON `MaxTrans`, mm: the farthest POSCORR lets the TCP go (its
-    /// box's diagonal), so the monitor never fires below POSCORR's limit nor
-    /// below the daemon's clamp.
+    /// box's diagonal, rounded up to 1 µm), so the monitor never fires
+    /// below POSCORR's limit nor below the daemon's clamp.
     pub monitor_mm: f64,
     /// POSCORRMON `MaxRotAngle`, degrees (POSCORR's).
     pub monitor_deg: f64,
@@ -146,11 +146,15 @@ fn mode_krl(mode: CorrectionMode) -> &'static str {
     }
 }
 
-/// A number as the files print it: shortest form, rounded up to 1 µm
-/// (monitor limits must never fall below what they guard).
+/// `v` rounded up to 0.001 (a monitor limit must never fall below what
+/// it guards).
+fn up_to_um(v: f64) -> f64 {
+    (v * 1000.0).ceil() / 1000.0
+}
+
+/// A number as the files print it: shortest form, rounded up to 0.001.
 fn num(v: f64) -> String {
-    let r = (v * 1000.0).ceil() / 1000.0;
-    format!("{r}")
+    format!("{}", up_to_um(v))
 }
 
 /// Generates the kit for `config` (`ethernet_xml`: the text of the file its
@@ -210,7 +214,7 @@ pub fn generate(
     let limits = KitLimits {
         poscorr_mm: config.poscorr_limit_mm,
         poscorr_deg: config.poscorr_limit_deg,
-        monitor_mm: config.poscorr_limit_mm * 3f64.sqrt(),
+        monitor_mm: up_to_um(config.poscorr_limit_mm * 3f64.sqrt()),
         monitor_deg: config.poscorr_limit_deg,
     };
     // The three angles at their clamp together turn up to √3 × clamp_deg
@@ -548,11 +552,7 @@ fn context_file(
             ("PosCorr_1", "PosCorr", "200,-180"),
             ("PosCorrMon_1", "PosCorrMon", "500,-180"),
         ] {
-            empty(
-                w,
-                "Node",
-                &[("Location", at), ("Name", name), ("Type", ty)],
-            )?;
+            empty(w, "Node", &[("Location", at), ("Name", name), ("Type", ty)])?;
         }
         end(w, "Nodes")?;
         end(w, "Editor")?;
@@ -574,14 +574,15 @@ DEF {KRL_MODULE}( )
 ; cycle_ms: change them there and generate the kit again, not here.
 ; ADAPT before the first run:
 ;  - the tool and base below ($TOOL/$BASE) and the start position;
-;  - the motion: RSI_MOVECORR() only follows the sensor until RSI_OFF;
-;    to correct a programmed path, replace it by your LIN/CIRC motions
-;    between RSI_ON and RSI_OFF;
+;  - the motion: RSI_MOVECORR() is a motion made of the correction
+;    alone and lasts until RSI stops it (Timeout, a STOP object); to
+;    correct a programmed path, put your LIN/CIRC motions between RSI_ON
+;    and RSI_OFF instead;
 ;  - commission first with the daemon's measure_only = true.
 DECL INT ret
 DECL INT CONTID
 
-INI
+BAS(#INITMOV, 0)
 
 ; ADAPT: the TCP and base the correction is applied to
 ; $TOOL = TOOL_DATA[1]
@@ -678,7 +679,12 @@ mod tests {
         .unwrap();
         let src = file(&kit, "photopose.src");
         assert!(src.contains("RSI_ON(#ABSOLUTE, #IPO_FAST)"), "{src}");
-        for call in ["RSI_CREATE(\"photopose.rsix\"", "RSI_MOVECORR()", "RSI_OFF()", "RSI_DELETE("] {
+        for call in [
+            "RSI_CREATE(\"photopose.rsix\"",
+            "RSI_MOVECORR()",
+            "RSI_OFF()",
+            "RSI_DELETE(",
+        ] {
             assert!(src.contains(call), "{call}: {src}");
         }
         let slow = RsiConfig {
@@ -731,14 +737,24 @@ mod tests {
         assert!(law.clamp_mm * 3f64.sqrt() <= l.monitor_mm);
         assert!(law.clamp_deg < l.poscorr_deg && l.poscorr_deg <= l.monitor_deg);
         let rsix = file(&kit, CONTEXT_FILE);
-        assert!(rsix.contains("Name=\"LowerLimX\" ParamId=\"0\" ParamValue=\"-5\""), "{rsix}");
-        assert!(rsix.contains("Name=\"MaxTrans\" ParamId=\"0\" ParamValue=\"8.661\""), "{rsix}");
+        assert!(
+            rsix.contains("Name=\"LowerLimX\" ParamId=\"0\" ParamValue=\"-5\""),
+            "{rsix}"
+        );
+        assert!(
+            rsix.contains("Name=\"MaxTrans\" ParamId=\"0\" ParamValue=\"8.661\""),
+            "{rsix}"
+        );
         // A rotation clamp POSCORR would cut is said.
         let tight = RsiConfig {
             clamp_deg: 4.0,
             ..config(CorrectionMode::Relative)
         };
         let kit = generate(&tight, None, &KitOptions::default()).unwrap();
-        assert!(kit.notes.iter().any(|n| n.contains("MaxRotAngle")), "{:?}", kit.notes);
+        assert!(
+            kit.notes.iter().any(|n| n.contains("MaxRotAngle")),
+            "{:?}",
+            kit.notes
+        );
     }
 }
