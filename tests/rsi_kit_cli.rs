@@ -350,3 +350,41 @@ fn rsi_sim_says_when_nothing_answers() {
     );
     assert!(!said.contains("late"), "{said}");
 }
+
+#[test]
+fn check_config_strict_refuses_a_controller_file_that_disagrees() {
+    let dir = scratch("kit-disagree");
+    let keys = dir.join("keys.toml");
+    std::fs::write(&keys, daemon_config(&format!("port = {}\n", free_port()))).unwrap();
+    let out = dir.join("kit");
+    kit(&keys, &out);
+    // An integrator's edit: a second, partial correction element and no RSol.
+    let xml = std::fs::read_to_string(out.join("RSI_EthernetConfig.xml"))
+        .unwrap()
+        .replace(
+            "</ELEMENTS>\n  </RECEIVE>",
+            "<ELEMENT TAG=\"Tech.X\" TYPE=\"DOUBLE\" INDX=\"7\" HOLDON=\"0\"/></ELEMENTS>\n  </RECEIVE>",
+        )
+        .replace("DEF_RSol", "DEF_Tech.T1");
+    let edited = dir.join("edited.xml");
+    std::fs::write(&edited, xml).unwrap();
+    let config = dir.join("photopose.toml");
+    std::fs::write(
+        &config,
+        daemon_config(&format!("ethernet_config = \"{}\"\n", edited.display())),
+    )
+    .unwrap();
+    let o = bin().args(["check-config"]).arg(&config).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("Tech lacks Y Z A B C"), "{err}");
+    assert!(err.contains("no DEF_RSol"), "{err}");
+    let o = bin()
+        .args(["check-config", "--strict"])
+        .arg(&config)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("2 warning(s) and --strict"), "{err}");
+}
