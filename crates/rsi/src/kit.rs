@@ -340,10 +340,12 @@ fn ethernet_file(
         start(w, "SEND", &[])?;
         start(w, "ELEMENTS", &[])?;
         for tag in SEND_TAGS {
+            // The late-packet counter is a whole number.
+            let ty = if tag == "DEF_Delay" { "LONG" } else { "DOUBLE" };
             empty(
                 w,
                 "ELEMENT",
-                &[("TAG", tag), ("TYPE", "DOUBLE"), ("INDX", "INTERNAL")],
+                &[("TAG", tag), ("TYPE", ty), ("INDX", "INTERNAL")],
             )?;
         }
         end(w, "ELEMENTS")?;
