@@ -672,6 +672,34 @@ mod tests {
     }
 
     #[test]
+    fn a_controller_file_is_followed_and_what_is_left_out_said() {
+        let xml = "<ROOT><CONFIG><IP_NUMBER>10.0.0.9</IP_NUMBER><PORT>50000</PORT><SENTYPE>Cell</SENTYPE></CONFIG>\
+            <SEND><ELEMENTS><ELEMENT TAG=\"DEF_RSol\"/><ELEMENT TAG=\"DEF_Tech.C1\"/></ELEMENTS></SEND><RECEIVE><ELEMENTS>\
+            <ELEMENT TAG=\"Corr.X\" HOLDON=\"0\"/><ELEMENT TAG=\"Corr.Y\" HOLDON=\"0\"/><ELEMENT TAG=\"Corr.Z\" HOLDON=\"0\"/>\
+            <ELEMENT TAG=\"Corr.A\" HOLDON=\"0\"/><ELEMENT TAG=\"Corr.B\" HOLDON=\"0\"/><ELEMENT TAG=\"Corr.C\" HOLDON=\"0\"/>\
+            <ELEMENT TAG=\"DiO\" HOLDON=\"0\"/></ELEMENTS></RECEIVE></ROOT>";
+        let c = RsiConfig {
+            bind: "0.0.0.0".into(),
+            ethernet_config: Some("RSI_EthernetConfig.xml".into()),
+            ..RsiConfig::default()
+        };
+        let kit = generate(&c, Some(xml), &KitOptions::default()).unwrap();
+        let e = EthernetConfig::parse(file(&kit, ETHERNET_FILE)).unwrap();
+        assert_eq!((e.port, e.sentype.as_str()), (50000, "Cell"));
+        assert_eq!(e.correction_element(), Some("Corr"));
+        assert_eq!(
+            e.ip_number.as_deref(),
+            Some("10.0.0.9"),
+            "kept from the file"
+        );
+        assert!(
+            kit.notes.iter().any(|n| n.contains("DEF_Tech.C1, DiO")),
+            "{:?}",
+            kit.notes
+        );
+    }
+
+    #[test]
     fn krl_follows_mode_and_cycle() {
         let kit = generate(
             &config(CorrectionMode::Absolute),
