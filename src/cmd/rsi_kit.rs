@@ -65,12 +65,11 @@ fn kit(args: KitArgs) -> Result<ExitCode> {
     };
     let config = RsiConfig::from_toml(&text).with_context(|| origin.clone())?;
     let xml = match &config.ethernet_config {
-        Some(p) => Some(std::fs::read_to_string(p).with_context(|| {
-            format!(
-                "{origin}: [rsi] ethernet_config: cannot read {}",
-                p.display()
-            )
-        })?),
+        // Read as the daemon reads it (same size limit, same errors).
+        Some(p) => Some(
+            photopose_formats::read_text(p, photopose_formats::FileKind::ControllerFile)
+                .with_context(|| format!("{origin}: [rsi] ethernet_config"))?,
+        ),
         None => None,
     };
     let options = KitOptions {
