@@ -43,6 +43,8 @@ enum Command {
     CircleTest(cmd::circle_test::Args),
     /// A simulated KUKA controller against the daemon's RSI server.
     RsiSim(cmd::rsi_sim::Args),
+    /// KUKA RSI tools: `rsi kit` writes the controller-side files.
+    Rsi(cmd::rsi_kit::Args),
 }
 
 fn main() -> ExitCode {
@@ -62,6 +64,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => cmd::calibrate::run(args),
         Command::CircleTest(args) => cmd::circle_test::run(args),
         Command::RsiSim(args) => cmd::rsi_sim::run(args),
+        Command::Rsi(args) => cmd::rsi_kit::run(args),
     };
     match result {
         Ok(code) => code,

@@ -15,6 +15,7 @@ pub mod pose_arg;
 pub mod record;
 pub mod render;
 pub mod resect;
+pub mod rsi_kit;
 pub mod rsi_sim;
 pub mod run;
 pub mod simulate;

@@ -314,6 +314,16 @@ impl RsiConfig {
                 }
                 let e = EthernetConfig::parse(xml)?;
                 warnings.extend(e.warnings(self.mode));
+                // Where the controller sends against where the daemon
+                // listens (a wildcard bind hears every address).
+                if let Some(Ok(target)) = e.ip_number.as_deref().map(str::parse::<IpAddr>) {
+                    if !bind_ip.is_unspecified() && target.to_canonical() != bind_ip {
+                        warnings.push(RsiWarning::IpNumber {
+                            ip_number: target.to_string(),
+                            bind: ip,
+                        });
+                    }
+                }
                 (e.port, e.sen_format(self.decimals)?)
             }
             (None, _) => {
@@ -773,6 +783,37 @@ mod tests {
         assert_eq!(
             c.warnings(Some(&no_rsol)).unwrap(),
             vec![RsiWarning::NoRsol]
+        );
+        // A second element with part of a correction is said (it is
+        // answered with zeros), with its line and what it lacks.
+        let partial = XML.replace(
+            "</ELEMENTS></RECEIVE>",
+            "<ELEMENT TAG=\"Shift.X\" HOLDON=\"0\"/><ELEMENT TAG=\"Shift.Y\" HOLDON=\"0\"/></ELEMENTS></RECEIVE>",
+        );
+        let w = c.warnings(Some(&partial)).unwrap();
+        assert!(
+            matches!(&w[..], [RsiWarning::PartialCorrection { element, missing, .. }]
+                if element == "Shift" && missing.join(" ") == "Z A B C"),
+            "{w:?}"
+        );
+        assert!(w[0].to_string().contains("Shift lacks Z A B C"), "{}", w[0]);
+        // IP_NUMBER (where the controller sends) against a specific bind.
+        let ip = XML.replace("<CONFIG>", "<CONFIG><IP_NUMBER>10.0.0.7</IP_NUMBER>");
+        let bound = RsiConfig {
+            bind: "10.0.0.5".into(),
+            ..c.clone()
+        };
+        let w = bound.warnings(Some(&ip)).unwrap();
+        assert!(matches!(&w[..], [RsiWarning::IpNumber { .. }]), "{w:?}");
+        assert!(w[0].to_string().contains("IP_NUMBER 10.0.0.7"), "{}", w[0]);
+        let same = RsiConfig {
+            bind: "10.0.0.7".into(),
+            ..c.clone()
+        };
+        assert!(same.warnings(Some(&ip)).unwrap().is_empty());
+        assert!(
+            c.warnings(Some(&ip)).unwrap().is_empty(),
+            "a wildcard bind hears it"
         );
         // A SENTYPE with a quote is refused at load.
         let quoted = XML.replace("<SENTYPE>Cam", "<SENTYPE>Ca\"m");

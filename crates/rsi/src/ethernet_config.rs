@@ -382,7 +382,8 @@ impl EthernetConfig {
     }
 
     /// Consistency warnings for running in `mode`: HOLDON pairing (absolute
-    /// needs `HOLDON="1"`, relative `HOLDON="0"`), `RSol` missing from SEND.
+    /// needs `HOLDON="1"`, relative `HOLDON="0"`), `RSol` missing from SEND,
+    /// a RECEIVE element with only part of the six correction attributes.
     pub fn warnings(&self, mode: CorrectionMode) -> Vec<RsiWarning> {
         let mut w = Vec::new();
         let corr = self.correction_element();
@@ -406,6 +407,40 @@ impl EthernetConfig {
         }
         if !self.send.iter().any(|s| s.ends_with("RSol")) {
             w.push(RsiWarning::NoRsol);
+        }
+        // Elements (other than the correction) with part of X..C, in file
+        // order: bit i set when POSE_ATTRS[i] is present.
+        let mut partial: Vec<(&str, usize, u8)> = Vec::new();
+        let mut index: HashMap<&str, usize> = HashMap::new();
+        for r in self
+            .receive
+            .iter()
+            .filter(|r| Some(r.element.as_str()) != corr)
+        {
+            let Some(bit) = r
+                .attribute
+                .as_deref()
+                .and_then(|a| POSE_ATTRS.iter().position(|p| *p == a))
+            else {
+                continue;
+            };
+            let k = *index.entry(r.element.as_str()).or_insert_with(|| {
+                partial.push((r.element.as_str(), r.line, 0));
+                partial.len() - 1
+            });
+            partial[k].2 |= 1 << bit;
+        }
+        for (element, line, bits) in partial {
+            w.push(RsiWarning::PartialCorrection {
+                line,
+                element: element.to_string(),
+                missing: POSE_ATTRS
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| bits & (1 << i) == 0)
+                    .map(|(_, a)| a.to_string())
+                    .collect(),
+            });
         }
         w
     }

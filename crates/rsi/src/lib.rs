@@ -6,7 +6,8 @@
 //! simulated controller for tests and demos.
 //!
 //! Pure modules (no IO, no clocks, no threads): [`xml`], [`codec`],
-//! [`ethernet_config`], [`config`], [`warning`], [`law`], [`session`].
+//! [`ethernet_config`], [`config`], [`warning`], [`law`], [`session`],
+//! [`kit`] (the controller-side files for a configuration).
 //! Concurrency: [`slot`]. IO: [`server`], [`monitor`] (its counters),
 //! [`controller`].
 
@@ -14,6 +15,7 @@ pub mod codec;
 pub mod config;
 pub mod controller;
 pub mod ethernet_config;
+pub mod kit;
 pub mod law;
 pub mod monitor;
 pub mod server;

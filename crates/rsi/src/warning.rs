@@ -1,6 +1,7 @@
 //! Consistency warnings about an RSI set-up that loads but is probably not
 //! what the integrator meant (HOLDON against the correction mode, no `RSol`
-//! in the SEND list, a dual-stack bind): plain data with a `Display`, so
+//! in the SEND list, a RECEIVE element with part of a correction, an
+//! `IP_NUMBER` that is not the bind address, a dual-stack bind): plain data with a `Display`, so
 //! `check-config` and `run` report the same list.
 
 use crate::law::CorrectionMode;
@@ -30,6 +31,25 @@ pub enum RsiWarning {
     /// datagrams arrive as IPv4-mapped addresses only while the system keeps
     /// dual-stack sockets (`net.ipv6.bindv6only = 0`, Linux's default).
     DualStackBind {
+        /// The bind address.
+        bind: IpAddr,
+    },
+    /// A RECEIVE element other than the correction that carries some of
+    /// `X Y Z A B C` but not all: probably a correction meant to be
+    /// complete (the daemon answers it with zeros).
+    PartialCorrection {
+        /// 1-based line of its first tag.
+        line: usize,
+        /// The element (`RKorr`).
+        element: String,
+        /// The attributes it lacks.
+        missing: Vec<String>,
+    },
+    /// The controller file's `IP_NUMBER` (where the controller sends) is
+    /// not the address the daemon binds.
+    IpNumber {
+        /// `IP_NUMBER` as written.
+        ip_number: String,
         /// The bind address.
         bind: IpAddr,
     },
@@ -69,6 +89,19 @@ impl fmt::Display for RsiWarning {
             RsiWarning::DualStackBind { bind } => write!(
                 f,
                 "[rsi] bind = \"{bind}\" with IPv4 controllers: their datagrams arrive only on a dual-stack socket (net.ipv6.bindv6only = 0); bind an IPv4 address to be independent of it"
+            ),
+            RsiWarning::PartialCorrection {
+                line,
+                element,
+                missing,
+            } => write!(
+                f,
+                "RSI_EthernetConfig.xml line {line}: RECEIVE element {element} lacks {} of the six correction attributes X Y Z A B C: it is answered with zeros, not used as the correction",
+                missing.join(" ")
+            ),
+            RsiWarning::IpNumber { ip_number, bind } => write!(
+                f,
+                "RSI_EthernetConfig.xml: IP_NUMBER {ip_number} (where the controller sends) is not [rsi] bind = \"{bind}\": the daemon never sees the controller's datagrams"
             ),
         }
     }
