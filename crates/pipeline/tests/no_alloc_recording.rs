@@ -4,6 +4,10 @@
 //! (`record`: protobuf encoding, MCAP chunks, compression) allocates, so
 //! this test's allocator counts every thread but that one.
 
+// A global allocator implements an unsafe trait (it only forwards to
+// `System`), and reading the thread's name goes through libc.
+#![allow(unsafe_code)]
+
 use photopose_field::design::default_plate;
 use photopose_pipeline::config::Source;
 use photopose_pipeline::sink::record::RecordLink;
