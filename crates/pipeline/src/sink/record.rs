@@ -410,8 +410,8 @@ impl Writer {
             let old = self.rotate_after.is_some_and(|d| opened.elapsed() >= d);
             if full || old {
                 let rec = current.take().expect("a recorder is open");
-                done_bytes += rec.bytes_written();
-                self.finish(rec);
+                done_bytes += self.finish(rec);
+                self.stats.bytes.store(done_bytes, Ordering::Relaxed);
                 segment += 1;
                 let next = segment_path(&self.path, segment);
                 match Recorder::create_with(&next, &self.options) {
@@ -428,10 +428,8 @@ impl Writer {
             }
         }
         if let Some(rec) = current {
-            self.stats
-                .bytes
-                .store(done_bytes + rec.bytes_written(), Ordering::Relaxed);
-            self.finish(rec);
+            done_bytes += self.finish(rec);
+            self.stats.bytes.store(done_bytes, Ordering::Relaxed);
         }
         // Whatever is still queued is dropped (the pipeline has stopped).
         while let Ok(item) = items.try_recv() {
@@ -439,13 +437,16 @@ impl Writer {
         }
     }
 
-    fn finish(&self, rec: Recorder) {
+    /// Finishes a file; its size (what was written if it cannot be read).
+    fn finish(&self, rec: Recorder) -> u64 {
         let path = rec.path().to_string();
+        let written = rec.bytes_written();
         if let Err(e) = rec.finish() {
             tracing::error!(error = %e, "cannot finish the recording");
-        } else {
-            tracing::info!(%path, "recording finished");
+            return written;
         }
+        tracing::info!(%path, "recording finished");
+        std::fs::metadata(&path).map_or(written, |m| m.len())
     }
 
     fn drop_item(&self, item: Item) {
