@@ -172,3 +172,47 @@ fn record_section_errors_name_the_key() {
     assert!(err.contains("gzip"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn record_section_keeps_every_nth_frame_and_rotates_by_size() {
+    let dir = scratch("record-rotate");
+    let recording = dir.join("rot.mcap");
+    let config = dir.join("rec.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[source]\nkind = \"synthetic\"\n[source.synthetic]\nrate_hz = 50.0\n\
+             [output]\nudp = []\n\
+             [record]\npath = \"{}\"\nframes = 2\ncompression = \"lz4\"\nrotate_mb = 1\n",
+            recording.display()
+        ),
+    )
+    .unwrap();
+    let summary = run(&["--frames", "12"], Some(&config));
+    assert!(summary.contains("6 frames (0 dropped)"), "{summary}");
+    // Six frames of about 0.7 MB each (lz4) over 1 MiB files: several
+    // files, each a complete recording, the frames in order across them.
+    let mut seqs = Vec::new();
+    let mut files = 0;
+    for n in 0.. {
+        let path = if n == 0 {
+            recording.clone()
+        } else {
+            dir.join(format!("rot-{n}.mcap"))
+        };
+        if !path.exists() {
+            break;
+        }
+        files += 1;
+        let bytes = std::fs::read(&path).unwrap();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            if m.channel.topic == "/camera/image" {
+                seqs.push(m.sequence);
+            }
+        }
+    }
+    assert!(files >= 2, "{files} files: {summary}");
+    assert_eq!(seqs, [0, 2, 4, 6, 8, 10]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
