@@ -22,6 +22,8 @@ enum Command {
     Detect(cmd::detect::Args),
     /// Records the frames of the configured source into an MCAP file.
     Record(cmd::record::Args),
+    /// Writes the frames of a recording as PGM files.
+    Export(cmd::export::Args),
     /// The whole chain on a simulated robot cell, ending with the circular test.
     Demo(cmd::demo::Args),
     /// The daemon: frames → poses → streams (default: synthetic camera).
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Resect(args) => cmd::resect::run(args),
         Command::Detect(args) => cmd::detect::run(args),
         Command::Record(args) => cmd::record::run(args),
+        Command::Export(args) => cmd::export::run(args),
         Command::Demo(args) => cmd::demo::run(args),
         Command::Run(args) => cmd::run::run(args),
         Command::CheckConfig(args) => cmd::run::check(args),

@@ -10,6 +10,7 @@ pub mod circle_test;
 pub mod defaults;
 pub mod demo;
 pub mod detect;
+pub mod export;
 pub mod field;
 pub mod pose_arg;
 pub mod record;

@@ -1,6 +1,8 @@
 //! `photopose record --out FILE.mcap`: records the frames of the configured
-//! source (with their sequence numbers and timestamps) into an MCAP file
-//! that `source.kind = "replay"` plays back (format: `photopose-record`).
+//! source alone (with their sequence numbers and timestamps, no poses) into
+//! an MCAP file in the standard Foxglove schemas that `source.kind =
+//! "replay"` plays back (format: `photopose-record`; the running daemon
+//! records with `photopose run --record`).
 
 use crate::cmd::{defaults, run};
 use anyhow::{Context, Result};
@@ -41,7 +43,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(sig, stop.clone()).context("cannot install signal handlers")?;
     }
-    let mut recorder = Recorder::create(&args.out)?;
+    let options = run::record_options(&config, args.config.as_deref(), &source.describe())?;
+    let mut recorder = Recorder::create_with(&args.out, &options)?;
     let mut slot = Slot::new(photopose_frame::Image::new_mono8(
         camera.sensor.width,
         camera.sensor.height,

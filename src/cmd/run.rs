@@ -27,6 +27,10 @@ pub struct Args {
     /// Print the histogram of the frame-to-pose latency at the end.
     #[arg(long)]
     pub latency_histogram: bool,
+    /// Record frames and poses into this MCAP file (`[record] path`; the
+    /// other `[record]` keys apply).
+    #[arg(long)]
+    pub record: Option<PathBuf>,
 }
 
 /// The built-in configuration (`config/photopose.toml`).
@@ -113,18 +117,122 @@ impl Signals {
     }
 }
 
+/// What a recording stores besides the messages: the camera, field and
+/// configuration files (the built-in ones when none is named) as
+/// attachments, and the version, host, start time and source as metadata.
+pub fn record_options(
+    config: &Config,
+    config_file: Option<&std::path::Path>,
+    source: &str,
+) -> Result<photopose_record::RecordOptions> {
+    use photopose_record::Attachment;
+    let file = |path: Option<&std::path::Path>, builtin: &str, name: &str, media: &str| {
+        let (name, data) = match path {
+            Some(p) => (
+                p.file_name()
+                    .map_or(name.to_string(), |n| n.to_string_lossy().into_owned()),
+                std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?,
+            ),
+            None => (name.to_string(), builtin.as_bytes().to_vec()),
+        };
+        anyhow::Ok(Attachment {
+            name,
+            media_type: media.into(),
+            data,
+        })
+    };
+    let attachments = vec![
+        file(
+            config.camera_file.as_deref(),
+            photopose_formats::camera::DEFAULT_CAMERA_TOML,
+            "camera.toml",
+            "application/toml",
+        )?,
+        file(
+            config.field_file.as_deref(),
+            defaults::PLATE_CSV,
+            "plate.csv",
+            "text/csv",
+        )?,
+        file(
+            config_file,
+            DEFAULT_CONFIG,
+            "photopose.toml",
+            "application/toml",
+        )?,
+    ];
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "unknown".into());
+    let start_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let metadata = [
+        ("version", env!("CARGO_PKG_VERSION").to_string()),
+        ("host", host),
+        ("start_utc_ns", start_ns.to_string()),
+        ("camera_id", config.camera_id.clone()),
+        ("source", source.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    Ok(photopose_record::RecordOptions {
+        compression: config.record.compression,
+        attachments,
+        metadata,
+    })
+}
+
+/// Starts the recording `config.record` names (if any): the writer thread,
+/// the frame tap around `source`; the link goes into the configuration for
+/// the sink. `segment` > 0 (a reload) writes `FILE-N.mcap` instead of
+/// `FILE.mcap`, the first N whose file does not exist.
+fn start_recording(
+    config: &mut Config,
+    config_file: Option<&std::path::Path>,
+    camera: &photopose_geometry::Camera,
+    source: Box<dyn photopose_pipeline::FrameSource>,
+    reloaded: bool,
+) -> Result<Box<dyn photopose_pipeline::FrameSource>> {
+    use photopose_pipeline::sink::record::{segment_path, RecordLink};
+    let Some(path) = config.record.path.clone() else {
+        return Ok(source);
+    };
+    if reloaded {
+        let free = (1..)
+            .map(|n| segment_path(&path, n))
+            .find(|p| !p.exists())
+            .expect("some segment name is free");
+        config.record.path = Some(free);
+    }
+    let options = record_options(config, config_file, &source.describe())?;
+    let frame_bytes = camera.sensor.width as usize * camera.sensor.height as usize;
+    let link = RecordLink::start(&config.record, options, frame_bytes)
+        .context("cannot start the recording")?;
+    let source = link.tap(source, &config.record);
+    config.record.link = Some(link);
+    Ok(source)
+}
+
 /// Starts the pipeline of a prepared configuration.
-fn start(prepared: Prepared, wedge: Option<Wedge>) -> Result<(Pipeline, Config)> {
+fn start(
+    prepared: Prepared,
+    wedge: Option<Wedge>,
+    config_file: Option<&std::path::Path>,
+    reloaded: bool,
+) -> Result<(Pipeline, Config)> {
     for w in &prepared.warnings {
         tracing::warn!("{w}");
     }
     let Prepared {
-        config,
+        mut config,
         camera,
         field,
         source,
         ..
     } = prepared;
+    let source = start_recording(&mut config, config_file, &camera, source, reloaded)?;
     let supervision = Supervision {
         wedge,
         ..Supervision::from_env()
@@ -151,12 +259,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let wedge = std::env::var("PHOTOPOSE_TEST_WEDGE")
         .ok()
         .and_then(|w| Wedge::parse(&w));
-    let prepared = prepare(args.config.as_deref(), args.frames)?;
+    let mut prepared = prepare(args.config.as_deref(), args.frames)?;
+    if let Some(r) = &args.record {
+        prepared.config.record.path = Some(r.clone());
+    }
     if signals.stopping() {
         tracing::info!("signal received during start-up: stopping");
         return Ok(ExitCode::SUCCESS);
     }
-    let (mut pipeline, mut config) = start(prepared, wedge)?;
+    let (mut pipeline, mut config) = start(prepared, wedge, args.config.as_deref(), false)?;
     notifier.notify("READY=1");
     let mut pipeline_started = Instant::now();
     let mut last_report = Instant::now();
@@ -186,6 +297,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let started = pipeline_started;
     let c = pipeline.join();
     summary(&c, started.elapsed().as_secs_f64(), args.latency_histogram);
+    record_summary(&config);
     Ok(ExitCode::SUCCESS)
 }
 
@@ -206,7 +318,12 @@ fn reload(
     };
     notifier.notify("RELOADING=1");
     let prepared = match prepare(Some(path), args.frames) {
-        Ok(p) => p,
+        Ok(mut p) => {
+            if let Some(r) = &args.record {
+                p.config.record.path = Some(r.clone());
+            }
+            p
+        }
         Err(e) => {
             tracing::error!("reload refused, keeping the running configuration: {e:#}");
             notifier.notify("READY=1");
@@ -217,7 +334,8 @@ fn reload(
     running.stop();
     let old = running.join();
     tracing::info!(poses_ok = old.poses_ok.get(), "previous pipeline stopped");
-    let started = match start(prepared, wedge) {
+    record_summary(&current);
+    let started = match start(prepared, wedge, Some(path), true) {
         Ok(started) => {
             tracing::info!(config = %path.display(), "configuration reloaded");
             started
@@ -226,11 +344,46 @@ fn reload(
             tracing::error!(
                 "the reloaded configuration did not start ({e:#}); back to the previous one"
             );
-            start(prepare_config(current)?, wedge)?
+            let mut previous = current;
+            previous.record.link = None;
+            start(prepare_config(previous)?, wedge, Some(path), true)?
         }
     };
     notifier.notify("READY=1");
     Ok(started)
+}
+
+/// The closing figures of the recording, if one ran (closed here if the
+/// pipeline did not).
+fn record_summary(config: &Config) {
+    let Some(link) = &config.record.link else {
+        return;
+    };
+    link.close();
+    let s = link.stats();
+    let n = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+    let (frames, bytes, pixels) = (n(&s.frames), n(&s.bytes), n(&s.pixel_bytes));
+    println!(
+        "recording {}: {} frames ({} dropped), {} poses ({} dropped), {} files, {} bytes; {:.0} bytes per frame, compression ratio {:.2}",
+        link.path().display(),
+        frames,
+        n(&s.frames_dropped),
+        n(&s.poses),
+        n(&s.poses_dropped),
+        n(&s.files),
+        bytes,
+        bytes as f64 / frames.max(1) as f64,
+        pixels as f64 / bytes.max(1) as f64,
+    );
+    tracing::info!(
+        path = %link.path().display(),
+        frames,
+        frames_dropped = n(&s.frames_dropped),
+        poses = n(&s.poses),
+        poses_dropped = n(&s.poses_dropped),
+        bytes,
+        "recording stopped"
+    );
 }
 
 /// The closing figures of a run.

@@ -68,6 +68,75 @@ struct File {
     metrics: MetricsSection,
     #[serde(default)]
     rsi: photopose_rsi::RsiConfig,
+    #[serde(default)]
+    record: RecordSection,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RecordSection {
+    path: Option<PathBuf>,
+    frames: RecordFramesToml,
+    poses: bool,
+    compression: String,
+    rotate_mb: u64,
+    rotate_minutes: u64,
+    queue: usize,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RecordFramesToml {
+    Word(String),
+    Every(i64),
+}
+
+impl Default for RecordSection {
+    fn default() -> Self {
+        RecordSection {
+            path: None,
+            frames: RecordFramesToml::Word("all".into()),
+            poses: true,
+            compression: "zstd".into(),
+            rotate_mb: 0,
+            rotate_minutes: 0,
+            queue: 8,
+        }
+    }
+}
+
+/// Which frames a recording keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordFrames {
+    /// Every frame.
+    All,
+    /// Every `n`th frame (the first, the `n+1`th …).
+    Every(u32),
+    /// No frame (poses only).
+    None,
+}
+
+/// The recording of the running daemon (`[record]`, `run --record FILE`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Record {
+    /// The recording (first file); `None`: no recording.
+    pub path: Option<PathBuf>,
+    /// Which frames.
+    pub frames: RecordFrames,
+    /// Whether the poses are recorded.
+    pub poses: bool,
+    /// Chunk compression.
+    pub compression: photopose_record::Compression,
+    /// Next file once this many bytes are written.
+    pub rotate_bytes: Option<u64>,
+    /// Next file once the current one is this old.
+    pub rotate_after: Option<std::time::Duration>,
+    /// Frames that can wait for the writer (preallocated buffers).
+    pub queue: usize,
+    /// The running recording (its writer thread and the frame tap), set
+    /// by whoever starts it before the pipeline (the binary); the sink
+    /// otherwise starts one of its own, poses only.
+    pub link: Option<crate::sink::record::RecordLink>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -181,6 +250,8 @@ pub struct Config {
     pub metrics_listen: Option<SocketAddr>,
     /// The KUKA RSI server, when `[rsi] enabled = true`.
     pub rsi: Option<Rsi>,
+    /// The recording (`[record]`).
+    pub record: Record,
 }
 
 /// The RSI server of the daemon: validated settings and the hand-eye file.
@@ -312,7 +383,55 @@ impl Config {
         } else {
             None
         };
+        let r = &f.record;
+        let frames = match &r.frames {
+            RecordFramesToml::Word(w) if w == "all" => RecordFrames::All,
+            RecordFramesToml::Word(w) if w == "none" => RecordFrames::None,
+            RecordFramesToml::Every(n) if (1..=1_000_000).contains(n) => {
+                RecordFrames::Every(*n as u32)
+            }
+            RecordFramesToml::Word(w) => {
+                return Err(bad(
+                    "record.frames",
+                    w.clone(),
+                    "must be \"all\", \"none\" or N (every Nth frame, 1..=1000000)",
+                ))
+            }
+            RecordFramesToml::Every(n) => {
+                return Err(bad(
+                    "record.frames",
+                    n.to_string(),
+                    "must be \"all\", \"none\" or N (every Nth frame, 1..=1000000)",
+                ))
+            }
+        };
+        let Some(compression) = photopose_record::Compression::from_name(&r.compression) else {
+            return Err(bad(
+                "record.compression",
+                r.compression.clone(),
+                "must be \"zstd\", \"lz4\" or \"none\"",
+            ));
+        };
+        if !(1..=1024).contains(&r.queue) {
+            return Err(bad(
+                "record.queue",
+                r.queue.to_string(),
+                "must be 1..=1024 frames",
+            ));
+        }
+        let record = Record {
+            path: r.path.clone(),
+            frames,
+            poses: r.poses,
+            compression,
+            rotate_bytes: (r.rotate_mb > 0).then(|| r.rotate_mb.saturating_mul(1 << 20)),
+            rotate_after: (r.rotate_minutes > 0)
+                .then(|| std::time::Duration::from_secs(r.rotate_minutes.saturating_mul(60))),
+            queue: r.queue,
+            link: None,
+        };
         Ok(Config {
+            record,
             rsi,
             camera_id: camera_id(f.camera.id, &bad)?,
             camera_file: f.camera.camera_file,

@@ -8,6 +8,7 @@
 //! Adding an output: one module under `sink/` implementing [`PoseSink`]
 //! from its own configuration, and one line in [`build`].
 
+pub mod record;
 pub mod rsi;
 pub mod tcp;
 pub mod udp;
@@ -84,6 +85,9 @@ pub fn build(
     if let Some(u) = udp::UdpSink::from_config(config)? {
         udp = Some(u.stats());
         sinks.push(Box::new(u));
+    }
+    if let Some(r) = record::RecordSink::from_config(config)? {
+        sinks.push(Box::new(r));
     }
     let (mut tcp_addr, mut tcp) = (None, None);
     if let Some(t) = tcp::TcpSink::from_config(config, edge)? {

@@ -151,7 +151,12 @@ fn a_replay_refuses_a_large_or_corrupt_recording_naming_the_file() {
     let path = dir.join("run.mcap");
     let cam = photopose_formats::default_camera();
     let (w, h) = (cam.sensor.width, cam.sensor.height);
-    let mut rec = Recorder::create(&path).unwrap();
+    // Uncompressed: the file is larger than the small limit below.
+    let options = photopose_record::RecordOptions {
+        compression: photopose_record::Compression::None,
+        ..Default::default()
+    };
+    let mut rec = Recorder::create_with(&path, &options).unwrap();
     for k in 0..2u8 {
         let px = vec![k.wrapping_mul(40).wrapping_add(3); (w * h) as usize];
         let img = Image::from_pixels(w, h, 255, Pixels::Mono8(px)).unwrap();

@@ -1,43 +1,55 @@
-//! photopose-record: recordings of camera frames with their metadata.
+//! photopose-record: recordings of camera frames and poses in MCAP, in
+//! the standard Foxglove schemas, readable by the official `mcap` readers and
+//! by Foxglove with no photopose plugin.
 //!
-//! A recording is an MCAP file (the container robotics tools such as
-//! Foxglove Studio open) with one channel, topic `/camera/frames`, message
-//! encoding `photopose.frame.v1`: each message is one frame, a fixed
-//! little-endian header followed by the pixels row by row:
+//! What a recording holds (see [`writer`]):
 //!
-//! | bytes | field |
-//! | --- | --- |
-//! | 8 | `seq` (u64) |
-//! | 8 | `camera_time_ns` (u64) |
-//! | 8 | `host_time_ns` (u64) |
-//! | 4 | `width` (u32) |
-//! | 4 | `height` (u32) |
-//! | 1 | bytes per pixel: 1 (Mono8) or 2 (Mono16, little-endian) |
-//! | 2 | `max_value` (u16, saturation level) |
-//! | … | `width × height × bytes per pixel` pixels |
+//! | topic | schema (encoding) | what |
+//! | --- | --- | --- |
+//! | `/camera/image` | `foxglove.RawImage` (protobuf) | every recorded frame, `mono8` or `mono16` (little-endian) |
+//! | `/pose` | `foxglove.PoseInFrame` (protobuf) | the camera pose of each frame with a pose, frame `field` |
+//! | `/pose/message` | `photopose.PoseMessage` (json, JSON Schema) | the full pose message, one per result |
 //!
-//! The MCAP message's `log_time` is the host time, `publish_time` the
-//! camera time, `sequence` the low 32 bits of `seq`. We write MCAP without
-//! compression so a recording can be replayed with a plain copy per frame.
+//! A message's `log_time` is the host time (ns since the Unix epoch),
+//! `publish_time` the camera time and `sequence` the low 32 bits of the
+//! frame's sequence number. The image channel's metadata holds the
+//! camera's saturation level (`max_value`). Attachments carry the camera,
+//! field and configuration files; a metadata record `photopose` the
+//! version, the host and the start time. Chunks are compressed (zstd by
+//! default, lz4 or none: [`Compression`]).
 //!
 //! Reading is checked: the file is read as a regular file of at most a
 //! limit (`photopose_formats::file`, kind "recording", 4 GiB unless the
 //! caller gives another), the data section's CRC and every chunk's CRC are
-//! verified, and every frame's header is checked against its length. A file
-//! that fails any of these is refused at [`Recording::open`] with its name;
-//! the whole recording is then held in memory (the replay copies frames out
-//! of it).
+//! verified, and every frame is checked against its size. A file that fails
+//! any of these is refused at [`Recording::open`] with its name; the whole
+//! recording is then held in memory (the replay copies frames out of it).
+//! Recordings of the first format (topic `/camera/frames`, encoding
+//! `photopose.frame.v1`: a 35-byte little-endian header `seq`,
+//! `camera_time_ns`, `host_time_ns`, `width`, `height`, bytes per pixel,
+//! `max_value`, then the pixels) are still read.
+
+pub mod writer;
+
+pub use writer::{Attachment, Compression, PoseRecord, RecordOptions, Recorder};
 
 use photopose_formats::file::{read_bytes_limited, FileError, FileKind};
 use photopose_frame::{Image, Pixels};
-use std::io::{BufWriter, Write};
 use std::path::Path;
 use thiserror::Error;
 
-/// The topic of the frames.
+/// The topic of the frames in the first format.
 pub const TOPIC: &str = "/camera/frames";
-/// The message encoding of the frames.
+/// The message encoding of the frames in the first format.
 pub const ENCODING: &str = "photopose.frame.v1";
+/// The topic of the frames (`foxglove.RawImage`).
+pub const IMAGE_TOPIC: &str = "/camera/image";
+/// The topic of the poses (`foxglove.PoseInFrame`).
+pub const POSE_TOPIC: &str = "/pose";
+/// The topic of the full pose messages (JSON).
+pub const MESSAGE_TOPIC: &str = "/pose/message";
+/// The schema name of the frames.
+pub const IMAGE_SCHEMA: &str = "foxglove.RawImage";
 const HEADER: usize = 35;
 
 /// A recording that cannot be written or read, with the file and why.
@@ -84,7 +96,7 @@ pub enum RecordError {
         what: String,
     },
     /// The file has no frames.
-    #[error("{path}: the recording holds no frames on {TOPIC}")]
+    #[error("{path}: the recording holds no frames (no {IMAGE_SCHEMA} messages on {IMAGE_TOPIC}, nor photopose.frame.v1 frames)")]
     Empty {
         /// The file.
         path: String,
@@ -100,106 +112,6 @@ pub struct FrameMeta {
     pub camera_time_ns: u64,
     /// Host time at reception, ns since the Unix epoch.
     pub host_time_ns: u64,
-}
-
-/// Writes a recording.
-pub struct Recorder {
-    path: String,
-    writer: mcap::Writer<BufWriter<std::fs::File>>,
-    channel: u16,
-    buf: Vec<u8>,
-}
-
-impl std::fmt::Debug for Recorder {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Recorder")
-            .field("path", &self.path)
-            .finish()
-    }
-}
-
-impl Recorder {
-    /// Creates (or replaces) the recording at `path`.
-    pub fn create(path: &Path) -> Result<Self, RecordError> {
-        let name = path.display().to_string();
-        let file = std::fs::File::create(path).map_err(|source| RecordError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let mcap_err = |e: mcap::McapError| RecordError::Mcap {
-            path: name.clone(),
-            message: e.to_string(),
-        };
-        let mut writer = mcap::WriteOptions::new()
-            .compression(None)
-            .profile("")
-            .create(BufWriter::new(file))
-            .map_err(mcap_err)?;
-        let channel = writer
-            .add_channel(0, TOPIC, ENCODING, &Default::default())
-            .map_err(mcap_err)?;
-        Ok(Recorder {
-            path: name,
-            writer,
-            channel,
-            buf: Vec::new(),
-        })
-    }
-
-    /// Appends one frame.
-    pub fn write(&mut self, meta: FrameMeta, image: &Image) -> Result<(), RecordError> {
-        let (bpp, bytes): (u8, &[u8]) = match image.pixels() {
-            Pixels::Mono8(p) => (1, p),
-            Pixels::Mono16(_) => (2, &[]),
-        };
-        self.buf.clear();
-        self.buf.extend_from_slice(&meta.seq.to_le_bytes());
-        self.buf
-            .extend_from_slice(&meta.camera_time_ns.to_le_bytes());
-        self.buf.extend_from_slice(&meta.host_time_ns.to_le_bytes());
-        self.buf.extend_from_slice(&image.width().to_le_bytes());
-        self.buf.extend_from_slice(&image.height().to_le_bytes());
-        self.buf.push(bpp);
-        self.buf.extend_from_slice(&image.max_value().to_le_bytes());
-        match image.pixels() {
-            Pixels::Mono8(_) => self.buf.extend_from_slice(bytes),
-            Pixels::Mono16(p) => {
-                for v in p {
-                    self.buf.extend_from_slice(&v.to_le_bytes());
-                }
-            }
-        }
-        let header = mcap::records::MessageHeader {
-            channel_id: self.channel,
-            sequence: meta.seq as u32,
-            log_time: meta.host_time_ns,
-            publish_time: meta.camera_time_ns,
-        };
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| RecordError::Mcap {
-                path: self.path.clone(),
-                message: e.to_string(),
-            })
-    }
-
-    /// Finishes the file (summary and footer) and flushes it to disk.
-    pub fn finish(mut self) -> Result<(), RecordError> {
-        let path = self.path.clone();
-        self.writer.finish().map_err(|e| RecordError::Mcap {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
-        let mut inner = self.writer.into_inner();
-        inner.flush().map_err(|source| RecordError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        inner
-            .get_ref()
-            .sync_all()
-            .map_err(|source| RecordError::Io { path, source })
-    }
 }
 
 /// A recording read into memory: the frames' byte ranges in file order.
@@ -246,6 +158,16 @@ impl Recording {
         let mut frames = Vec::new();
         for message in stream {
             let m = message.map_err(mcap_err)?;
+            let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
+            if schema == Some(IMAGE_SCHEMA) {
+                let frame = frame_from_raw_image(&m).map_err(|what| RecordError::Frame {
+                    path: name.clone(),
+                    index: frames.len(),
+                    what,
+                })?;
+                frames.push(frame);
+                continue;
+            }
             if m.channel.topic != TOPIC {
                 continue;
             }
@@ -307,6 +229,31 @@ impl Recording {
             u32_at(24),
             u32_at(28),
         )
+    }
+
+    /// Frame `index` as a new image of its recorded depth and saturation
+    /// level, with its metadata (for export, not for the replay's hot path).
+    pub fn frame(&self, index: usize) -> Result<(FrameMeta, Image), RecordError> {
+        let (meta, w, h) = self.meta(index);
+        let d = &self.frames[index];
+        let max_value = u16::from_le_bytes([d[33], d[34]]);
+        let px = &d[HEADER..];
+        let pixels = if d[32] == 1 {
+            Pixels::Mono8(px.to_vec())
+        } else {
+            Pixels::Mono16(
+                px.chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect(),
+            )
+        };
+        let image =
+            Image::from_pixels(w, h, max_value, pixels).map_err(|e| RecordError::Frame {
+                path: self.path.clone(),
+                index,
+                what: e.to_string(),
+            })?;
+        Ok((meta, image))
     }
 
     /// Copies frame `index` into `image` (which must have its size and
@@ -425,4 +372,59 @@ fn check_frame(d: &[u8]) -> Result<(), String> {
         return Err(format!("{} bytes, a {w}×{h} frame needs {need}", d.len()));
     }
     Ok(())
+}
+
+/// A `foxglove.RawImage` message as a frame of the first format (header
+/// and little-endian pixels), the replay's one layout in memory.
+fn frame_from_raw_image(m: &mcap::Message<'_>) -> Result<Vec<u8>, String> {
+    use foxglove::Decode;
+    if m.channel.message_encoding != "protobuf" {
+        return Err(format!(
+            "{IMAGE_SCHEMA} with message encoding `{}`, expected `protobuf`",
+            m.channel.message_encoding
+        ));
+    }
+    let image = foxglove::schemas::RawImage::decode(&m.data[..])
+        .map_err(|e| format!("not a {IMAGE_SCHEMA}: {e}"))?;
+    let bpp: usize = match image.encoding.as_str() {
+        "mono8" | "8UC1" => 1,
+        "mono16" | "16UC1" => 2,
+        other => {
+            return Err(format!(
+                "image encoding `{other}` (mono8 or mono16 expected)"
+            ))
+        }
+    };
+    let (w, h) = (image.width as usize, image.height as usize);
+    if w == 0 || h == 0 || w > 65_536 || h > 65_536 {
+        return Err(format!("frame size {w}×{h} is out of range"));
+    }
+    let row = w * bpp;
+    let step = image.step as usize;
+    if step < row || image.data.len() < step * (h - 1) + row {
+        return Err(format!(
+            "{} bytes with a step of {step}, a {w}×{h} {} frame needs {}",
+            image.data.len(),
+            image.encoding,
+            step * (h - 1) + row
+        ));
+    }
+    let max_value: u16 = m
+        .channel
+        .metadata
+        .get("max_value")
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(if bpp == 1 { 255 } else { u16::MAX });
+    let mut d = Vec::with_capacity(HEADER + row * h);
+    d.extend_from_slice(&u64::from(m.sequence).to_le_bytes());
+    d.extend_from_slice(&m.publish_time.to_le_bytes());
+    d.extend_from_slice(&m.log_time.to_le_bytes());
+    d.extend_from_slice(&image.width.to_le_bytes());
+    d.extend_from_slice(&image.height.to_le_bytes());
+    d.push(bpp as u8);
+    d.extend_from_slice(&max_value.to_le_bytes());
+    for r in 0..h {
+        d.extend_from_slice(&image.data[r * step..r * step + row]);
+    }
+    Ok(d)
 }

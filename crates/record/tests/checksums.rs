@@ -3,7 +3,7 @@
 //! as regular files.
 
 use photopose_frame::{Image, Pixels};
-use photopose_record::{FrameMeta, RecordError, Recorder, Recording};
+use photopose_record::{Compression, FrameMeta, RecordError, RecordOptions, Recorder, Recording};
 use std::path::{Path, PathBuf};
 
 fn scratch(name: &str) -> PathBuf {
@@ -22,7 +22,12 @@ fn frame(k: u8) -> Image {
 }
 
 fn record(path: &Path, frames: u8) {
-    let mut rec = Recorder::create(path).unwrap();
+    // Uncompressed, so the test can find a frame's pixels in the file.
+    let options = RecordOptions {
+        compression: Compression::None,
+        ..RecordOptions::default()
+    };
+    let mut rec = Recorder::create_with(path, &options).unwrap();
     for k in 0..frames {
         let meta = FrameMeta {
             seq: k as u64,

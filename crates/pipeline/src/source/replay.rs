@@ -1,5 +1,6 @@
 //! The replay source (`[source.replay]`): recorded frames (MCAP, see
-//! `photopose-record`) at the recorded pace times a factor, or as fast as
+//! `photopose-record`: the `foxglove.RawImage` channel, or the frames of a
+//! first-format recording) at the recorded pace times a factor, or as fast as
 //! the pipeline takes them. It owns its section: keys, defaults and checks.
 //! Host times come from the recording (shifted per pass), so a replay is
 //! the same run every time.

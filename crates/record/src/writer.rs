@@ -1,0 +1,443 @@
+//! The recording writer: frames as `foxglove.RawImage`, poses as
+//! `foxglove.PoseInFrame` plus the full pose message in JSON, attachments
+//! and a metadata record, in compressed MCAP chunks. The schemas of the
+//! Foxglove types come from the `foxglove` crate (its published protobuf
+//! descriptors); only the pose message's JSON Schema is ours.
+
+use crate::{FrameMeta, RecordError, IMAGE_TOPIC, MESSAGE_TOPIC, POSE_TOPIC};
+use foxglove::schemas::{Pose, PoseInFrame, Quaternion, RawImage, Timestamp, Vector3};
+use foxglove::Encode;
+use photopose_frame::{Image, Pixels};
+use std::collections::BTreeMap;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+/// The chunk compression of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Compression {
+    /// Zstandard (the default: the smaller files).
+    #[default]
+    Zstd,
+    /// LZ4 (faster, larger).
+    Lz4,
+    /// No compression.
+    None,
+}
+
+impl Compression {
+    /// The name in configuration files (`zstd`, `lz4`, `none`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Compression::Zstd => "zstd",
+            Compression::Lz4 => "lz4",
+            Compression::None => "none",
+        }
+    }
+
+    /// The compression of a configuration name.
+    pub fn from_name(name: &str) -> Option<Compression> {
+        match name {
+            "zstd" => Some(Compression::Zstd),
+            "lz4" => Some(Compression::Lz4),
+            "none" => Some(Compression::None),
+            _ => None,
+        }
+    }
+
+    fn mcap(self) -> Option<mcap::Compression> {
+        match self {
+            Compression::Zstd => Some(mcap::Compression::Zstd),
+            Compression::Lz4 => Some(mcap::Compression::Lz4),
+            Compression::None => None,
+        }
+    }
+}
+
+/// A file stored in the recording (camera, field, configuration).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Attachment {
+    /// Its name (the file's name).
+    pub name: String,
+    /// Its media type (`text/plain`, `application/toml`, …).
+    pub media_type: String,
+    /// Its bytes.
+    pub data: Vec<u8>,
+}
+
+/// How a recording is written.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RecordOptions {
+    /// Chunk compression.
+    pub compression: Compression,
+    /// Files stored with the recording.
+    pub attachments: Vec<Attachment>,
+    /// The `photopose` metadata record (version, host, start …).
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// One pose result to record.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseRecord<'a> {
+    /// The frame's sequence number.
+    pub seq: u64,
+    /// The frame's camera time, ns.
+    pub camera_time_ns: u64,
+    /// The frame's host time, ns since the Unix epoch.
+    pub host_time_ns: u64,
+    /// The camera's projection centre in the field (mm) and its rotation
+    /// (quaternion `w, x, y, z`), when the frame has a pose.
+    pub pose: Option<([f64; 3], [f64; 4])>,
+    /// The full pose message, one JSON object (a trailing newline is
+    /// dropped).
+    pub json: &'a [u8],
+}
+
+/// The JSON Schema of the pose message (photopose's own message; the
+/// stream's version 1, see `photopose-stream`).
+const POSE_MESSAGE_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "photopose.PoseMessage",
+  "type": "object",
+  "properties": {
+    "seq": {"type": "integer"},
+    "camera_time_ns": {"type": "integer"},
+    "host_time_ns": {"type": "integer"},
+    "latency_us": {"type": "number"},
+    "status": {"type": "string"},
+    "center": {"type": "array", "items": {"type": "number"}},
+    "rotation": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
+    "quaternion_wxyz": {"type": "array", "items": {"type": "number"}},
+    "std_center": {"type": "array", "items": {"type": "number"}},
+    "std_rotation_deg": {"type": "array", "items": {"type": "number"}},
+    "sigma0_px": {"type": "number"},
+    "n_targets": {"type": "integer"},
+    "rsi": {"type": "string"},
+    "robot_xyzabc": {"type": "array", "items": {"type": "number"}}
+  }
+}"#;
+
+/// A file writer that knows how far it has written (for rotation by size).
+struct Counted {
+    file: BufWriter<std::fs::File>,
+    end: Arc<AtomicU64>,
+    at: u64,
+}
+
+impl Write for Counted {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.at += n as u64;
+        self.end.fetch_max(self.at, Ordering::Relaxed);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for Counted {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        self.at = self.file.seek(pos)?;
+        self.end.fetch_max(self.at, Ordering::Relaxed);
+        Ok(self.at)
+    }
+}
+
+/// Writes a recording.
+pub struct Recorder {
+    path: String,
+    writer: mcap::Writer<Counted>,
+    written: Arc<AtomicU64>,
+    image: Option<u16>,
+    pose: u16,
+    message: u16,
+    buf: Vec<u8>,
+    frames: u64,
+    poses: u64,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder")
+            .field("path", &self.path)
+            .field("frames", &self.frames)
+            .field("poses", &self.poses)
+            .finish()
+    }
+}
+
+fn schema_of<T: Encode>() -> foxglove::Schema {
+    T::get_schema().expect("the foxglove schema types carry their schema")
+}
+
+impl Recorder {
+    /// Creates (or replaces) the recording at `path`, zstd-compressed, no
+    /// attachments.
+    pub fn create(path: &Path) -> Result<Self, RecordError> {
+        Self::create_with(path, &RecordOptions::default())
+    }
+
+    /// Creates (or replaces) the recording at `path` with `options`.
+    pub fn create_with(path: &Path, options: &RecordOptions) -> Result<Self, RecordError> {
+        let name = path.display().to_string();
+        let file = std::fs::File::create(path).map_err(|source| RecordError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        let mcap_err = |e: mcap::McapError| RecordError::Mcap {
+            path: name.clone(),
+            message: e.to_string(),
+        };
+        let written = Arc::new(AtomicU64::new(0));
+        let mut writer = mcap::WriteOptions::new()
+            .compression(options.compression.mcap())
+            .profile("")
+            .library(concat!("photopose-record ", env!("CARGO_PKG_VERSION")))
+            .create(Counted {
+                file: BufWriter::new(file),
+                end: written.clone(),
+                at: 0,
+            })
+            .map_err(mcap_err)?;
+        let pose_schema = schema_of::<PoseInFrame>();
+        let id = writer
+            .add_schema(&pose_schema.name, &pose_schema.encoding, &pose_schema.data)
+            .map_err(mcap_err)?;
+        let pose = writer
+            .add_channel(
+                id,
+                POSE_TOPIC,
+                &PoseInFrame::get_message_encoding(),
+                &BTreeMap::new(),
+            )
+            .map_err(mcap_err)?;
+        let id = writer
+            .add_schema(
+                "photopose.PoseMessage",
+                "jsonschema",
+                POSE_MESSAGE_SCHEMA.as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let message = writer
+            .add_channel(id, MESSAGE_TOPIC, "json", &BTreeMap::new())
+            .map_err(mcap_err)?;
+        for a in &options.attachments {
+            writer
+                .attach(&mcap::Attachment {
+                    log_time: 0,
+                    create_time: 0,
+                    name: a.name.clone(),
+                    media_type: a.media_type.clone(),
+                    data: std::borrow::Cow::Borrowed(&a.data),
+                })
+                .map_err(mcap_err)?;
+        }
+        if !options.metadata.is_empty() {
+            writer
+                .write_metadata(&mcap::records::Metadata {
+                    name: "photopose".into(),
+                    metadata: options.metadata.clone(),
+                })
+                .map_err(mcap_err)?;
+        }
+        Ok(Recorder {
+            path: name,
+            writer,
+            written,
+            image: None,
+            pose,
+            message,
+            buf: Vec::new(),
+            frames: 0,
+            poses: 0,
+        })
+    }
+
+    fn mcap_err(&self, e: mcap::McapError) -> RecordError {
+        RecordError::Mcap {
+            path: self.path.clone(),
+            message: e.to_string(),
+        }
+    }
+
+    /// Bytes written to the file so far (compressed chunks as they close).
+    pub fn bytes_written(&self) -> u64 {
+        self.written.load(Ordering::Relaxed)
+    }
+
+    /// Frames written.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// The file.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// Appends one frame.
+    pub fn write(&mut self, meta: FrameMeta, image: &Image) -> Result<(), RecordError> {
+        match image.pixels() {
+            Pixels::Mono8(p) => {
+                self.write_pixels(meta, image.width(), image.height(), image.max_value(), 1, p)
+            }
+            Pixels::Mono16(p) => {
+                let mut bytes = Vec::with_capacity(p.len() * 2);
+                for v in p {
+                    bytes.extend_from_slice(&v.to_le_bytes());
+                }
+                self.write_pixels(
+                    meta,
+                    image.width(),
+                    image.height(),
+                    image.max_value(),
+                    2,
+                    &bytes,
+                )
+            }
+        }
+    }
+
+    /// Appends one frame given as rows of little-endian pixels of
+    /// `bytes_per_pixel` (1: mono8, 2: mono16) bytes; `max_value` is the
+    /// saturation level (stored once, in the image channel's metadata).
+    pub fn write_pixels(
+        &mut self,
+        meta: FrameMeta,
+        width: u32,
+        height: u32,
+        max_value: u16,
+        bytes_per_pixel: u8,
+        pixels: &[u8],
+    ) -> Result<(), RecordError> {
+        let channel = match self.image {
+            Some(c) => c,
+            None => {
+                let schema = schema_of::<RawImage>();
+                let id = self
+                    .writer
+                    .add_schema(&schema.name, &schema.encoding, &schema.data)
+                    .map_err(|e| self.mcap_err(e))?;
+                let metadata = BTreeMap::from([("max_value".to_string(), max_value.to_string())]);
+                let c = self
+                    .writer
+                    .add_channel(
+                        id,
+                        IMAGE_TOPIC,
+                        &RawImage::get_message_encoding(),
+                        &metadata,
+                    )
+                    .map_err(|e| self.mcap_err(e))?;
+                self.image = Some(c);
+                c
+            }
+        };
+        let message = RawImage {
+            timestamp: Some(timestamp(meta.host_time_ns)),
+            frame_id: "camera".into(),
+            width,
+            height,
+            encoding: if bytes_per_pixel == 2 {
+                "mono16"
+            } else {
+                "mono8"
+            }
+            .into(),
+            step: width * u32::from(bytes_per_pixel),
+            data: foxglove::bytes::Bytes::copy_from_slice(pixels),
+        };
+        self.buf.clear();
+        message
+            .encode(&mut self.buf)
+            .map_err(|e| RecordError::Mcap {
+                path: self.path.clone(),
+                message: format!("cannot encode frame {}: {e}", meta.seq),
+            })?;
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: meta.seq as u32,
+            log_time: meta.host_time_ns,
+            publish_time: meta.camera_time_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| self.mcap_err(e))?;
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Appends one pose result: the full message always, the
+    /// `PoseInFrame` when the frame has a pose.
+    pub fn write_pose(&mut self, pose: &PoseRecord<'_>) -> Result<(), RecordError> {
+        let header = |channel_id| mcap::records::MessageHeader {
+            channel_id,
+            sequence: pose.seq as u32,
+            log_time: pose.host_time_ns,
+            publish_time: pose.camera_time_ns,
+        };
+        if let Some((c, q)) = pose.pose {
+            let message = PoseInFrame {
+                timestamp: Some(timestamp(pose.host_time_ns)),
+                frame_id: "field".into(),
+                pose: Some(Pose {
+                    position: Some(Vector3 {
+                        x: c[0],
+                        y: c[1],
+                        z: c[2],
+                    }),
+                    orientation: Some(Quaternion {
+                        x: q[1],
+                        y: q[2],
+                        z: q[3],
+                        w: q[0],
+                    }),
+                }),
+            };
+            self.buf.clear();
+            message
+                .encode(&mut self.buf)
+                .map_err(|e| RecordError::Mcap {
+                    path: self.path.clone(),
+                    message: format!("cannot encode pose {}: {e}", pose.seq),
+                })?;
+            self.writer
+                .write_to_known_channel(&header(self.pose), &self.buf)
+                .map_err(|e| self.mcap_err(e))?;
+        }
+        let json = pose.json.strip_suffix(b"\n").unwrap_or(pose.json);
+        self.writer
+            .write_to_known_channel(&header(self.message), json)
+            .map_err(|e| self.mcap_err(e))?;
+        self.poses += 1;
+        Ok(())
+    }
+
+    /// Finishes the file (summary and footer) and flushes it to disk.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        let path = self.path.clone();
+        self.writer.finish().map_err(|e| RecordError::Mcap {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        let mut inner = self.writer.into_inner();
+        inner.flush().map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        inner
+            .file
+            .get_ref()
+            .sync_all()
+            .map_err(|source| RecordError::Io { path, source })
+    }
+}
+
+fn timestamp(ns: u64) -> Timestamp {
+    Timestamp::new(
+        u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
+        (ns % 1_000_000_000) as u32,
+    )
+}
