@@ -49,33 +49,18 @@ pub struct Args {
 }
 
 /// The camera pose of an `ok` pose-stream line that carries `RIst`.
-fn sample(v: &serde_json::Value) -> Option<Sample> {
-    if v["status"] != "ok" {
+fn sample(l: &photopose_stream::PoseLine) -> Option<Sample> {
+    if l.has_pose() != Some(true) {
         return None;
     }
-    let nums = |key: &str, n: usize| -> Option<Vec<f64>> {
-        let a = v[key].as_array()?;
-        (a.len() == n)
-            .then(|| a.iter().map(|x| x.as_f64()).collect::<Option<Vec<f64>>>())
-            .flatten()
-    };
-    let robot = nums("robot_xyzabc", 6)?;
-    let c = nums("center", 3)?;
-    let sc = nums("std_center", 3)?;
-    let sr = nums("std_rotation_deg", 3)?;
-    let rows = v["rotation"].as_array()?;
-    let mut r = photopose_geometry::Matrix3::zeros();
-    for (i, row) in rows.iter().enumerate().take(3) {
-        for (j, x) in row.as_array()?.iter().enumerate().take(3) {
-            r[(i, j)] = x.as_f64()?;
-        }
-    }
+    let (c, r, sc, sr) = (l.center?, l.rotation?, l.std_center?, l.std_rotation_deg?);
+    let r = photopose_geometry::Matrix3::from_fn(|i, j| r[i][j]);
     Some(Sample {
-        time_s: v["camera_time_ns"].as_u64()? as f64 / 1e9,
-        robot_xyzabc: std::array::from_fn(|k| robot[k]),
+        time_s: l.camera_time_ns? as f64 / 1e9,
+        robot_xyzabc: l.robot_xyzabc?,
         camera: photopose_geometry::pose::camera_pose(&photopose_geometry::Exterior::new(
             r,
-            photopose_geometry::Vector3::new(c[0], c[1], c[2]),
+            photopose_geometry::Vector3::from(c),
         )),
         camera_std: [sc[0], sc[1], sc[2], sr[0], sr[1], sr[2]],
     })
@@ -146,10 +131,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
             Err(e) => return Err(e).context("reading the pose stream"),
         }
         lines += 1;
-        let v: serde_json::Value = serde_json::from_str(line.trim())
-            .with_context(|| format!("pose stream line {lines} is not JSON"))?;
+        let v = photopose_stream::PoseLine::parse(line.trim())
+            .with_context(|| format!("pose stream line {lines} is not a pose message"))?;
         let Some(s) = sample(&v) else {
-            if v["status"] == "ok" {
+            if v.has_pose() == Some(true) {
                 without_robot += 1;
             }
             continue;

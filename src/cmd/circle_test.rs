@@ -10,7 +10,7 @@ use photopose_circle::pose::tcp_from_camera;
 use photopose_circle::{analyse, plot, report, AnalysisOptions, CircleTest, Isometry3};
 use photopose_geometry::pose::{camera_pose, isometry_from_xyzabc};
 use photopose_geometry::{rotation, Exterior, Matrix3, Vector3};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -39,15 +39,6 @@ pub struct Args {
     /// Print the JSON report on stdout instead of the text report.
     #[arg(long)]
     pub json: bool,
-}
-
-/// One input line: a pose message (`status`) or a resect line (`ok`).
-#[derive(Deserialize)]
-struct PoseLine {
-    status: Option<String>,
-    ok: Option<bool>,
-    center: Option<[f64; 3]>,
-    rotation: Option<[[f64; 3]; 3]>,
 }
 
 /// What was read from one pose file.
@@ -244,25 +235,15 @@ pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSum
         }
         let at = format!("{name}:{}", k + 1);
         summary.lines += 1;
-        let l: PoseLine =
-            serde_json::from_str(line).with_context(|| format!("{at}: not a JSON pose line"))?;
-        let has_pose = match (&l.status, l.ok) {
-            (Some(status), _) => {
-                if status != "ok" {
-                    *summary.skipped.entry(status.clone()).or_default() += 1;
-                }
-                status == "ok"
-            }
-            (None, Some(ok)) => {
-                if !ok {
-                    *summary.skipped.entry("failed".into()).or_default() += 1;
-                }
-                ok
-            }
-            (None, None) => {
-                bail!("{at}: neither a pose message (no \"status\") nor a resect line (no \"ok\")")
-            }
+        let l = photopose_stream::PoseLine::parse(line)
+            .with_context(|| format!("{at}: not a JSON pose line"))?;
+        let Some(has_pose) = l.has_pose() else {
+            bail!("{at}: neither a pose message (no \"status\") nor a resect line (no \"ok\")")
         };
+        if !has_pose {
+            let why = l.status.clone().unwrap_or_else(|| "failed".into());
+            *summary.skipped.entry(why).or_default() += 1;
+        }
         if !has_pose {
             continue;
         }

@@ -74,13 +74,13 @@ fn hammer(policy: Overflow, capacity: usize, consumers: usize, frames: u64, slow
                                 }
                                 seen.push(f.meta.seq);
                                 let r = rng.next();
-                                if slow && r % 4 == 0 {
+                                if slow && r.is_multiple_of(4) {
                                     std::thread::sleep(Duration::from_micros(r % 200));
                                 }
                                 // Sometimes keep a frame (or two) a while longer.
-                                if r % 5 == 0 && held.len() < 2 {
+                                if r.is_multiple_of(5) && held.len() < 2 {
                                     held.push(f);
-                                } else if r % 3 == 0 {
+                                } else if r.is_multiple_of(3) {
                                     held.clear();
                                 }
                             }

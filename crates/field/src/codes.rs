@@ -57,7 +57,7 @@ pub fn id_of(reading: u16) -> Option<u64> {
 /// Whether code `id` has an even number of bright sectors (the codes that
 /// designed plates use).
 pub fn is_even(id: u64) -> bool {
-    value_of(id).is_some_and(|v| v.count_ones() % 2 == 0)
+    value_of(id).is_some_and(|v| v.count_ones().is_multiple_of(2))
 }
 
 /// The even code ids in ascending order.

@@ -67,8 +67,8 @@ impl PlateDesign {
                 let coded = self.coded_step > 0
                     && col >= self.coded_offset.0
                     && row >= self.coded_offset.1
-                    && (col - self.coded_offset.0) % self.coded_step == 0
-                    && (row - self.coded_offset.1) % self.coded_step == 0;
+                    && (col - self.coded_offset.0).is_multiple_of(self.coded_step)
+                    && (row - self.coded_offset.1).is_multiple_of(self.coded_step);
                 let position = Vector3::new(
                     x0 + col as f64 * self.spacing,
                     y0 - row as f64 * self.spacing,

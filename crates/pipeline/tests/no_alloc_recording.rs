@@ -4,73 +4,23 @@
 //! (`record`: protobuf encoding, MCAP chunks, compression) allocates, so
 //! this test's allocator counts every thread but that one.
 
-// A global allocator implements an unsafe trait (it only forwards to
-// `System`), and reading the thread's name goes through libc.
-#![allow(unsafe_code)]
-
 use photopose_field::design::default_plate;
 use photopose_pipeline::config::Source;
 use photopose_pipeline::sink::record::RecordLink;
 use photopose_pipeline::source::SyntheticSource;
 use photopose_pipeline::{Config, Pipeline, Supervision};
-use std::alloc::{GlobalAlloc, Layout, System};
+use photopose_testkit::{allocations_outside, exclude_thread, CountingAllocator};
 use std::net::UdpSocket;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-static COUNTED: AtomicUsize = AtomicUsize::new(0);
-
-/// Whether the calling thread is the recording's writer (its name, read
-/// with `prctl` through libc: no allocation).
-fn on_writer_thread() -> bool {
-    let mut name = [0u8; 16];
-    // SAFETY: the buffer has the 16 bytes the call writes at most.
-    let r = unsafe {
-        libc::pthread_getname_np(libc::pthread_self(), name.as_mut_ptr().cast(), name.len())
-    };
-    r == 0 && name.starts_with(b"record\0")
-}
-
-struct FramePathAllocator;
-
-// SAFETY: every call forwards to `System` unchanged; counting reads the
-// thread's name and touches an atomic.
-unsafe impl GlobalAlloc for FramePathAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if !on_writer_thread() {
-            COUNTED.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract, forwarded.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        if !on_writer_thread() {
-            COUNTED.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract, forwarded.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if !on_writer_thread() {
-            COUNTED.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract, forwarded.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract, forwarded.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: FramePathAllocator = FramePathAllocator;
+static GLOBAL: CountingAllocator = CountingAllocator;
 
 #[test]
 fn the_frame_path_does_not_allocate_while_recording() {
+    // The writer thread encodes and compresses: off the frame path.
+    exclude_thread("record");
     let dir = std::env::temp_dir().join(format!("photopose-noalloc-rec-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -128,9 +78,9 @@ compression = "lz4"
         }
     };
     receive(30);
-    let before = COUNTED.load(Ordering::Relaxed);
+    let before = allocations_outside();
     receive(40);
-    let allocated = COUNTED.load(Ordering::Relaxed) - before;
+    let allocated = allocations_outside() - before;
     pipeline.stop();
     pipeline.join();
     link.close();

@@ -67,9 +67,9 @@ fn a_cycle_allocates_nothing() {
         for (k, d) in datagrams.iter().enumerate() {
             let k = from + k as u64;
             let now = k as f64 * 0.004;
-            if k % 10 == 0 {
+            if k.is_multiple_of(10) {
                 // Every fifth publication is broken: a frozen-invalid cycle.
-                if k % 50 == 0 {
+                if k.is_multiple_of(50) {
                     publisher.publish(&Measurement {
                         seq: k,
                         time_s: now,
@@ -90,7 +90,7 @@ fn a_cycle_allocates_nothing() {
             session.commit(ctl, f.ipoc.value() + k * 4, now);
             let latest = reader.read();
             let o = law.cycle(now, f.rsol, latest.as_ref());
-            if k % 50 == 0 {
+            if k.is_multiple_of(50) {
                 assert_eq!(o.status, LawStatus::FrozenInvalid);
             }
             let send = if law.admissible(&o.send) {

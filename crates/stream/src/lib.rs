@@ -15,12 +15,14 @@
 pub mod edge;
 pub mod http;
 pub mod message;
+pub mod read;
 pub mod tcp;
 pub mod udp;
 
 pub use edge::{Edge, EdgeHandle};
 pub use http::{HttpLimits, HttpStats, TextEndpoint};
 pub use message::{PoseMessage, PoseStatus};
+pub use read::PoseLine;
 pub use tcp::{TcpLimits, TcpServer, TcpStats};
 pub use udp::{DestinationStats, UdpSender, UdpStats};
 

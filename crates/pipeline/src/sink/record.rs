@@ -306,7 +306,7 @@ impl FrameSource for FrameTap {
 
     fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
         self.inner.next_frame(slot, timeout)?;
-        if self.count % u64::from(self.every) == 0 {
+        if self.count.is_multiple_of(u64::from(self.every)) {
             self.link.frame(slot);
         }
         self.count += 1;
