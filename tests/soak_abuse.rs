@@ -19,30 +19,15 @@
 
 mod common;
 
-use common::{bin, root, scratch, FakeCamera};
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{TcpListener, TcpStream, UdpSocket};
-use std::process::{Child, Stdio};
+use common::{
+    bin, free_tcp_port, free_udp_port, metric, root, scrape, scratch, FakeCamera, Killed,
+};
+use std::io::{BufRead, BufReader};
+use std::net::{TcpStream, UdpSocket};
+use std::process::Stdio;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-/// A port free on 127.0.0.1 now.
-fn free_tcp_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn free_udp_port() -> u16 {
-    UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// VmRSS, VmSize (kB) and Threads of a process.
 #[derive(Debug, Clone, Copy)]
@@ -67,37 +52,6 @@ fn sample(pid: u32) -> Option<Sample> {
         size_kb: field("VmSize:")?,
         threads: field("Threads:")?,
     })
-}
-
-/// The daemon, killed on drop if a test fails half way.
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// One HTTP GET of the metrics; the body.
-fn scrape(port: u16) -> Option<String> {
-    let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
-    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
-    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
-        .ok()?;
-    let mut text = String::new();
-    s.read_to_string(&mut text).ok()?;
-    text.starts_with("HTTP/1.1 200")
-        .then(|| text.split("\r\n\r\n").nth(1).unwrap_or("").to_string())
-}
-
-fn metric(body: &str, name: &str) -> Option<f64> {
-    body.lines()
-        .find(|l| l.split_whitespace().next() == Some(name))?
-        .split_whitespace()
-        .nth(1)?
-        .parse()
-        .ok()
 }
 
 #[test]
@@ -139,7 +93,7 @@ fn the_daemon_survives_abuse_with_flat_resources() {
     )
     .unwrap();
     let mut fake = Some(FakeCamera::start());
-    let daemon = Daemon(
+    let daemon = Killed(
         bin()
             .args(["run", "--config"])
             .arg(&config)
