@@ -190,7 +190,22 @@ pub fn spawn_grabber_counted<S: FrameSource + 'static>(
                 &mut observer,
             );
             source.stop();
-            tracing::info!(grabber = %thread_name, exit = ?exit, stats = ?source.stats(), "grabber stopped");
+            let st = source.stats();
+            let why = match &exit {
+                GrabberExit::Stopped => "stopped".to_string(),
+                GrabberExit::Ended => "source ended".to_string(),
+                GrabberExit::Failed(e) => format!("failed: {e}"),
+            };
+            tracing::info!(
+                grabber = %thread_name,
+                exit = %why,
+                frames = st.frames,
+                missing = st.missing,
+                incomplete = st.incomplete,
+                losses = st.losses,
+                opens = st.opens,
+                "grabber stopped"
+            );
             (source, exit)
         })?;
     Ok(Grabber {
@@ -229,7 +244,7 @@ fn run<S: FrameSource>(
                     // Log the first drop and then every power of two.
                     let dropped = producer.counters().snapshot().dropped;
                     if dropped >= drops_logged.saturating_mul(2).max(1) {
-                        tracing::warn!(grabber = %name, dropped, policy = ?producer.policy(), "ring full: frames dropped");
+                        tracing::warn!(grabber = %name, dropped, policy = producer.policy().name(), "ring full: frames dropped");
                         drops_logged = dropped;
                     }
                 }

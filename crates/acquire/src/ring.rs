@@ -93,6 +93,17 @@ pub enum Overflow {
     Block,
 }
 
+impl Overflow {
+    /// The policy's name as configured (`drop-newest`, `drop-oldest`, `block`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Overflow::DropNewest => "drop-newest",
+            Overflow::DropOldest => "drop-oldest",
+            Overflow::Block => "block",
+        }
+    }
+}
+
 /// Counters of a ring (all monotonic, relaxed: read them for metrics).
 #[derive(Debug, Default)]
 pub struct RingCounters {

@@ -407,14 +407,8 @@ impl Pipeline {
         }
         if let Some(server) = self.rsi.take() {
             // The robot keeps being answered until the poses have stopped.
-            let s = server.stop();
-            tracing::info!(
-                cycles = s.cycles,
-                replies = s.replies,
-                p99_us = ?s.latency_p99_us,
-                p999_us = ?s.latency_p999_us,
-                "RSI server stopped"
-            );
+            // The server logs its own stop; the figures are in the summary.
+            server.stop();
         }
         if let Some(m) = self.metrics.take() {
             m.stop();
