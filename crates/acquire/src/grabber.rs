@@ -190,22 +190,28 @@ pub fn spawn_grabber_counted<S: FrameSource + 'static>(
                 &mut observer,
             );
             source.stop();
-            let st = source.stats();
             let why = match &exit {
                 GrabberExit::Stopped => "stopped".to_string(),
                 GrabberExit::Ended => "source ended".to_string(),
                 GrabberExit::Failed(e) => format!("failed: {e}"),
             };
-            tracing::info!(
-                grabber = %thread_name,
-                exit = %why,
-                frames = st.frames,
-                missing = st.missing,
-                incomplete = st.incomplete,
-                losses = st.losses,
-                opens = st.opens,
-                "grabber stopped"
-            );
+            let published = c.published.get();
+            if source.shared_counters().is_some() {
+                // A camera keeps its own counts of what the link lost.
+                let st = source.stats();
+                tracing::info!(
+                    grabber = %thread_name,
+                    exit = %why,
+                    frames = published,
+                    missing = st.missing,
+                    incomplete = st.incomplete,
+                    losses = st.losses,
+                    opens = st.opens,
+                    "grabber stopped"
+                );
+            } else {
+                tracing::info!(grabber = %thread_name, exit = %why, frames = published, "grabber stopped");
+            }
             (source, exit)
         })?;
     Ok(Grabber {
