@@ -17,4 +17,28 @@ pub struct FrameMeta {
     pub camera_time_ns: u64,
     /// Host time of reception, ns since the Unix epoch.
     pub host_time_ns: u64,
+    /// Host time of reception on the host's monotonic clock
+    /// (`CLOCK_MONOTONIC`), ns; 0 when the source did not stamp it.
+    pub host_mono_ns: u64,
+    /// The middle of the exposure on the host's monotonic clock
+    /// (`CLOCK_MONOTONIC`), ns: the instant the measurement belongs to; 0
+    /// when not known.
+    pub exposure_mono_ns: u64,
+    /// The standard uncertainty of `exposure_mono_ns`, ns (0 when not known).
+    pub exposure_sigma_ns: u64,
+    /// The exposure time (shutter open), ns; 0 when not known.
+    pub exposure_ns: u64,
+}
+
+impl FrameMeta {
+    /// The middle of the exposure in UTC (ns since the Unix epoch), from the
+    /// reception's UTC and the two monotonic instants; `None` when the
+    /// exposure instant or the monotonic reception time is not known.
+    pub fn exposure_utc_ns(&self) -> Option<u64> {
+        if self.exposure_mono_ns == 0 || self.host_mono_ns == 0 || self.host_time_ns == 0 {
+            return None;
+        }
+        let back = self.host_mono_ns.checked_sub(self.exposure_mono_ns)?;
+        self.host_time_ns.checked_sub(back)
+    }
 }

@@ -36,6 +36,16 @@ pub struct FrameTimes {
     pub handover_utc_ns: u64,
     /// The hand-over on the host's monotonic clock.
     pub handover: Instant,
+    /// The hand-over on the host's monotonic clock (`CLOCK_MONOTONIC`), ns;
+    /// 0 when the source did not stamp it.
+    pub handover_mono_ns: u64,
+    /// The middle of the exposure on the host's monotonic clock
+    /// (`CLOCK_MONOTONIC`), ns; 0 when not known.
+    pub exposure_mono_ns: u64,
+    /// The middle of the exposure, ns since the Unix epoch (UTC), when known.
+    pub exposure_utc_ns: Option<u64>,
+    /// The standard uncertainty of the exposure instant, ns (0: not known).
+    pub exposure_sigma_ns: u64,
     /// When the worker finished the frame, host monotonic clock.
     pub processed: Instant,
 }
@@ -80,6 +90,10 @@ impl PoseResult {
                 camera_ns: meta.camera_time_ns,
                 handover_utc_ns: meta.host_time_ns,
                 handover,
+                handover_mono_ns: meta.host_mono_ns,
+                exposure_mono_ns: meta.exposure_mono_ns,
+                exposure_utc_ns: meta.exposure_utc_ns(),
+                exposure_sigma_ns: meta.exposure_sigma_ns,
                 processed: Instant::now(),
             },
             status,
