@@ -259,6 +259,16 @@ impl Locator {
         &self.field
     }
 
+    /// What came of the last frame (located or tracked).
+    pub fn status(&self) -> &PoseStatus {
+        &self.status
+    }
+
+    /// The pose of the last frame, when it has one.
+    pub fn pose(&self) -> Option<&ResectionReport> {
+        self.pose.as_ref()
+    }
+
     /// The targets identified in the last frame (located or tracked),
     /// coded first in a located frame, in field order in a tracked one.
     pub fn identified(&self) -> &[Identified] {
