@@ -5,6 +5,11 @@
 //! ring giving another id, a jump), or when the latest pose is too many
 //! frames old.
 //!
+//! Off by default: which pose a worker tracks from depends on which frames
+//! the other workers have finished, so two runs over the same recording
+//! agree only to a fraction of σ, not bit for bit (a replay at speed `max`
+//! is otherwise deterministic).
+//!
 //! The latest pose of the camera lives in one [`TrackSlot`] shared by the
 //! workers. Workers finish frames out of order: a pose replaces the slot's
 //! only when its frame is newer, and the one it replaces becomes the
@@ -61,7 +66,7 @@ pub struct Tracking {
 impl Default for Tracking {
     fn default() -> Self {
         Tracking {
-            enabled: true,
+            enabled: false,
             full_frame_every: 50,
             min_targets: 12,
             max_gap: 8,

@@ -34,6 +34,8 @@ workers = 2
 slots = 6
 overflow = "block"
 max_age_ms = 5000.0
+[tracking]
+enabled = true
 [output]
 udp = ["{}"]
 "#,
