@@ -5,13 +5,20 @@
 //! Prints medians and 99th percentiles per stage; a stage's time per frame
 //! is the sum over its blobs where it runs per blob. The probe adds a clock
 //! read per stage mark (a few µs per frame), so `total` is slightly above a
-//! plain run.
+//! plain run; the whole-frame figure (`full_frame`) is timed without it.
+//!
+//! Tracking mode is timed along the demo's moving circle (the simulated
+//! cell, its default feed, frames at `--track-rate`): each frame tracked from
+//! the pose predicted by the two before it, as the daemon does; a frame that
+//! cannot be tracked is located whole and counted.
 
 use crate::cmd::defaults;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
+use photopose_circle::cell::Cell;
 use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::{Exterior, Vector3};
+use photopose_locate::track::{Motion, Prior, TrackOptions};
 use photopose_locate::{LocateOptions, Locator, PoseStatus, Stage};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_vision::DetectStage;
@@ -34,7 +41,14 @@ pub struct Args {
     /// Passes over the frames.
     #[arg(long, default_value_t = 50)]
     pub rounds: usize,
-    /// Print JSON instead of a table.
+    /// Frames along the moving circle for tracking mode.
+    #[arg(long, default_value_t = 200)]
+    pub track_frames: usize,
+    /// Frame rate along the moving circle, frames/s.
+    #[arg(long, default_value_t = 1000.0)]
+    pub track_rate: f64,
+    /// End the output with one JSON object (`full_frame_median_us`,
+    /// `tracking_median_us`, the stages …).
     #[arg(long)]
     pub json: bool,
 }
@@ -137,12 +151,26 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if times[8].is_empty() {
         bail!("no frame gave a pose ({failed} failed)");
     }
+    // The whole frame without the probe's clock reads.
+    let mut full = Vec::with_capacity(args.frames * args.rounds);
+    for _ in 0..args.rounds {
+        for img in &frames {
+            let t0 = Instant::now();
+            let ok = *locator.locate(img.view())?.status == PoseStatus::Ok;
+            let dt = t0.elapsed().as_secs_f64() * 1e6;
+            if ok {
+                full.push(dt);
+            }
+        }
+    }
+    full.sort_by(f64::total_cmp);
+    let tracking = track_circle(&mut renderer, &mut locator, &args)?;
     for t in &mut times {
         t.sort_by(f64::total_cmp);
     }
     let names = NAMES;
     if args.json {
-        let obj: serde_json::Map<String, serde_json::Value> = names
+        let stages: serde_json::Map<String, serde_json::Value> = names
             .iter()
             .zip(&times)
             .map(|(n, t)| {
@@ -152,7 +180,20 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 )
             })
             .collect();
-        println!("{}", serde_json::Value::Object(obj));
+        let obj = serde_json::json!({
+            "full_frame_median_us": percentile(&full, 0.5),
+            "full_frame_p99_us": percentile(&full, 0.99),
+            "tracking_median_us": percentile(&tracking.times, 0.5),
+            "tracking_p99_us": percentile(&tracking.times, 0.99),
+            "tracking_frames": tracking.times.len(),
+            "tracking_fallbacks": tracking.fallbacks,
+            "tracking_targets_mean": tracking.targets_mean,
+            "frames": args.frames,
+            "rounds": args.rounds,
+            "failed": failed,
+            "stages_us": serde_json::Value::Object(stages),
+        });
+        println!("{obj}");
     } else {
         println!(
             "frame pipeline, single thread: {} frames × {} rounds, {:.0} visible targets per frame on average, {} failed",
@@ -173,6 +214,115 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 percentile(t, 0.99)
             );
         }
+        println!(
+            "{:>12} | {:>11.1} | {:>11.1}",
+            "full_frame",
+            percentile(&full, 0.5),
+            percentile(&full, 0.99)
+        );
+        println!(
+            "{:>12} | {:>11.1} | {:>11.1}   ({} frames along the moving circle at {} frames/s, {:.0} targets per frame, {} located whole)",
+            "tracking",
+            percentile(&tracking.times, 0.5),
+            percentile(&tracking.times, 0.99),
+            tracking.times.len(),
+            args.track_rate,
+            tracking.targets_mean,
+            tracking.fallbacks
+        );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// What tracking along the circle measured.
+struct Tracking {
+    /// Time per tracked frame, µs, sorted.
+    times: Vec<f64>,
+    /// Frames that could not be tracked and were located whole.
+    fallbacks: usize,
+    /// Targets per tracked frame, mean.
+    targets_mean: f64,
+}
+
+/// Tracks frames rendered along the simulated cell's circle, each from the
+/// pose predicted by the two before it.
+fn track_circle(renderer: &mut Renderer, locator: &mut Locator, args: &Args) -> Result<Tracking> {
+    if args.track_frames < 3 || !(args.track_rate.is_finite() && args.track_rate > 0.0) {
+        bail!("--track-frames must be at least 3 and --track-rate positive");
+    }
+    let mut cell = Cell::default();
+    cell.path.rate_hz = args.track_rate;
+    let samples = cell.samples().context("the simulated cell")?;
+    let mut frames = Vec::with_capacity(args.track_frames);
+    for (k, s) in samples.iter().take(args.track_frames).enumerate() {
+        renderer.set_options(RenderOptions {
+            seed: 1000 + k as u64,
+            ..RenderOptions::default()
+        })?;
+        let mut img = renderer.new_image();
+        renderer.render(&s.exterior(), &mut img)?;
+        frames.push(img);
+    }
+    let camera = *locator.camera();
+    let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+    let options = TrackOptions::default();
+    let mut times = Vec::with_capacity(frames.len() * args.rounds.min(10));
+    let (mut fallbacks, mut targets) = (0usize, 0usize);
+    for _ in 0..args.rounds.min(10) {
+        let mut motion: Option<Motion> = None;
+        let mut last = None;
+        for (k, img) in frames.iter().enumerate() {
+            let seq = k as u64;
+            let t0 = Instant::now();
+            let tracked = match (&motion, &last) {
+                (Some(m), Some((cov, threshold))) => {
+                    let distance = m.last.1.center.norm();
+                    let (exterior, motion_px) = m.predict(seq, c, px, distance);
+                    let prior = Prior {
+                        exterior,
+                        covariance: *cov,
+                        motion_px,
+                        threshold: *threshold,
+                    };
+                    locator.track(img.view(), &prior, &options).ok().copied()
+                }
+                _ => None,
+            };
+            let dt = t0.elapsed().as_secs_f64() * 1e6;
+            let pose = match tracked {
+                Some(p) => {
+                    times.push(dt);
+                    targets += p.n_points;
+                    p
+                }
+                None => {
+                    if motion.is_some() {
+                        fallbacks += 1;
+                    }
+                    let loc = locator.locate(img.view())?;
+                    let Some(p) = loc.pose.copied() else {
+                        bail!("frame {k} of the moving circle gave no pose");
+                    };
+                    last = Some((p.covariance, loc.detections.threshold));
+                    p
+                }
+            };
+            if let Some((cov, _)) = &mut last {
+                *cov = pose.covariance;
+            }
+            motion = Some(Motion {
+                last: (seq, pose.exterior),
+                before: motion.map(|m| m.last),
+            });
+        }
+    }
+    if times.is_empty() {
+        bail!("no frame of the moving circle could be tracked ({fallbacks} located whole)");
+    }
+    times.sort_by(f64::total_cmp);
+    Ok(Tracking {
+        targets_mean: targets as f64 / times.len() as f64,
+        times,
+        fallbacks,
+    })
 }

@@ -35,7 +35,8 @@ pub use camera::{Camera, Distortion, Interior, Sensor};
 pub use error::GeometryError;
 pub use exterior::Exterior;
 pub use nalgebra::{
-    Isometry3, Matrix2, Matrix3, Matrix6, Point3, UnitQuaternion, Vector2, Vector3, Vector6,
+    Isometry3, Matrix2, Matrix3, Matrix6, Point3, Rotation3, UnitQuaternion, Vector2, Vector3,
+    Vector6,
 };
 pub use observation::Observation;
 pub use resection::{Resection, ResectionOptions, ResectionReport};

@@ -16,6 +16,7 @@
 //! a frame with as many targets.
 
 mod gate;
+pub mod track;
 
 use gate::Grid;
 use photopose_field::{Field, TargetKind};
@@ -26,7 +27,7 @@ use photopose_geometry::{
     ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{
-    DetectStage, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
+    DetectStage, Detections, Detector, DetectorOptions, FrameStatus, VisionError, WindowMeasurer,
 };
 use thiserror::Error;
 
@@ -169,6 +170,10 @@ pub struct Locator {
     /// Field indices of the uncoded targets, each with the field index of
     /// its nearest other target (for the gate's upper bound).
     uncoded: Vec<(usize, usize)>,
+    /// Each field target's distance to its nearest other target, mm.
+    spacing: Vec<f64>,
+    /// Tracking mode's measurer of one target in its window.
+    window: WindowMeasurer,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -200,20 +205,29 @@ impl Locator {
     ) -> Result<Self, LocateError> {
         let n = field.len();
         let targets = field.targets();
-        let uncoded = (0..n)
-            .filter(|&k| targets[k].kind == TargetKind::Uncoded)
+        let nearest: Vec<usize> = (0..n)
             .map(|k| {
-                let nearest = (0..n)
+                (0..n)
                     .filter(|&j| j != k)
                     .min_by(|&a, &b| {
                         let da = (targets[a].position - targets[k].position).norm_squared();
                         let db = (targets[b].position - targets[k].position).norm_squared();
                         da.total_cmp(&db)
                     })
-                    .unwrap_or(k);
-                (k, nearest)
+                    .unwrap_or(k)
             })
             .collect();
+        let uncoded = (0..n)
+            .filter(|&k| targets[k].kind == TargetKind::Uncoded)
+            .map(|k| (k, nearest[k]))
+            .collect();
+        let spacing = (0..n)
+            .map(|k| match nearest[k] {
+                j if j == k => f64::INFINITY,
+                j => (targets[j].position - targets[k].position).norm(),
+            })
+            .collect();
+        let window = WindowMeasurer::new(*detector.options());
         Ok(Locator {
             resection: Resection::new(&camera, options.resection),
             grid: Grid::new(camera.sensor.width, camera.sensor.height, 16, 4 * n.max(64)),
@@ -229,6 +243,8 @@ impl Locator {
             pose: None,
             rejected: Vec::with_capacity(n),
             uncoded,
+            spacing,
+            window,
             field,
         })
     }
@@ -241,6 +257,22 @@ impl Locator {
     /// The test field.
     pub fn field(&self) -> &Field {
         &self.field
+    }
+
+    /// What came of the last frame (located or tracked).
+    pub fn status(&self) -> &PoseStatus {
+        &self.status
+    }
+
+    /// The pose of the last frame, when it has one.
+    pub fn pose(&self) -> Option<&ResectionReport> {
+        self.pose.as_ref()
+    }
+
+    /// The targets identified in the last frame (located or tracked),
+    /// coded first in a located frame, in field order in a tracked one.
+    pub fn identified(&self) -> &[Identified] {
+        &self.identified
     }
 
     /// Detects, identifies and resects one frame.
@@ -333,7 +365,7 @@ impl Locator {
         // 4. Uncoded targets by projection.
         self.identify_uncoded(&coarse);
         if self.options.eccentricity {
-            self.correct_eccentricity(&coarse);
+            self.correct_eccentricity(&coarse.exterior);
         }
         probe(Stage::Uncoded);
         // 5. Final pose over all identified targets.
@@ -359,10 +391,9 @@ impl Locator {
     /// transformation of the target's plane — and the centroid of the imaged
     /// dot is that ellipse's centre; its offset from the projected centre is
     /// taken off (lens distortion changes it only in the second order).
-    fn correct_eccentricity(&mut self, coarse: &ResectionReport) {
+    fn correct_eccentricity(&mut self, e: &photopose_geometry::Exterior) {
         let c = self.camera.interior.c;
         let ps = self.camera.sensor.pixel_size;
-        let e = &coarse.exterior;
         for (o, t) in self.obs.iter_mut().zip(self.identified.iter_mut()) {
             debug_assert_eq!(o.id, t.id);
             let Some(target) = self.field.get(t.id) else {

@@ -1,8 +1,10 @@
 //! Once warm, locating a frame — detection, identification, both
-//! resections — allocates nothing: a counting global allocator watches.
+//! resections — allocates nothing, nor does tracking a frame from a pose: a
+//! counting global allocator watches.
 
 use photopose_field::design::default_plate;
 use photopose_geometry::Exterior;
+use photopose_locate::track::{Prior, TrackOptions};
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_testkit::{allocations, CountingAllocator};
@@ -40,4 +42,29 @@ fn locating_allocates_nothing_once_warm() {
         }
     }
     assert_eq!(allocations() - before, 0, "allocations per frame once warm");
+    // Tracking mode from each frame's own pose.
+    let priors: Vec<Prior> = frames
+        .iter()
+        .map(|img| {
+            let loc = locator.locate(img.view()).unwrap();
+            let pose = loc.pose.unwrap();
+            Prior {
+                exterior: pose.exterior,
+                covariance: pose.covariance,
+                motion_px: 1.0,
+                threshold: loc.detections.threshold,
+            }
+        })
+        .collect();
+    let options = TrackOptions::default();
+    for (img, prior) in frames.iter().zip(&priors) {
+        locator.track(img.view(), prior, &options).unwrap();
+    }
+    let before = allocations();
+    for _ in 0..3 {
+        for (img, prior) in frames.iter().zip(&priors) {
+            locator.track(img.view(), prior, &options).unwrap();
+        }
+    }
+    assert_eq!(allocations() - before, 0, "allocations per tracked frame");
 }

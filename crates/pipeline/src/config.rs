@@ -70,6 +70,8 @@ struct File {
     rsi: photopose_rsi::RsiConfig,
     #[serde(default)]
     record: RecordSection,
+    #[serde(default)]
+    tracking: crate::track::TrackingSection,
 }
 
 #[derive(Debug, Deserialize)]
@@ -238,6 +240,8 @@ pub struct Config {
     pub overflow: Overflow,
     /// Age after which the last pose is stale, ms.
     pub max_age_ms: f64,
+    /// Tracking mode (`[tracking]`).
+    pub tracking: crate::track::Tracking,
     /// UDP destinations.
     pub udp: Vec<SocketAddr>,
     /// TCP listen address.
@@ -295,6 +299,7 @@ impl Config {
             why,
         };
         let source = crate::source::Source::from_section(f.source, &bad)?;
+        let tracking = crate::track::Tracking::from_section(f.tracking, &bad)?;
         let overflow = f.pipeline.overflow.unwrap_or(match &source {
             Source::Replay(r) if r.speed == Speed::Max => Overflow::Block,
             _ => Overflow::DropNewest,
@@ -441,6 +446,7 @@ impl Config {
             slots: p.slots as usize,
             overflow,
             max_age_ms: p.max_age_ms,
+            tracking,
             udp,
             tcp_listen,
             tcp_client_queue: f.output.tcp_client_queue,

@@ -25,6 +25,7 @@ pub mod result;
 pub mod run;
 pub mod sink;
 pub mod source;
+pub mod track;
 
 pub use config::{Config, ConfigError};
 pub use run::{Counters, Pipeline, Supervision};

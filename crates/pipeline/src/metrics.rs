@@ -25,6 +25,8 @@ pub struct Counters {
     pub frames_dropped: Counter,
     /// Frames processed by the workers.
     pub frames_processed: Counter,
+    /// Frames located in tracking mode (from the latest pose).
+    pub frames_tracked: Counter,
     /// Messages with a pose.
     pub poses_ok: Counter,
     /// Messages without a pose (too few targets, error).
@@ -66,6 +68,7 @@ impl Default for Counters {
             frames_in: Counter::new(),
             frames_dropped: Counter::new(),
             frames_processed: Counter::new(),
+            frames_tracked: Counter::new(),
             poses_ok: Counter::new(),
             poses_failed: Counter::new(),
             stale: Counter::new(),
@@ -164,6 +167,11 @@ impl Collect for Counters {
                 "photopose_frames_processed_total",
                 "Frames processed by the detection workers.",
                 &self.frames_processed,
+            ),
+            (
+                "photopose_frames_tracked_total",
+                "Frames located in tracking mode, from the latest pose instead of the whole frame.",
+                &self.frames_tracked,
             ),
             (
                 "photopose_poses_ok_total",

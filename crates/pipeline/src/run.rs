@@ -253,8 +253,10 @@ impl Pipeline {
         let camera_id: CameraId = Arc::from(config.camera_id.as_str());
         // Workers: take frames from the ring, hand each result to the output
         // stage; dropping the frame handle returns its slot to the ring.
+        let track_slot = crate::track::TrackSlot::default();
         for k in 0..config.workers {
             let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
+            let tracker = crate::track::Tracker::new(config.tracking, track_slot.clone());
             let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();
             let camera_id = camera_id.clone();
@@ -274,7 +276,7 @@ impl Pipeline {
                     hold_wedged(stop, "detect-0");
                     return;
                 }
-                let result = locate(&mut locator, &camera_id, &frame);
+                let result = locate(&mut locator, &tracker, &counters, &camera_id, &frame);
                 counters.frames_processed.inc();
                 let outcome = Outcome::Message {
                     order: frame.order,
@@ -440,14 +442,26 @@ fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) 
     }
 }
 
-/// Locates one frame into its result.
-fn locate(locator: &mut Locator, camera: &CameraId, frame: &Slot) -> PoseResult {
-    let located = locator.locate(frame.image.view()).ok();
+/// Locates one frame (tracked from the latest pose when it may be) into
+/// its result.
+fn locate(
+    locator: &mut Locator,
+    tracker: &crate::track::Tracker,
+    counters: &Counters,
+    camera: &CameraId,
+    frame: &Slot,
+) -> PoseResult {
+    let located = tracker
+        .locate(locator, frame.meta.seq, frame.image.view())
+        .ok();
+    if let Some((crate::track::Mode::Tracked, _, _)) = located {
+        counters.frames_tracked.inc();
+    }
     PoseResult::from_location(
         camera,
         &frame.meta,
         frame.received,
-        located.as_ref().map(|l| (l.status, l.pose)),
+        located.map(|(_, status, pose)| (status, pose)),
     )
 }
 

@@ -1,6 +1,6 @@
 //! Once warm, a frame allocates nothing on its way through the daemon: from
 //! the source's hand-over into the ring, through a detection worker (locate,
-//! the pose result) and the ordered output (message, JSON line) to the
+//! whole or tracked from the latest pose, the pose result) and the ordered output (message, JSON line) to the
 //! sinks' hand-off (UDP datagrams to a real socket). A counting global
 //! allocator watches every thread of this process while frames flow.
 
@@ -34,6 +34,8 @@ workers = 2
 slots = 6
 overflow = "block"
 max_age_ms = 5000.0
+[tracking]
+enabled = true
 [output]
 udp = ["{}"]
 "#,
@@ -66,11 +68,14 @@ udp = ["{}"]
     receive(60);
     let before = allocations();
     let poses_before = pipeline.counters().poses_ok.get();
+    let tracked_before = pipeline.counters().frames_tracked.get();
     receive(100);
     let allocated = allocations() - before;
     let poses = pipeline.counters().poses_ok.get() - poses_before;
+    let tracked = pipeline.counters().frames_tracked.get() - tracked_before;
     pipeline.stop();
     pipeline.join();
     assert!(poses >= 90, "{poses} poses measured in the window");
+    assert!(tracked >= poses / 2, "{tracked} of {poses} frames tracked");
     assert_eq!(allocated, 0, "allocations while {poses} frames flowed");
 }

@@ -455,7 +455,7 @@ impl Detector {
 
 /// Stage 3: the tests on a blob's binary statistics (area, distance from
 /// the window's edge, saturation, elongation, fill of its ellipse).
-fn blob_tests<P: Pixel>(
+pub(crate) fn blob_tests<P: Pixel>(
     plane: &Plane<'_, P>,
     blob: &Blob,
     o: &DetectorOptions,
@@ -490,7 +490,7 @@ fn blob_tests<P: Pixel>(
 
 /// Stage 4: the background-subtracted centroid and moments of a blob, and
 /// the test of its fourth moment (a filled ellipse's).
-fn centroid<P: Pixel>(
+pub(crate) fn centroid<P: Pixel>(
     plane: &Plane<'_, P>,
     blob: &Blob,
     t: &ThresholdResult,
@@ -512,17 +512,17 @@ fn centroid<P: Pixel>(
 }
 
 /// What stage 5 found around a dot.
-struct Ring {
+pub(crate) struct Ring {
     /// The sampling frame of the ring (from the deblurred moments).
     frame: Option<RingFrame>,
     /// The dot's deblurred moments `(cxx, cyy, cxy)`.
     moments: (f64, f64, f64),
-    reading: Reading,
+    pub(crate) reading: Reading,
 }
 
 /// Stage 5: the code ring around a measured dot, sampled on the dot's
 /// ellipse with the blur removed.
-fn read_ring<P: Pixel>(
+pub(crate) fn read_ring<P: Pixel>(
     plane: &Plane<'_, P>,
     m: &Measurement,
     params: &CodeParams,

@@ -38,11 +38,13 @@ pub mod label;
 pub mod measure;
 pub mod pixel;
 pub mod threshold;
+pub mod window;
 
 pub use code::{CodeSet, CodeStatus, Uncertainty};
 pub use detector::{DetectStage, Detector};
 pub use photopose_field::TargetKind;
 pub use threshold::{FrameStatus, Threshold, ThresholdResult};
+pub use window::{Expected, WindowMeasurer, WindowOutcome, WindowTarget};
 
 use label::Blob;
 use thiserror::Error;

@@ -1,0 +1,249 @@
+//! Tracking mode: a frame located from a recent pose instead of from its
+//! coded targets. Every field target is projected with the predicted pose
+//! and its uncertainty; each is looked for only in a small window around
+//! its prediction (`photopose_vision::WindowMeasurer`, the whole-frame
+//! detector's labelling, blob tests and centroid with the threshold of the
+//! last whole-frame pass) and identified by the prediction alone: exactly
+//! one blob inside a gate that never reaches half-way to the next target.
+//! The pose is then refined over all of them as in the whole-frame path, so
+//! the result means the same: same ids, same centres, same adjustment.
+//!
+//! A wrong prediction could make every gate catch its neighbour on a
+//! regular grid. Two guards keep that from ever becoming a pose: the rings
+//! of a few coded targets are read and must give their own ids (none may
+//! give another), and the refined pose must project every target within its
+//! gate of the prediction. A frame that fails them is not a result: the
+//! caller locates it on the whole frame.
+//!
+//! [`Motion`] predicts the pose of a later frame from the two latest poses
+//! (constant velocity per frame).
+
+use crate::{Identified, Locator, PoseStatus, Projected};
+use photopose_field::TargetKind;
+use photopose_frame::ImageView;
+use photopose_geometry::precision::projection_with_covariance;
+use photopose_geometry::{Exterior, Matrix3, Matrix6, Observation, ResectionReport, Rotation3};
+use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
+
+/// Tuning of tracking mode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackOptions {
+    /// Targets that must be found for a tracked pose (fewer: locate the
+    /// whole frame).
+    pub min_targets: usize,
+    /// Coded targets whose rings are read to confirm the prediction.
+    pub verify_codes: usize,
+    /// Share of the predicted motion since the prior added to each gate,
+    /// px per px (the prediction's error grows with the speed).
+    pub motion_gate: f64,
+    /// Largest shift of the refined pose against the prediction, as a
+    /// share of the gate (beyond it the tracked pose is refused).
+    pub max_shift_ratio: f64,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        TrackOptions {
+            min_targets: 12,
+            verify_codes: 4,
+            motion_gate: 0.5,
+            max_shift_ratio: 1.0,
+        }
+    }
+}
+
+/// What tracking starts from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    /// The predicted exterior orientation of this frame.
+    pub exterior: Exterior,
+    /// The covariance of the pose the prediction came from.
+    pub covariance: Matrix6<f64>,
+    /// Image motion of the prediction against that pose, px (widens the
+    /// gates).
+    pub motion_px: f64,
+    /// The threshold of the last whole-frame pass.
+    pub threshold: ThresholdResult,
+}
+
+/// Why a frame could not be tracked (the caller locates it whole).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrackLost {
+    /// Fewer targets found than needed.
+    TooFewTargets {
+        /// Targets found.
+        found: usize,
+    },
+    /// A coded target's ring gave another id, or none confirmed the
+    /// prediction.
+    CodeMismatch,
+    /// The refined pose lies too far from the prediction.
+    Jump,
+    /// The adjustment failed.
+    NoPose,
+}
+
+/// Two poses of a camera and the frames they belong to: the prediction of a
+/// later frame's pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Motion {
+    /// The latest pose and its frame.
+    pub last: (u64, Exterior),
+    /// The one before (`None`: standing still is assumed).
+    pub before: Option<(u64, Exterior)>,
+}
+
+impl Motion {
+    /// The pose predicted for frame `seq` (constant motion per frame), and
+    /// the change from the latest pose as an image motion estimate, px,
+    /// for a camera of principal distance `c` and pixel size `pixel_size`
+    /// looking at targets `distance` mm away.
+    pub fn predict(&self, seq: u64, c: f64, pixel_size: f64, distance: f64) -> (Exterior, f64) {
+        let (s1, e1) = self.last;
+        let Some((s0, e0)) = self.before.filter(|(s0, _)| *s0 < s1) else {
+            return (e1, 0.0);
+        };
+        let k = (seq as f64 - s1 as f64) / (s1 - s0) as f64;
+        if !(k.is_finite() && k > 0.0) {
+            return (e1, 0.0);
+        }
+        let step = Rotation3::from_matrix_unchecked(e1.rotation * e0.rotation.transpose());
+        let turn = step.powf(k);
+        let rotation: Matrix3<f64> = turn.matrix() * e1.rotation;
+        let center = e1.center + (e1.center - e0.center) * k;
+        let shift = (center - e1.center).norm() / distance.max(1.0) + turn.angle();
+        (Exterior::new(rotation, center), c * shift / pixel_size)
+    }
+}
+
+impl Locator {
+    /// Locates `image` from `prior` (tracking mode). `Ok` with a pose, or
+    /// why the frame must be located whole. Allocates nothing once warm.
+    pub fn track(
+        &mut self,
+        image: ImageView<'_>,
+        prior: &Prior,
+        options: &TrackOptions,
+    ) -> Result<&ResectionReport, TrackLost> {
+        self.identified.clear();
+        self.rejected.clear();
+        self.obs.clear();
+        self.projected.clear();
+        self.coarse = None;
+        self.pose = None;
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        let e = &prior.exterior;
+        let gate_extra = options.motion_gate * prior.motion_px;
+        let (mut confirmed, mut checked) = (0usize, 0usize);
+        for (fi, t) in self.field.targets().iter().enumerate() {
+            let Some((ideal, cov)) =
+                projection_with_covariance(c, e, &prior.covariance, &t.position)
+            else {
+                continue;
+            };
+            let Some(measured) = self.camera.distort(ideal) else {
+                continue;
+            };
+            let p = self.camera.image_to_pixel(measured);
+            if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
+                continue;
+            }
+            let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
+            let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+            let sigma_px = lmax.max(0.0).sqrt() / px;
+            let depth = (e.rotation * (t.position - e.center)).z.abs();
+            let scale = c / (depth * px);
+            let spacing = self.spacing[fi] * scale;
+            let gate =
+                (self.options.gate_min_px + self.options.gate_sigmas * sigma_px + gate_extra)
+                    .min(self.options.gate_spacing_ratio * spacing);
+            let coded = t.kind == TargetKind::Coded;
+            let read_code = coded && checked < options.verify_codes;
+            let expected = Expected {
+                col: p.x,
+                row: p.y,
+                gate_px: gate,
+                radius_px: t.radius * scale,
+                coded,
+                read_code,
+            };
+            let WindowOutcome::Found(m) = self.window.measure(&image, &prior.threshold, &expected)
+            else {
+                continue;
+            };
+            if let Some(code) = m.code {
+                checked += 1;
+                match code.id() {
+                    Some(id) if id == t.id => confirmed += 1,
+                    Some(_) => return Err(TrackLost::CodeMismatch),
+                    None => {}
+                }
+            }
+            self.projected.push(Projected {
+                field_index: fi,
+                col: p.x,
+                row: p.y,
+                sigma_px: gate,
+                spacing,
+            });
+            self.identified.push(Identified {
+                id: t.id,
+                kind: t.kind,
+                col: m.col,
+                row: m.row,
+                blob_col: m.col,
+                blob_row: m.row,
+                detection: usize::MAX,
+                used: true,
+            });
+            self.obs.push(Observation::from_pixel(
+                &self.camera,
+                t.id,
+                t.position,
+                m.col,
+                m.row,
+            ));
+        }
+        let found = self.obs.len();
+        if found < options.min_targets.max(self.options.min_coded.max(4)) {
+            self.status = PoseStatus::TooFewTargets { coded: confirmed };
+            return Err(TrackLost::TooFewTargets { found });
+        }
+        if options.verify_codes > 0 && confirmed == 0 {
+            return Err(TrackLost::CodeMismatch);
+        }
+        if self.options.eccentricity {
+            self.correct_eccentricity(e);
+        }
+        let report = match self.resection.refine(&self.obs, *e) {
+            Ok(r) => r,
+            Err(_) => return Err(TrackLost::NoPose),
+        };
+        // Every target of the refined pose must lie within its gate of the
+        // prediction: a pose that moved a grid step is a wrong match.
+        for pr in &self.projected {
+            let t = &self.field.targets()[pr.field_index];
+            let Some(q) = report
+                .exterior
+                .project_ideal(c, &t.position)
+                .and_then(|i| self.camera.distort(i))
+            else {
+                return Err(TrackLost::Jump);
+            };
+            let q = self.camera.image_to_pixel(q);
+            let shift = ((q.x - pr.col).powi(2) + (q.y - pr.row).powi(2)).sqrt();
+            if shift > options.max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px) {
+                return Err(TrackLost::Jump);
+            }
+        }
+        let rejected = self.resection.rejected_ids();
+        for t in &mut self.identified {
+            t.used = !rejected.contains(&t.id);
+        }
+        self.rejected.extend_from_slice(rejected);
+        self.pose = Some(report);
+        self.status = PoseStatus::Ok;
+        Ok(self.pose.as_ref().expect("just set"))
+    }
+}

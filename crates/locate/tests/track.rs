@@ -1,0 +1,125 @@
+//! Tracking mode against the whole-frame path on rendered frames of the
+//! default camera and plate: the same ids and the same pose (within a tenth
+//! of its σ) from a prediction; a prediction a grid step off is refused,
+//! never turned into a pose (the allocation test is in no_alloc.rs).
+
+use photopose_field::design::default_plate;
+use photopose_geometry::{Exterior, Vector3};
+use photopose_locate::track::{Motion, Prior, TrackLost, TrackOptions};
+use photopose_locate::{LocateOptions, Locator, PoseStatus};
+use photopose_render::{RenderOptions, Renderer};
+
+fn poses() -> [Exterior; 3] {
+    [
+        Exterior::from_kuka_pose([0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]),
+        Exterior::from_kuka_pose([40.0, -30.0, 900.0, 30.0, 10.0, -5.0]),
+        Exterior::from_kuka_pose([-60.0, 50.0, 1100.0, -120.0, -12.0, 8.0]),
+    ]
+}
+
+fn shifted(e: &Exterior, by: Vector3<f64>) -> Exterior {
+    Exterior::new(e.rotation, e.center + by)
+}
+
+#[test]
+fn a_tracked_frame_gives_the_whole_frame_pose_and_ids() {
+    let camera = photopose_formats::default_camera();
+    let field = default_plate();
+    let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
+    let mut locator = Locator::new(camera, field, LocateOptions::default()).unwrap();
+    for truth in poses() {
+        let mut img = renderer.new_image();
+        renderer.render(&truth, &mut img).unwrap();
+        let whole = locator.locate(img.view()).unwrap();
+        assert_eq!(*whole.status, PoseStatus::Ok);
+        let full = *whole.pose.unwrap();
+        let threshold = whole.detections.threshold;
+        let mut ids: Vec<u64> = whole.targets.iter().map(|t| t.id).collect();
+        ids.sort_unstable();
+        // Predicted 0.8 mm off, as from the motion of a moving robot.
+        let prior = Prior {
+            exterior: shifted(&full.exterior, Vector3::new(0.5, -0.4, 0.5)),
+            covariance: full.covariance,
+            motion_px: 2.0,
+            threshold,
+        };
+        let tracked = *locator
+            .track(img.view(), &prior, &TrackOptions::default())
+            .unwrap();
+        let sigma = full.std_center();
+        for k in 0..3 {
+            let d = (tracked.exterior.center[k] - full.exterior.center[k]).abs();
+            assert!(d <= 0.1 * sigma[k], "axis {k}: {d} mm vs σ {}", sigma[k]);
+        }
+        let dr = (tracked.exterior.rotation - full.exterior.rotation)
+            .abs()
+            .max();
+        assert!(dr < 0.1 * full.std_rotation_deg().max().to_radians());
+        assert_eq!(tracked.n_points, full.n_points);
+        let mut tracked_ids = locator_ids(&locator);
+        tracked_ids.sort_unstable();
+        assert_eq!(tracked_ids, ids);
+    }
+}
+
+fn locator_ids(locator: &Locator) -> Vec<u64> {
+    locator.identified().iter().map(|t| t.id).collect()
+}
+
+#[test]
+fn a_prediction_a_grid_step_off_is_refused() {
+    let camera = photopose_formats::default_camera();
+    let field = default_plate();
+    let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
+    let mut locator = Locator::new(camera, field, LocateOptions::default()).unwrap();
+    let truth = poses()[0];
+    let mut img = renderer.new_image();
+    renderer.render(&truth, &mut img).unwrap();
+    let whole = locator.locate(img.view()).unwrap();
+    let full = *whole.pose.unwrap();
+    let threshold = whole.detections.threshold;
+    // Off by the plate's grid pitch and by fractions of it, along both axes.
+    for (dx, dy) in [
+        (20.0, 0.0),
+        (0.0, 20.0),
+        (-20.0, 20.0),
+        (10.0, 0.0),
+        (7.0, -7.0),
+    ] {
+        let prior = Prior {
+            exterior: shifted(&full.exterior, Vector3::new(dx, dy, 0.0)),
+            covariance: full.covariance,
+            motion_px: 0.0,
+            threshold,
+        };
+        match locator.track(img.view(), &prior, &TrackOptions::default()) {
+            Err(TrackLost::TooFewTargets { .. } | TrackLost::CodeMismatch | TrackLost::Jump) => {}
+            Err(other) => panic!("({dx}, {dy}): {other:?}"),
+            Ok(r) => {
+                // Accepted only if it is the true pose.
+                let d = (r.exterior.center - full.exterior.center).norm();
+                assert!(d < 0.05, "({dx}, {dy}): a pose {d} mm off was accepted");
+            }
+        }
+    }
+}
+
+#[test]
+fn motion_predicts_constant_velocity() {
+    let a = Exterior::from_kuka_pose([0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]);
+    let b = Exterior::from_kuka_pose([1.0, -2.0, 1000.5, 0.2, 0.0, 0.0]);
+    let c = Exterior::from_kuka_pose([2.0, -4.0, 1001.0, 0.4, 0.0, 0.0]);
+    let m = Motion {
+        last: (10, b),
+        before: Some((9, a)),
+    };
+    let (p, shift) = m.predict(11, 12.0, 0.00645, 1000.0);
+    assert!((p.center - c.center).norm() < 1e-9);
+    assert!((p.rotation - c.rotation).abs().max() < 1e-9);
+    assert!(shift > 0.0);
+    let still = Motion {
+        last: (10, b),
+        before: None,
+    };
+    assert_eq!(still.predict(11, 12.0, 0.00645, 1000.0).0, b);
+}

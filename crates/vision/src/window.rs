@@ -1,0 +1,393 @@
+//! Measuring one expected target in a small window of a frame (tracking
+//! mode): the detector's stages 2–4 — labelling, blob tests, centroid — on
+//! the pixels around a predicted position, with a threshold found before on
+//! a whole frame, and no code reading: the target's identity comes from the
+//! prediction, not from its ring.
+//!
+//! The blob is labelled in a small core window (the gate plus the dot), and
+//! measured in a larger one that holds the centroid's window and its dark
+//! surroundings: the blob tests and the centroid then see exactly the
+//! pixels they see in the whole frame, so a target measured here has the
+//! centre the whole-frame detector gives it with the same threshold.
+//!
+//! Identification by prediction is only as safe as the gate: exactly one
+//! blob whose binary centre lies inside the gate is taken, two are
+//! [`WindowOutcome::Ambiguous`], and the caller keeps gates from
+//! overlapping.
+
+use crate::code::{CodeParams, Gap, RingTables};
+use crate::detector::{blob_tests, centroid, read_ring};
+use crate::label::{LabelOutcome, Labeller};
+use crate::measure;
+use crate::pixel::{Pixel, Plane};
+use crate::{CodeStatus, DetectorOptions, RejectReason, ThresholdResult, Uncertainty};
+use photopose_frame::{ImageView, ViewPixels};
+
+/// Runs a core window may hold (a dot and the parts of a ring or of a
+/// neighbour that reach into it).
+const MAX_RUNS: usize = 4096;
+/// Blobs a core window may hold.
+const MAX_BLOBS: usize = 512;
+
+/// Where to look for one target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Expected {
+    /// Predicted centre, full-frame pixel column.
+    pub col: f64,
+    /// Predicted centre, full-frame pixel row.
+    pub row: f64,
+    /// The blob's binary centre must lie this close to the prediction, px.
+    pub gate_px: f64,
+    /// Expected semi-major axis of the dot's image, px (sizes the windows).
+    pub radius_px: f64,
+    /// A coded target (its centre is measured clear of its ring).
+    pub coded: bool,
+    /// Read the ring of a coded target too (to confirm its identity).
+    pub read_code: bool,
+}
+
+/// A target measured in its window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowTarget {
+    /// Centre column (full-frame pixel coordinates).
+    pub col: f64,
+    /// Centre row.
+    pub row: f64,
+    /// Pixels above the threshold.
+    pub area: u32,
+    /// Largest grey value.
+    pub peak: u32,
+    /// Background-subtracted grey-value sum.
+    pub signal: f64,
+    /// Local background level.
+    pub background: f64,
+    /// The ring's reading, when asked for.
+    pub code: Option<CodeStatus>,
+}
+
+/// What came of one window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WindowOutcome {
+    /// One blob inside the gate, measured.
+    Found(WindowTarget),
+    /// No blob inside the gate.
+    Missing,
+    /// More than one blob inside the gate: not identified.
+    Ambiguous,
+    /// The blob inside the gate is not a target (reason as in the detector).
+    Rejected(RejectReason),
+}
+
+/// The measurer with its buffers (allocated once).
+#[derive(Debug)]
+pub struct WindowMeasurer {
+    options: DetectorOptions,
+    labeller: Labeller,
+    tables: RingTables,
+}
+
+impl WindowMeasurer {
+    /// A measurer applying the detector's blob tests of `options`.
+    pub fn new(options: DetectorOptions) -> Self {
+        WindowMeasurer {
+            options,
+            labeller: Labeller::new(MAX_RUNS, MAX_BLOBS),
+            tables: RingTables::default(),
+        }
+    }
+
+    /// Measures the target expected at `e` in `image` (a whole frame or a
+    /// window of one), with the threshold `t` of an earlier whole-frame
+    /// pass. Allocates nothing.
+    pub fn measure(
+        &mut self,
+        image: &ImageView<'_>,
+        t: &ThresholdResult,
+        e: &Expected,
+    ) -> WindowOutcome {
+        let max_value = image.max_value() as u32;
+        match image.pixels() {
+            ViewPixels::Mono8(data) => self.run(image, data, t, e, max_value.min(255)),
+            ViewPixels::Mono16(data) => self.run(image, data, t, e, max_value),
+        }
+    }
+
+    fn run<P: Pixel>(
+        &mut self,
+        image: &ImageView<'_>,
+        data: &[P],
+        t: &ThresholdResult,
+        e: &Expected,
+        max_value: u32,
+    ) -> WindowOutcome {
+        if !(e.col.is_finite() && e.row.is_finite() && e.gate_px >= 0.0) {
+            return WindowOutcome::Missing;
+        }
+        let radius = e.radius_px.max(1.0);
+        // The core holds every blob whose centre may be inside the gate,
+        // whole; the outer window the centroid's window (the box grown by
+        // `GROW`, scaled ellipse) and its dark ring (up to 1.8 times it).
+        let core = e.gate_px + 1.5 * radius + 3.0;
+        let outer = e.gate_px + 2.0 * (1.9 * radius * measure::MAX_SCALE) + measure::GROW + 4.0;
+        let Some(outer_plane) = sub_plane(image, data, e.col, e.row, outer) else {
+            return WindowOutcome::Missing;
+        };
+        let Some(core_plane) = sub_plane(image, data, e.col, e.row, core) else {
+            return WindowOutcome::Missing;
+        };
+        match self.labeller.label(&core_plane, t.threshold, max_value) {
+            LabelOutcome::Complete => {}
+            LabelOutcome::TooManyRuns | LabelOutcome::TooManyBlobs => {
+                return WindowOutcome::Ambiguous;
+            }
+        }
+        let gate2 = e.gate_px * e.gate_px;
+        let mut found = None;
+        for blob in self.labeller.blobs() {
+            if blob.area < self.options.min_area {
+                continue;
+            }
+            let (c, r) = blob.centre();
+            if (c - e.col).powi(2) + (r - e.row).powi(2) > gate2 {
+                continue;
+            }
+            if found.is_some() {
+                return WindowOutcome::Ambiguous;
+            }
+            found = Some(*blob);
+        }
+        let Some(blob) = found else {
+            return WindowOutcome::Missing;
+        };
+        // A blob cut by the core's edge (not the frame's) is larger than
+        // expected: the blob tests on the outer window would judge a part.
+        let cut = |lo: u32, hi: u32, plo: usize, phi: usize, flo: u32, fhi: u32| {
+            (lo as usize == plo && lo > flo) || (hi as usize == phi && hi < fhi)
+        };
+        let (fc0, fr0) = image.origin();
+        let (fc1, fr1) = (fc0 + image.width() - 1, fr0 + image.height() - 1);
+        if cut(
+            blob.col0,
+            blob.col1,
+            core_plane.col0,
+            core_plane.last_col(),
+            fc0,
+            fc1,
+        ) || cut(
+            blob.row0,
+            blob.row1,
+            core_plane.row0,
+            core_plane.last_row(),
+            fr0,
+            fr1,
+        ) {
+            return WindowOutcome::Rejected(RejectReason::TooLarge);
+        }
+        if let Err(reason) = blob_tests(&outer_plane, &blob, &self.options) {
+            return WindowOutcome::Rejected(reason);
+        }
+        let m = match centroid(&outer_plane, &blob, t, &self.options) {
+            Ok(m) => m,
+            Err(reason) => return WindowOutcome::Rejected(reason),
+        };
+        // Near the frame's edge the whole-frame detector keeps a target only
+        // if its ring's samples (the ring's middle of an uncoded one, out
+        // to the quiet zone of a coded one) lie inside: read the ring there
+        // to judge alike. Elsewhere only when asked for.
+        let (fc0, fr0) = (fc0 as f64, fr0 as f64);
+        let (fc1, fr1) = (fc1 as f64, fr1 as f64);
+        let edge = 3.5 * radius * measure::MAX_SCALE + e.gate_px + 3.0;
+        let near_edge =
+            e.col - edge < fc0 || e.row - edge < fr0 || e.col + edge > fc1 || e.row + edge > fr1;
+        let mut code = None;
+        if near_edge || (e.coded && e.read_code) {
+            let params = CodeParams {
+                min_contrast: (self.options.noise_factor * t.noise)
+                    .max(self.options.min_contrast * max_value as f64),
+                sector_margin: self.options.sector_margin,
+                sample_margin: self.options.sample_margin,
+                dark_tolerance: self.options.dark_tolerance,
+            };
+            let reading = read_ring(&outer_plane, &m, &params, &self.options, &self.tables).reading;
+            let outside = reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage);
+            let cut = if e.coded {
+                outside
+            } else {
+                (outside && !reading.ring_present) || reading.gap == Gap::Outside
+            };
+            if near_edge && cut {
+                return WindowOutcome::Rejected(RejectReason::Border);
+            }
+            if e.coded && e.read_code {
+                code = Some(reading.status);
+            }
+        }
+        let m = if e.coded {
+            measure::measure(
+                &outer_plane,
+                &blob,
+                t.threshold,
+                t.background,
+                measure::CODED_GROW,
+                measure::CODED_MAX_SCALE,
+            )
+            .unwrap_or(m)
+        } else {
+            m
+        };
+        WindowOutcome::Found(WindowTarget {
+            col: m.col,
+            row: m.row,
+            area: blob.area,
+            peak: blob.max,
+            signal: m.signal,
+            background: m.background,
+            code,
+        })
+    }
+}
+
+/// The square of half-width `half` px around `(col, row)`, clipped to
+/// `image`; `None` when nothing of it lies inside.
+fn sub_plane<'a, P>(
+    image: &ImageView<'_>,
+    data: &'a [P],
+    col: f64,
+    row: f64,
+    half: f64,
+) -> Option<Plane<'a, P>> {
+    let (c0, r0) = image.origin();
+    let (c1, r1) = (
+        c0 as f64 + image.width() as f64 - 1.0,
+        r0 as f64 + image.height() as f64 - 1.0,
+    );
+    let lo_c = (col - half).floor().max(c0 as f64);
+    let lo_r = (row - half).floor().max(r0 as f64);
+    let hi_c = (col + half).ceil().min(c1);
+    let hi_r = (row + half).ceil().min(r1);
+    if !(lo_c <= hi_c && lo_r <= hi_r) {
+        return None;
+    }
+    let (lc, lr) = (lo_c as usize, lo_r as usize);
+    let stride = image.stride();
+    let first = (lr - r0 as usize) * stride + (lc - c0 as usize);
+    let width = hi_c as usize - lc + 1;
+    let height = hi_r as usize - lr + 1;
+    Some(Plane {
+        data: &data[first..],
+        width,
+        height,
+        stride,
+        col0: lc,
+        row0: lr,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::{Drawn, Rng, Scene, View};
+    use crate::{CodeSet, Detector, TargetKind};
+    use photopose_field::codes;
+
+    /// Three uncoded dots and two coded targets, blurred and noisy.
+    fn scene() -> photopose_frame::Image {
+        let mut s = Scene::new(320, 240, 15.0);
+        let dot = |col, row| Drawn {
+            col,
+            row,
+            radius: 5.0,
+            view: View::frontal(1.0),
+            code: None,
+            phase: 0.0,
+        };
+        let ids: Vec<u64> = codes::even_ids().step_by(5).take(2).collect();
+        let coded = |col, row, id| Drawn {
+            code: codes::value_of(id),
+            phase: 0.3,
+            ..dot(col, row)
+        };
+        for t in [
+            dot(40.3, 50.7),
+            dot(70.1, 52.2),
+            dot(250.6, 190.4),
+            coded(120.4, 120.9, ids[0]),
+            coded(220.7, 70.2, ids[1]),
+        ] {
+            s.draw(&t, 190.0);
+        }
+        s.blur(0.6);
+        s.noise(2.0, &mut Rng::new(5));
+        s.to_mono8()
+    }
+
+    #[test]
+    fn a_target_in_its_window_has_the_whole_frame_centre() {
+        let img = scene();
+        let options = DetectorOptions {
+            codes: CodeSet::all(),
+            ..DetectorOptions::default()
+        };
+        let mut det = Detector::new(img.width(), img.height(), options).unwrap();
+        let view = img.view();
+        let found = det.detect(view).unwrap().clone();
+        assert_eq!(found.targets.len(), 5, "{:?}", found.targets);
+        let mut w = WindowMeasurer::new(options);
+        for d in &found.targets {
+            let e = Expected {
+                col: d.col + 0.7,
+                row: d.row - 0.4,
+                gate_px: 3.0,
+                radius_px: d.semi_major,
+                coded: d.kind == TargetKind::Coded,
+                read_code: true,
+            };
+            match w.measure(&view, &found.threshold, &e) {
+                WindowOutcome::Found(m) => {
+                    assert_eq!((m.col, m.row), (d.col, d.row));
+                    assert_eq!(m.area, d.area);
+                    if d.kind == TargetKind::Coded {
+                        assert_eq!(m.code.and_then(|c| c.id()), d.id);
+                        assert!(d.id.is_some());
+                    } else {
+                        assert_eq!(m.code, None);
+                    }
+                }
+                other => panic!("{other:?} at {} {}", d.col, d.row),
+            }
+        }
+    }
+
+    #[test]
+    fn nothing_inside_the_gate_is_missing_and_two_are_ambiguous() {
+        let img = scene();
+        let options = DetectorOptions::default();
+        let mut det = Detector::new(img.width(), img.height(), options).unwrap();
+        let view = img.view();
+        let t = det.detect(view).unwrap().threshold;
+        let mut w = WindowMeasurer::new(options);
+        let e = Expected {
+            col: 40.3 + 8.0,
+            row: 50.7,
+            gate_px: 2.0,
+            radius_px: 5.0,
+            coded: false,
+            read_code: false,
+        };
+        assert_eq!(w.measure(&view, &t, &e), WindowOutcome::Missing);
+        let far = Expected {
+            col: -100.0,
+            row: -100.0,
+            ..e
+        };
+        assert_eq!(w.measure(&view, &t, &far), WindowOutcome::Missing);
+        // Half-way between the two close dots, with a gate reaching both.
+        let both = Expected {
+            col: 55.2,
+            row: 51.4,
+            gate_px: 16.0,
+            ..e
+        };
+        assert_eq!(w.measure(&view, &t, &both), WindowOutcome::Ambiguous);
+    }
+}
