@@ -81,6 +81,23 @@ impl Provenance {
             xml_escape(&json)
         )
     }
+
+    /// `svg` with [`Provenance::svg_metadata`] inserted right after its
+    /// opening `<svg …>` tag (unchanged when it has none).
+    pub fn insert_into_svg(&self, svg: &str) -> String {
+        let Some(open) = svg.find("<svg") else {
+            return svg.to_string();
+        };
+        let Some(end) = svg[open..].find('>').map(|k| open + k + 1) else {
+            return svg.to_string();
+        };
+        let mut s = String::with_capacity(svg.len() + 512);
+        s.push_str(&svg[..end]);
+        s.push('\n');
+        s.push_str(&self.svg_metadata());
+        s.push_str(svg[end..].trim_start_matches('\n'));
+        s
+    }
 }
 
 /// SHA-256 of `bytes` as 64 lower-case hex digits.
@@ -184,5 +201,9 @@ mod tests {
         let meta = p.svg_metadata();
         assert!(meta.contains("a&amp;b.csv") && !meta.contains("a&b"));
         assert!(meta.contains("&quot;sha256&quot;"));
+        let svg = p.insert_into_svg("<?xml version=\"1.0\"?>\n<svg a=\"1\">\n<g/></svg>\n");
+        assert!(svg.starts_with("<?xml version=\"1.0\"?>\n<svg a=\"1\">\n<metadata"));
+        assert!(svg.ends_with("</metadata>\n<g/></svg>\n"), "{svg}");
+        assert_eq!(p.insert_into_svg("no svg"), "no svg");
     }
 }
