@@ -203,7 +203,10 @@ fn calibrates_rendered_images_and_names_the_image_without_plate() {
         let text = std::fs::read_to_string(r.plots.join(f)).unwrap();
         assert!(text.starts_with("<svg") && text.contains("<circle"), "{f}");
         // Provenance in the plot, the camera and the date in its title.
-        assert!(text.contains("<metadata id=\"photopose-provenance\">"), "{f}");
+        assert!(
+            text.contains("<metadata id=\"photopose-provenance\">"),
+            "{f}"
+        );
         assert!(
             text.contains("camera calibrated.toml (1300 × 1030 px")
                 && text.contains("2023-11-14T22:13:20Z"),
@@ -222,7 +225,10 @@ fn check_provenance(r: &Run, images: &[PathBuf], initial: &Path, report: &Value,
     assert_eq!(rec.date, "2023-11-14T22:13:20Z");
     assert_eq!(rec.tool, format!("photopose {}", env!("CARGO_PKG_VERSION")));
     assert_eq!(rec.images, 8);
-    assert_eq!(rec.observations as u64, report["n_observations"].as_u64().unwrap());
+    assert_eq!(
+        rec.observations as u64,
+        report["n_observations"].as_u64().unwrap()
+    );
     assert_eq!(rec.sigma0_px, report["sigma0_px"].as_f64().unwrap());
     assert_eq!(rec.fixed, ["k3", "b1", "b2"]);
     let std = rec.std.values();

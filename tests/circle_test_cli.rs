@@ -132,7 +132,10 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     }
     let injected = cell.error.radial_f_mm() * 1e3;
     let g = tcp["g_filtered_um"].as_f64().unwrap();
-    assert!((g - injected).abs() < 5.0, "G {g} µm vs injected {injected} µm");
+    assert!(
+        (g - injected).abs() < 5.0,
+        "G {g} µm vs injected {injected} µm"
+    );
     // No nominal circle given: no F.
     assert_eq!(tcp["f_um"], Value::Null);
     assert_eq!(tcp["nominal"], Value::Null);
@@ -167,7 +170,10 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
         assert!(body.len() > 500, "{name} too short");
         if name.ends_with(".svg") {
             assert!(body.starts_with("<svg") && body.trim_end().ends_with("</svg>"));
-            assert!(body.contains("<metadata id=\"photopose-provenance\">") && body.contains(&sha(&poses)));
+            assert!(
+                body.contains("<metadata id=\"photopose-provenance\">")
+                    && body.contains(&sha(&poses))
+            );
         }
     }
     let text = std::fs::read_to_string(out_dir.join("report.txt")).unwrap();
@@ -192,7 +198,11 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
         .arg("--json")
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let n: Value = serde_json::from_slice(&out.stdout).unwrap();
     let tcp_n = &n["tcp"];
     assert_eq!(tcp_n["g_um"], tcp["g_um"]);
@@ -205,7 +215,10 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     );
     let g = tcp["g_um"].as_f64().unwrap();
     assert!(fmax > 0.0 && fmin < 0.0, "F {fmax} {fmin}");
-    assert!(((fmax - fmin) - g).abs() < 0.2 * g, "F {fmax}..{fmin} vs G {g}");
+    assert!(
+        ((fmax - fmin) - g).abs() < 0.2 * g,
+        "F {fmax}..{fmin} vs G {g}"
+    );
     // The nominal circle belongs to the TCP; the camera has none.
     assert_eq!(n["camera"]["f_um"], Value::Null);
 }
@@ -243,7 +256,7 @@ fn bad_lines_and_hand_eye_files_are_named() {
 }
 
 #[test]
-fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
+fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_g() {
     let dir = scratch("circle-test-resect");
     let cell = Cell::default();
     let samples = cell.samples().unwrap();

@@ -9,13 +9,12 @@ use crate::cmd::{batch::load_frame, defaults};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_calibrate::{
-    calibrate, natural_cmp, svg, Blob, CalibrationOptions, Fixed, ImageDetections, Report,
-    Skipped,
+    calibrate, natural_cmp, svg, Blob, CalibrationOptions, Fixed, ImageDetections, Report, Skipped,
 };
 use photopose_formats::provenance::{hash_file, InputFile, Provenance};
 use photopose_formats::{CalibrationRecord, CameraFile, FileKind, ParameterStd};
-use serde::Serialize;
 use photopose_vision::{Detector, DetectorOptions, FrameStatus};
+use serde::Serialize;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -220,7 +219,10 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
                 "residuals.svg",
                 svg::vector_plot(&camera, &cal.images, &labels),
             ),
-            ("radial.svg", svg::radial_plot(&camera, &cal.images, &labels)),
+            (
+                "radial.svg",
+                svg::radial_plot(&camera, &cal.images, &labels),
+            ),
         ] {
             let p = dir.join(name);
             std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?;

@@ -11,13 +11,13 @@ use crate::cmd::defaults;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_formats::hand_eye::{save_hand_eye, Fit, HandEyeFile, Transform};
+use photopose_formats::provenance::{hash_file, sha256_hex, InputFile, Provenance};
+use photopose_formats::FileKind;
 use photopose_handeye::stations::CameraSource;
 use photopose_handeye::{
     parse_stations, solve, CameraPose, HandEye, HandEyeOptions, Station, StationResidual,
 };
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
-use photopose_formats::provenance::{hash_file, sha256_hex, InputFile, Provenance};
-use photopose_formats::FileKind;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -235,7 +235,10 @@ fn load_stations(args: &Args, inputs: &mut Vec<InputFile>) -> Result<Vec<Station
         let locator = match &mut locator {
             Some(l) => l,
             None => {
-                for (p, kind) in [(&args.camera, FileKind::Camera), (&args.field, FileKind::Field)] {
+                for (p, kind) in [
+                    (&args.camera, FileKind::Camera),
+                    (&args.field, FileKind::Field),
+                ] {
                     if let Some(p) = p {
                         inputs.push(hash_file(p, kind)?);
                     }

@@ -137,7 +137,10 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
         }
     }
     if !(args.overlap_mm.is_finite() && args.overlap_mm >= 0.0) {
-        bail!("--overlap-mm {}: must be a length ≥ 0 in mm", args.overlap_mm);
+        bail!(
+            "--overlap-mm {}: must be a length ≥ 0 in mm",
+            args.overlap_mm
+        );
     }
     let field = defaults::field(args.field.as_deref())?;
     let (name, sha256) = match &args.field {
@@ -212,7 +215,8 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
                         .file_stem()
                         .map(|s| s.to_string_lossy().into_owned())
                         .unwrap_or_else(|| "plate".into());
-                    args.out.with_file_name(format!("{stem}-{}.svg", page.label))
+                    args.out
+                        .with_file_name(format!("{stem}-{}.svg", page.label))
                 };
                 write(&path, &page.svg)?;
                 written.sheets.push(path.display().to_string());

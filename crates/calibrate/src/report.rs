@@ -287,7 +287,9 @@ mod tests {
 
     #[test]
     fn natural_order_counts_digit_runs_as_numbers() {
-        let mut names = vec!["v10.pgm", "v2.pgm", "v1.pgm", "v11.pgm", "a/v9.pgm", "v1b.pgm"];
+        let mut names = vec![
+            "v10.pgm", "v2.pgm", "v1.pgm", "v11.pgm", "a/v9.pgm", "v1b.pgm",
+        ];
         names.sort_by(|a, b| natural_cmp(a, b));
         assert_eq!(
             names,

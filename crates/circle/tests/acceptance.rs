@@ -189,7 +189,11 @@ fn noisy_cell_recovers_f_within_5_um_and_wobble_within_a_thousandth_degree() {
         "F {f} vs injected {injected_f}"
     );
     // The raw F carries the noise's extremes: far above the injected value.
-    assert!((tcp.g_um * 1e-3) > injected_f + 0.03, "raw F {}", (tcp.g_um * 1e-3));
+    assert!(
+        (tcp.g_um * 1e-3) > injected_f + 0.03,
+        "raw F {}",
+        (tcp.g_um * 1e-3)
+    );
     let w = wobble_error(&tcp, &samples, &cell.error);
     assert!(w < 0.001, "wobble off by {w}°");
     // The filtered TCP profile follows the injected pattern to within the

@@ -76,8 +76,7 @@ impl ParameterStd {
     /// The values in the order of [`PARAMETERS`].
     pub fn values(&self) -> [Option<f64>; 10] {
         [
-            self.c, self.x0, self.y0, self.k1, self.k2, self.k3, self.p1, self.p2, self.b1,
-            self.b2,
+            self.c, self.x0, self.y0, self.k1, self.k2, self.k3, self.p1, self.p2, self.b1, self.b2,
         ]
     }
 
@@ -488,7 +487,10 @@ mod tests {
             ..file
         };
         assert_eq!(camera_file_to_toml(&plain), camera_to_toml(&plain.camera));
-        assert_eq!(parse_camera_file(&camera_to_toml(&plain.camera), "x").unwrap(), plain);
+        assert_eq!(
+            parse_camera_file(&camera_to_toml(&plain.camera), "x").unwrap(),
+            plain
+        );
     }
 
     #[test]
@@ -496,22 +498,37 @@ mod tests {
         let text = camera_file_to_toml(&calibrated());
         let cases = [
             (text.replace("k1 = 3e-7", "k4 = 3e-7"), "k4"),
-            (text.replace("images = 12", "images = 12\nweather = 1"), "weather"),
+            (
+                text.replace("images = 12", "images = 12\nweather = 1"),
+                "weather",
+            ),
             (
                 text.replace("2026-11-24T16:08:08Z", "yesterday"),
                 "calibration.date",
             ),
-            (text.replace("c = 0.00015", "c = -0.00015"), "calibration.std.c = -0.00015"),
-            (text.replace("[\"k3\"]", "[\"k9\"]"), "calibration.fixed[0] = \"k9\""),
+            (
+                text.replace("c = 0.00015", "c = -0.00015"),
+                "calibration.std.c = -0.00015",
+            ),
+            (
+                text.replace("[\"k3\"]", "[\"k9\"]"),
+                "calibration.fixed[0] = \"k9\"",
+            ),
             (
                 text.replace(&crate::provenance::sha256_hex(b"v1"), "beef"),
                 "calibration.inputs[0].sha256",
             ),
-            (text.replace("sigma0_px = 0.031", "sigma0_px = nan"), "calibration.sigma0_px"),
+            (
+                text.replace("sigma0_px = 0.031", "sigma0_px = nan"),
+                "calibration.sigma0_px",
+            ),
         ];
         for (bad, want) in cases {
             let e = parse_camera_file(&bad, "cam.toml").unwrap_err().to_string();
-            assert!(e.starts_with("cam.toml: ") && e.contains(want), "{e:?} lacks {want:?}");
+            assert!(
+                e.starts_with("cam.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
         }
     }
 

@@ -93,7 +93,7 @@ fn esc(text: &str) -> String {
 /// of the field's `X` and `Y` axes, the field's name and checksum.
 pub fn annotate(drawing: &Drawing, text: &SheetText) -> Drawing {
     let (dx, dy) = (SIDE_MM, SIDE_MM);
-    let width = (drawing.width_mm + 2.0 * SIDE_MM).max(SCALE_BAR_MM + 180.0);
+    let width = (drawing.width_mm + 2.0 * SIDE_MM).max(SCALE_BAR_MM + 200.0);
     let height = drawing.height_mm + SIDE_MM + STRIP_MM;
     let mut s = String::new();
     let _ = writeln!(
@@ -139,9 +139,9 @@ pub fn annotate(drawing: &Drawing, text: &SheetText) -> Drawing {
         );
     }
     // The axes, drawn in the bottom strip's left corner.
-    let base = (dx + 8.0, bottom + 30.0);
+    let base = (dx + 6.0, bottom + 31.0);
     for (k, (ux, uy)) in drawing.axes.iter().enumerate() {
-        let tip = (base.0 + 18.0 * ux, base.1 + 18.0 * uy);
+        let tip = (base.0 + 16.0 * ux, base.1 + 16.0 * uy);
         // Arrow head: two strokes back from the tip.
         let back = |a: f64| {
             let (c, sn) = (a.cos(), a.sin());
@@ -154,27 +154,18 @@ pub fn annotate(drawing: &Drawing, text: &SheetText) -> Drawing {
         let _ = writeln!(
             s,
             r#"<path class="axis" d="M{:.3} {:.3}L{:.3} {:.3}M{:.3} {:.3}L{:.3} {:.3}L{:.3} {:.3}"/>"#,
-            base.0,
-            base.1,
-            tip.0,
-            tip.1,
-            h1.0,
-            h1.1,
-            tip.0,
-            tip.1,
-            h2.0,
-            h2.1
+            base.0, base.1, tip.0, tip.1, h1.0, h1.1, tip.0, tip.1, h2.0, h2.1
         );
         let _ = writeln!(
             labels,
             r#"<text x="{:.3}" y="{:.3}" text-anchor="middle">{}</text>"#,
-            base.0 + 23.0 * ux,
-            base.1 + 23.0 * uy + 1.5,
+            base.0 + 20.0 * ux,
+            base.1 + 20.0 * uy + 1.2,
             ["X", "Y"][k]
         );
     }
     // The scale-check bar with a tick every 10 mm.
-    let (bx, by) = (dx + 45.0, bottom + 14.0);
+    let (bx, by) = (dx + 40.0, bottom + 14.0);
     let _ = writeln!(
         s,
         r#"<path class="scale-bar" stroke-width="0.5" d="M{bx:.3} {by:.3}H{:.3}"/>"#,
@@ -203,11 +194,12 @@ pub fn annotate(drawing: &Drawing, text: &SheetText) -> Drawing {
     );
     let _ = writeln!(
         s,
-        r#"<text x="{bx:.3}" y="{:.3}">measure: must be {:.1} mm (print at 100 %, no fitting to the page)</text>"#,
+        r#"<text x="{bx:.3}" y="{:.3}">measure: must be {:.1} mm</text><text x="{bx:.3}" y="{:.3}">(print at 100 %, no fitting to the page)</text>"#,
         by + 7.0,
-        SCALE_BAR_MM
+        SCALE_BAR_MM,
+        by + 13.0
     );
-    let tx = bx + SCALE_BAR_MM + 15.0;
+    let tx = bx + SCALE_BAR_MM + 25.0;
     for (k, line) in [
         format!("field: {}", esc(text.name)),
         format!("field file sha256: {}", esc(text.checksum)),
@@ -336,16 +328,8 @@ pub fn layout(
         } else {
             (short, long)
         };
-        let cols = windows(
-            width,
-            page_w - 2.0 * PRINTER_MARGIN_MM,
-            overlap_mm,
-        );
-        let rows = windows(
-            height,
-            page_h - 2.0 * PRINTER_MARGIN_MM,
-            overlap_mm,
-        );
+        let cols = windows(width, page_w - 2.0 * PRINTER_MARGIN_MM, overlap_mm);
+        let rows = windows(height, page_h - 2.0 * PRINTER_MARGIN_MM, overlap_mm);
         let mut tiles = Vec::with_capacity(rows.len() * cols.len());
         for (row, &(y, h)) in rows.iter().enumerate() {
             for (col, &(x, w)) in cols.iter().enumerate() {
@@ -505,7 +489,10 @@ mod tests {
     #[test]
     fn a_574_by_432_drawing_takes_four_a3_and_two_a2_sheets_and_one_a1() {
         let a3 = layout(574.0, 432.0, Paper::A3, 20.0).unwrap();
-        assert_eq!((a3.tiles.len(), a3.rows, a3.cols, a3.landscape), (4, 2, 2, true));
+        assert_eq!(
+            (a3.tiles.len(), a3.rows, a3.cols, a3.landscape),
+            (4, 2, 2, true)
+        );
         let a2 = layout(574.0, 432.0, Paper::A2, 20.0).unwrap();
         assert_eq!(a2.tiles.len(), 2);
         let a1 = layout(574.0, 432.0, Paper::A1, 20.0).unwrap();
@@ -521,7 +508,9 @@ mod tests {
                 assert!(pair[0].x + pair[0].w - pair[1].x >= 20.0 - 1e-9);
             }
             let last = l.tiles.last().unwrap();
-            assert!((last.x + last.w - 574.0).abs() < 1e-9 && (last.y + last.h - 432.0).abs() < 1e-9);
+            assert!(
+                (last.x + last.w - 574.0).abs() < 1e-9 && (last.y + last.h - 432.0).abs() < 1e-9
+            );
         }
         assert!(layout(574.0, 432.0, Paper::A4, 200.0).is_err());
     }
@@ -552,7 +541,17 @@ mod tests {
                 );
             }
         }
-        assert_eq!(layout(d.width_mm, d.height_mm, Paper::A4, 20.0).unwrap().tiles.len(), 9);
+        // 604 × 487 mm annotated: portrait A4 (190 × 277 mm printable) in
+        // 4 columns and 2 rows.
+        let a4 = layout(d.width_mm, d.height_mm, Paper::A4, 20.0).unwrap();
+        assert_eq!((a4.cols, a4.rows, a4.landscape), (4, 2, false));
+        assert_eq!(
+            layout(d.width_mm, d.height_mm, Paper::A2, 20.0)
+                .unwrap()
+                .tiles
+                .len(),
+            2
+        );
     }
 
     #[test]
@@ -562,7 +561,9 @@ mod tests {
         let pages = sheets(&d, &l);
         assert_eq!(pages.len(), l.tiles.len());
         for (p, t) in pages.iter().zip(&l.tiles) {
-            assert!(p.svg.contains(r#"width="420mm" height="297mm" viewBox="0 0 420 297""#));
+            assert!(p
+                .svg
+                .contains(r#"width="420mm" height="297mm" viewBox="0 0 420 297""#));
             // The window: as many mm of the drawing as of the page.
             assert!(p.svg.contains(&format!(
                 r#"width="{:.3}" height="{:.3}" viewBox="{:.3} {:.3} {:.3} {:.3}""#,
@@ -572,7 +573,10 @@ mod tests {
             assert!(p.svg.contains("<g class=\"alignment\""));
         }
         assert_eq!(pages[1].label, "r1c2");
-        let one = sheets(&d, &layout(d.width_mm, d.height_mm, Paper::A0, 20.0).unwrap());
+        let one = sheets(
+            &d,
+            &layout(d.width_mm, d.height_mm, Paper::A0, 20.0).unwrap(),
+        );
         assert_eq!(one.len(), 1);
         assert!(one[0].svg.contains(r#"width="1189mm" height="841mm""#));
         assert!(!one[0].svg.contains("alignment"));
@@ -587,13 +591,19 @@ mod tests {
         let s = d.to_svg();
         // A 100 mm bar in drawing (= printed) millimetres, 11 ticks.
         let bar = s.split("class=\"scale-bar\"").nth(1).unwrap();
-        let path: &str = bar.split("d=\"M").nth(1).unwrap().split('"').next().unwrap();
+        let path: &str = bar
+            .split("d=\"M")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap();
         let (start, end) = path.split_once('H').unwrap();
         let x0: f64 = start.split(' ').next().unwrap().parse().unwrap();
         let x1: f64 = end.parse().unwrap();
         assert!((x1 - x0 - 100.0).abs() < 1e-9, "{path}");
         let ticks = s.split("class=\"scale-ticks\"").nth(1).unwrap();
-        assert_eq!(ticks.split('"').nth(2).unwrap().matches('M').count(), 11);
+        assert_eq!(ticks.split('"').nth(1).unwrap().matches('M').count(), 11);
         assert!(s.contains("measure: must be 100.0 mm"));
         assert!(s.contains("field: plate.csv") && s.contains("sha256: 0123456789ab"));
         assert_eq!(s.matches("class=\"origin\"").count(), 2);
