@@ -183,7 +183,7 @@ fn noisy_run(
 fn noisy_cell_recovers_f_within_5_um_and_wobble_within_a_thousandth_degree() {
     let (cell, samples, tcp, _) = noisy_run(11, SIGMA_PX, 15);
     let injected_f = cell.error.radial_f_mm();
-    let f = (tcp.g_filtered_um.unwrap() * 1e-3);
+    let f = tcp.g_filtered_um.unwrap() * 1e-3;
     assert!(
         (f - injected_f).abs() < 0.005,
         "F {f} vs injected {injected_f}"
