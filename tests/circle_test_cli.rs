@@ -178,7 +178,7 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     }
     let text = std::fs::read_to_string(out_dir.join("report.txt")).unwrap();
     assert!(text.contains("circular deviation G") && text.contains("of the TCP"));
-    assert!(text.contains("radial deviation F   — (needs the nominal circle"));
+    assert!(text.contains("radial deviation F   — (no nominal circle given for this path"));
     assert!(text.starts_with("made by photopose ") && text.contains(&sha(&hand_eye)));
 
     // The commanded circle as the nominal one: F from it, G unchanged.
@@ -221,6 +221,8 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     );
     // The nominal circle belongs to the TCP; the camera has none.
     assert_eq!(n["camera"]["f_um"], Value::Null);
+    let text = std::fs::read_to_string(dir.join("out-nominal/report.txt")).unwrap();
+    assert!(text.contains("radial deviation F   max +"), "{text}");
 }
 
 #[test]

@@ -70,7 +70,7 @@ pub fn text(title: &str, test: &CircleTest) -> String {
         _ => {
             let _ = writeln!(
                 s,
-                "radial deviation F   — (needs the nominal circle: --nominal-center, --nominal-radius)"
+                "radial deviation F   — (no nominal circle given for this path: --nominal-center, --nominal-radius)"
             );
         }
     }
