@@ -115,6 +115,7 @@ fn run(dir: &Path, initial: &Path, images: &[PathBuf], extra: &[&str]) -> Run {
     let report = dir.join("report.json");
     let plots = dir.join("plots");
     let out = bin()
+        .env("SOURCE_DATE_EPOCH", "1700000000")
         .args(["calibrate", "camera", "--initial"])
         .arg(initial)
         .arg("--out")
@@ -201,7 +202,67 @@ fn calibrates_rendered_images_and_names_the_image_without_plate() {
     for f in ["residuals.svg", "radial.svg"] {
         let text = std::fs::read_to_string(r.plots.join(f)).unwrap();
         assert!(text.starts_with("<svg") && text.contains("<circle"), "{f}");
+        // Provenance in the plot, the camera and the date in its title.
+        assert!(
+            text.contains("<metadata id=\"photopose-provenance\">"),
+            "{f}"
+        );
+        assert!(
+            text.contains("camera calibrated.toml (1300 × 1030 px")
+                && text.contains("2023-11-14T22:13:20Z"),
+            "{f}"
+        );
     }
+    check_provenance(&r, &images, &initial, &report, &stdout);
+}
+
+/// The camera file's `[calibration]` section and the report's provenance:
+/// tool, date, image and observation counts, σ of the estimated parameters,
+/// every readable input with the SHA-256 of its bytes.
+fn check_provenance(r: &Run, images: &[PathBuf], initial: &Path, report: &Value, stdout: &str) {
+    let file = photopose_formats::load_camera_file(&r.camera).unwrap();
+    let rec = file.calibration.expect("a [calibration] section");
+    assert_eq!(rec.date, "2023-11-14T22:13:20Z");
+    assert_eq!(rec.tool, format!("photopose {}", env!("CARGO_PKG_VERSION")));
+    assert_eq!(rec.images, 8);
+    assert_eq!(
+        rec.observations as u64,
+        report["n_observations"].as_u64().unwrap()
+    );
+    // serde_json's float parsing may differ from TOML's in the last bit.
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+    assert!(close(rec.sigma0_px, report["sigma0_px"].as_f64().unwrap()));
+    assert_eq!(rec.fixed, ["k3", "b1", "b2"]);
+    let std = rec.std.values();
+    for (k, p) in report["parameters"].as_array().unwrap().iter().enumerate() {
+        match (std[k], p["std"].as_f64()) {
+            (Some(a), Some(b)) => assert!(close(a, b), "{}: {a} vs {b}", p["name"]),
+            (a, b) => assert_eq!(a, b, "{}", p["name"]),
+        }
+    }
+    assert!(std[0].unwrap() > 0.0 && std[9].is_none());
+    // The initial camera first, then every image (the blank one too: it was
+    // read), each with the SHA-256 of its bytes.
+    let expected: Vec<&Path> = std::iter::once(initial)
+        .chain(images.iter().map(PathBuf::as_path))
+        .collect();
+    assert_eq!(rec.inputs.len(), expected.len());
+    for p in &expected {
+        let want = photopose_formats::provenance::sha256_hex(&std::fs::read(p).unwrap());
+        let got = rec
+            .inputs
+            .iter()
+            .find(|i| Path::new(&i.path) == *p)
+            .unwrap_or_else(|| panic!("{} not among the inputs", p.display()));
+        assert_eq!(got.sha256, want);
+        assert!(stdout.contains(&format!("{}  sha256 {want}", p.display())));
+    }
+    assert_eq!(report["provenance"]["date"], "2023-11-14T22:13:20Z");
+    assert_eq!(
+        report["provenance"]["inputs"].as_array().unwrap().len(),
+        expected.len()
+    );
+    assert!(stdout.starts_with("made by photopose "), "{stdout}");
 }
 
 #[test]

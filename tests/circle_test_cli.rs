@@ -1,7 +1,8 @@
 //! End-to-end test of `photopose circle-test`: a pose stream written from
 //! the simulated cell (with pose noise and some lines without a pose), run
 //! through the real binary with a hand-eye file; checks the report's keys,
-//! the files written and the recovered radial deviation F.
+//! the files written, the recovered circular deviation G, the radial
+//! deviation F against the nominal circle, and the provenance.
 
 mod common;
 
@@ -72,6 +73,7 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     .unwrap();
     let out_dir = dir.join("out");
     let out = bin()
+        .env("SOURCE_DATE_EPOCH", "1700000000")
         .arg("circle-test")
         .arg(&poses)
         .arg("--hand-eye")
@@ -113,8 +115,10 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
         "direction",
         "coverage_deg",
         "harmonics_upr",
-        "f_mm",
-        "f_filtered_mm",
+        "g_um",
+        "g_filtered_um",
+        "nominal",
+        "f_um",
         "radial_mm",
         "out_of_plane_mm",
         "mean_orientation_abc_deg",
@@ -126,9 +130,26 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
     ] {
         assert!(tcp.get(key).is_some(), "missing tcp.{key}");
     }
-    let injected = cell.error.radial_f_mm();
-    let f = tcp["f_filtered_mm"].as_f64().unwrap();
-    assert!((f - injected).abs() < 0.005, "F {f} vs injected {injected}");
+    let injected = cell.error.radial_f_mm() * 1e3;
+    let g = tcp["g_filtered_um"].as_f64().unwrap();
+    assert!(
+        (g - injected).abs() < 5.0,
+        "G {g} µm vs injected {injected} µm"
+    );
+    // No nominal circle given: no F.
+    assert_eq!(tcp["f_um"], Value::Null);
+    assert_eq!(tcp["nominal"], Value::Null);
+    assert!(tcp.get("f_mm").is_none() && tcp.get("f_filtered_mm").is_none());
+    // Provenance: tool, date, the pose file and the hand-eye file hashed.
+    let p = &v["provenance"];
+    assert_eq!(p["date"], "2023-11-14T22:13:20Z");
+    assert!(p["tool"].as_str().unwrap().starts_with("photopose "));
+    let sha = |path: &std::path::Path| {
+        photopose_formats::provenance::sha256_hex(&std::fs::read(path).unwrap())
+    };
+    assert_eq!(p["inputs"][0]["path"], poses.display().to_string());
+    assert_eq!(p["inputs"][0]["sha256"], sha(&poses));
+    assert_eq!(p["inputs"][1]["sha256"], sha(&hand_eye));
     let r = tcp["radius_mm"].as_f64().unwrap();
     assert!((r - 149.9).abs() < 0.002, "{r}");
     assert_eq!(tcp["direction"], "ccw");
@@ -149,10 +170,59 @@ fn circle_test_of_a_simulated_stream_recovers_the_tcp_error() {
         assert!(body.len() > 500, "{name} too short");
         if name.ends_with(".svg") {
             assert!(body.starts_with("<svg") && body.trim_end().ends_with("</svg>"));
+            assert!(
+                body.contains("<metadata id=\"photopose-provenance\">")
+                    && body.contains(&sha(&poses))
+            );
         }
     }
     let text = std::fs::read_to_string(out_dir.join("report.txt")).unwrap();
-    assert!(text.contains("radial deviation F") && text.contains("of the TCP"));
+    assert!(text.contains("circular deviation G") && text.contains("of the TCP"));
+    assert!(text.contains("radial deviation F   — (no nominal circle given for this path"));
+    assert!(text.starts_with("made by photopose ") && text.contains(&sha(&hand_eye)));
+
+    // The commanded circle as the nominal one: F from it, G unchanged.
+    let c = cell.path.center_mm;
+    let out = bin()
+        .env("SOURCE_DATE_EPOCH", "1700000000")
+        .arg("circle-test")
+        .arg(&poses)
+        .arg("--hand-eye")
+        .arg(&hand_eye)
+        .arg("--out-dir")
+        .arg(dir.join("out-nominal"))
+        .arg("--nominal-center")
+        .arg(format!("{},{},{}", c[0], c[1], c[2]))
+        .arg("--nominal-radius")
+        .arg(cell.path.radius_mm.to_string())
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let n: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let tcp_n = &n["tcp"];
+    assert_eq!(tcp_n["g_um"], tcp["g_um"]);
+    assert_eq!(tcp_n["nominal"]["radius_mm"], cell.path.radius_mm);
+    // The injected pattern about the commanded circle: F spans what G does
+    // (within the pose noise), positive and negative.
+    let (fmax, fmin) = (
+        tcp_n["f_um"]["max"].as_f64().unwrap(),
+        tcp_n["f_um"]["min"].as_f64().unwrap(),
+    );
+    let g = tcp["g_um"].as_f64().unwrap();
+    assert!(fmax > 0.0 && fmin < 0.0, "F {fmax} {fmin}");
+    assert!(
+        ((fmax - fmin) - g).abs() < 0.2 * g,
+        "F {fmax}..{fmin} vs G {g}"
+    );
+    // The nominal circle belongs to the TCP; the camera has none.
+    assert_eq!(n["camera"]["f_um"], Value::Null);
+    let text = std::fs::read_to_string(dir.join("out-nominal/report.txt")).unwrap();
+    assert!(text.contains("radial deviation F   max +"), "{text}");
 }
 
 #[test]
@@ -188,7 +258,7 @@ fn bad_lines_and_hand_eye_files_are_named() {
 }
 
 #[test]
-fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
+fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_g() {
     let dir = scratch("circle-test-resect");
     let cell = Cell::default();
     let samples = cell.samples().unwrap();
@@ -228,15 +298,15 @@ fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_f() {
         stdout.contains("40 lines, 39 poses used, skipped: 1 failed"),
         "{stdout}"
     );
-    assert!(stdout.contains("F filtered           —"), "{stdout}");
+    assert!(stdout.contains("G filtered           —"), "{stdout}");
     let v: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("out/report.json")).unwrap())
             .unwrap();
     assert_eq!(v["tcp"], Value::Null);
     assert_eq!(v["plots_of"], "camera");
-    assert_eq!(v["camera"]["f_filtered_mm"], Value::Null);
-    // The camera's raw F over 39 noise-free poses: the injected pattern as
+    assert_eq!(v["camera"]["g_filtered_um"], Value::Null);
+    // The camera's raw G over 39 noise-free poses: the injected pattern as
     // the camera sees it (the wobble's lever arm adds micrometres).
-    let f = v["camera"]["f_mm"].as_f64().unwrap();
-    assert!((f - cell.error.radial_f_mm()).abs() < 0.03, "{f}");
+    let g = v["camera"]["g_um"].as_f64().unwrap();
+    assert!((g - cell.error.radial_f_mm() * 1e3).abs() < 30.0, "{g}");
 }

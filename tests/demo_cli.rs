@@ -53,8 +53,8 @@ fn the_demo_runs_the_chain_and_finds_the_injected_deviation() {
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("report.json")).unwrap())
             .unwrap();
-    let f = report["tcp"]["f_filtered_mm"].as_f64().unwrap();
-    assert!((f - 0.1682).abs() < 0.015, "F filtered {f} mm\n{stdout}");
+    let g = report["tcp"]["g_filtered_um"].as_f64().unwrap();
+    assert!((g - 168.2).abs() < 15.0, "G filtered {g} µm\n{stdout}");
     assert!(
         stdout.contains("RSI:") && stdout.contains("injected F"),
         "{stdout}"

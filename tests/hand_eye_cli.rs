@@ -173,11 +173,22 @@ fn pose_columns_give_both_transforms_within_their_sigma() {
     check_recovered(&out, 3.0);
     let text = std::fs::read_to_string(&out).unwrap();
     assert!(text.contains("[camera_in_tcp]") && text.contains("stations = 12"));
+    // Provenance: tool, UTC date, the station file with its SHA-256.
+    let sha = photopose_formats::provenance::sha256_hex(&std::fs::read(&st).unwrap());
+    let p = &v["provenance"];
+    assert!(p["tool"].as_str().unwrap().starts_with("photopose "));
+    assert!(photopose_formats::provenance::parse_rfc3339(p["date"].as_str().unwrap()).is_ok());
+    assert_eq!(p["inputs"][0]["path"], st.display().to_string());
+    assert_eq!(p["inputs"][0]["sha256"], sha);
 
     // The text report names the stations and the result.
     let o = calibrate(&st, &dir.join("again.toml"), &[]);
     assert!(o.status.success());
     let report = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        report.starts_with("made by photopose ") && report.contains(&format!("sha256 {sha}")),
+        "{report}"
+    );
     assert!(report.contains("rejected stations: none"), "{report}");
     assert!(
         report.contains("s12") && report.contains("camera in TCP"),

@@ -180,10 +180,61 @@ fn field_svg_draws_the_plate_at_one_to_one() {
     assert!(s.starts_with("<?xml") && s.trim_end().ends_with("</svg>"));
     // 544 × 384 mm between the outer centres; 5 mm surround (uncoded) left
     // and right, 12 mm quiet zones (coded) top and bottom, the bottom row's
-    // labels (3.9 mm), 10 mm border.
-    assert!(s.contains(r#"width="574mm" height="431.9mm" viewBox="0 0 574 431.9""#));
+    // labels (3.9 mm), 10 mm border: a 574 × 431.9 mm plate, in a white
+    // margin of 15 mm and a 40 mm strip below with the annotations.
+    assert!(s.contains(r#"width="604mm" height="486.9mm" viewBox="0 0 604 486.9""#));
+    assert!(s.contains(r##"<rect x="0" y="0" width="574" height="431.9" fill="#000"/>"##));
     assert_eq!(s.matches("<circle").count(), 230);
     assert!(s.matches("<path").count() >= 30);
+    // Scale-check bar, origin, axes, the field's name and checksum.
+    let sha = photopose_formats::provenance::sha256_hex(include_bytes!("../config/plate.csv"));
+    assert!(s.contains("measure: must be 100.0 mm"));
+    assert!(s.contains("class=\"origin\"") && s.contains(">X</text>") && s.contains(">Y</text>"));
+    assert!(s.contains("field: built-in plate") && s.contains(&sha[..12]));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["field_sha256"], sha);
+
+    // On paper: A1 holds it (one landscape sheet), A2 needs two tiles and
+    // A3 four, each page 1:1 in mm and labelled.
+    for (paper, pages, size) in [
+        (
+            "A1",
+            vec!["a1.svg"],
+            r#"width="841mm" height="594mm" viewBox="0 0 841 594""#,
+        ),
+        (
+            "A2",
+            vec!["a2-r1c1.svg", "a2-r1c2.svg"],
+            r#"width="420mm" height="594mm" viewBox="0 0 420 594""#,
+        ),
+        (
+            "a3",
+            vec!["a3-r1c1.svg", "a3-r1c2.svg", "a3-r2c1.svg", "a3-r2c2.svg"],
+            r#"width="420mm" height="297mm" viewBox="0 0 420 297""#,
+        ),
+    ] {
+        let out_path = dir.join(format!("{}.svg", paper.to_lowercase()));
+        let out = photopose(&["field", "svg", "--out", p(&out_path), "--paper", paper]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["sheets"].as_array().unwrap().len(), pages.len(), "{v}");
+        for name in pages {
+            let page = std::fs::read_to_string(dir.join(name)).unwrap();
+            assert!(page.contains(size), "{name}");
+            if name.contains("-r") {
+                let label = &name[3..7];
+                assert!(page.contains(&format!(">{label} (row")), "{name}");
+                assert!(page.contains("class=\"alignment\""), "{name}");
+            }
+        }
+    }
+    let out = photopose(&["field", "svg", "--out", p(&svg), "--paper", "B4"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("one of A4, A3, A2, A1, A0"),
+        "{}",
+        text(&out.stderr)
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -1,15 +1,20 @@
 //! `photopose calibrate camera`: detects the targets of 10–30 images of the
 //! test field, runs the self-calibrating bundle adjustment of
-//! `photopose-calibrate` and writes the camera file, the report (text on
-//! stdout, JSON on request) and the residual plots.
+//! `photopose-calibrate` and writes the camera file (with its
+//! `[calibration]` section), the report (text on stdout, JSON on request)
+//! and the residual plots, all carrying the provenance (tool, date, input
+//! files with their SHA-256).
 
 use crate::cmd::{batch::load_frame, defaults};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_calibrate::{
-    calibrate, svg, Blob, CalibrationOptions, Fixed, ImageDetections, Report, Skipped,
+    calibrate, natural_cmp, svg, Blob, CalibrationOptions, Fixed, ImageDetections, Report, Skipped,
 };
+use photopose_formats::provenance::{hash_file, InputFile, Provenance};
+use photopose_formats::{CalibrationRecord, CameraFile, FileKind, ParameterStd};
 use photopose_vision::{Detector, DetectorOptions, FrameStatus};
+use serde::Serialize;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -44,8 +49,46 @@ pub struct Args {
     pub plot_dir: Option<PathBuf>,
 }
 
+/// The JSON report: the provenance, then the calibration's report.
+#[derive(Serialize)]
+struct JsonReport<'a> {
+    provenance: &'a Provenance,
+    #[serde(flatten)]
+    report: &'a Report,
+}
+
+/// The `[calibration]` section of the camera file written.
+fn record(report: &Report, provenance: &Provenance) -> CalibrationRecord {
+    let std = ParameterStd::from_values(std::array::from_fn(|k| {
+        let name = photopose_formats::camera::PARAMETERS[k].0;
+        report
+            .parameters
+            .iter()
+            .find(|p| p.name == name)
+            .and_then(|p| p.std)
+    }));
+    CalibrationRecord {
+        date: provenance.date.clone(),
+        tool: provenance.tool.clone(),
+        images: report.images.len() as u32,
+        observations: report.n_observations as u32,
+        sigma0_px: report.sigma0_px,
+        sigma0_mm: report.sigma0_mm,
+        fixed: report
+            .parameters
+            .iter()
+            .filter(|p| p.fixed)
+            .map(|p| p.name.to_string())
+            .collect(),
+        std,
+        inputs: provenance.inputs.clone(),
+    }
+}
+
 /// Runs the command.
-pub fn run(args: Args) -> Result<ExitCode> {
+pub fn run(mut args: Args) -> Result<ExitCode> {
+    args.images
+        .sort_by(|a, b| natural_cmp(&a.display().to_string(), &b.display().to_string()));
     let initial = defaults::camera(args.initial.as_deref())?;
     let field = defaults::field(args.field.as_deref())?;
     let mut fixed = Fixed::none();
@@ -65,8 +108,20 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     let mut inputs = Vec::with_capacity(args.images.len());
     let mut unreadable = Vec::new();
+    let mut hashes: Vec<InputFile> = Vec::new();
+    for (path, kind) in [
+        (&args.initial, FileKind::Camera),
+        (&args.field, FileKind::Field),
+    ] {
+        if let Some(p) = path {
+            hashes.push(hash_file(p, kind)?);
+        }
+    }
     for path in &args.images {
         let name = path.display().to_string();
+        if let Ok(h) = hash_file(path, FileKind::Image) {
+            hashes.push(h);
+        }
         let image = match load_frame(path, &initial) {
             Ok(i) => i,
             Err(e) => {
@@ -124,20 +179,50 @@ pub fn run(args: Args) -> Result<ExitCode> {
     // The result must be a valid camera file.
     photopose_geometry::Camera::new(camera.sensor, camera.interior, camera.distortion)
         .context("the adjusted camera is not a valid camera")?;
-    std::fs::write(&args.out, photopose_formats::camera_to_toml(&camera))
-        .with_context(|| format!("writing {}", args.out.display()))?;
     let report = Report::new(&cal, &fixed, &unreadable);
-    print!("{}", report.to_text());
+    let provenance = Provenance::now(hashes);
+    let file = CameraFile {
+        camera,
+        calibration: Some(record(&report, &provenance)),
+    };
+    std::fs::write(&args.out, photopose_formats::camera_file_to_toml(&file))
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    print!("{}{}", provenance.to_text(), report.to_text());
     println!("camera written to {}", args.out.display());
     if let Some(p) = &args.report_json {
-        std::fs::write(p, serde_json::to_string_pretty(&report)? + "\n")
+        let json = JsonReport {
+            provenance: &provenance,
+            report: &report,
+        };
+        std::fs::write(p, serde_json::to_string_pretty(&json)? + "\n")
             .with_context(|| format!("writing {}", p.display()))?;
     }
     if let Some(dir) = &args.plot_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let name = args
+            .out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let camera_label = format!(
+            "{name} ({} × {} px, c = {:.3} mm)",
+            camera.sensor.width, camera.sensor.height, camera.interior.c
+        );
+        let metadata = provenance.svg_metadata();
+        let labels = svg::PlotLabels {
+            camera: &camera_label,
+            date: &provenance.date,
+            metadata: &metadata,
+        };
         for (name, text) in [
-            ("residuals.svg", svg::vector_plot(&camera, &cal.images)),
-            ("radial.svg", svg::radial_plot(&camera, &cal.images)),
+            (
+                "residuals.svg",
+                svg::vector_plot(&camera, &cal.images, &labels),
+            ),
+            (
+                "radial.svg",
+                svg::radial_plot(&camera, &cal.images, &labels),
+            ),
         ] {
             let p = dir.join(name);
             std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))?;

@@ -2,13 +2,17 @@
 //! the plate in the robot's base frame from a station file (robot poses
 //! with either camera poses or frames to measure them from), written as a
 //! hand-eye file, with a report of the fit (per-station residuals, standard
-//! deviations, rejected stations) as text or one JSON object.
+//! deviations, rejected stations) as text or one JSON object, each with its
+//! provenance (tool, date, the station file and every file it read with
+//! their SHA-256).
 
 use crate::cmd::batch::load_frame;
 use crate::cmd::defaults;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_formats::hand_eye::{save_hand_eye, Fit, HandEyeFile, Transform};
+use photopose_formats::provenance::{hash_file, sha256_hex, InputFile, Provenance};
+use photopose_formats::FileKind;
 use photopose_handeye::stations::CameraSource;
 use photopose_handeye::{
     parse_stations, solve, CameraPose, HandEye, HandEyeOptions, Station, StationResidual,
@@ -62,6 +66,7 @@ pub struct Args {
 /// The JSON report.
 #[derive(Serialize)]
 struct Report<'a> {
+    provenance: &'a Provenance,
     ok: bool,
     out: String,
     /// `X = T_tcp←camera`.
@@ -116,7 +121,9 @@ impl<'a> ResidualJson<'a> {
 
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
-    let stations = load_stations(&args)?;
+    let mut inputs = Vec::new();
+    let stations = load_stations(&args, &mut inputs)?;
+    let provenance = Provenance::now(inputs);
     let options = HandEyeOptions {
         robot_std_mm: args.robot_std_mm,
         robot_std_deg: args.robot_std_deg,
@@ -131,6 +138,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if args.json {
         let std_x = he.std_unknowns();
         let report = Report {
+            provenance: &provenance,
             ok: true,
             out: args.out.display().to_string(),
             camera_in_tcp: TransformJson {
@@ -157,7 +165,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         };
         println!("{}", serde_json::to_string(&report)?);
     } else {
-        print!("{}", text_report(&he, &file, &args.out));
+        print!(
+            "{}{}",
+            provenance.to_text(),
+            text_report(&he, &file, &args.out)
+        );
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -183,10 +195,14 @@ fn hand_eye_file(he: &HandEye) -> HandEyeFile {
 }
 
 /// Reads the station file and measures the camera pose of every station
-/// that names a frame.
-fn load_stations(args: &Args) -> Result<Vec<Station>> {
-    let text = photopose_formats::read_text(&args.stations, photopose_formats::FileKind::Stations)?;
+/// that names a frame; every file read is added to `inputs` with its hash.
+fn load_stations(args: &Args, inputs: &mut Vec<InputFile>) -> Result<Vec<Station>> {
+    let text = photopose_formats::read_text(&args.stations, FileKind::Stations)?;
     let origin = args.stations.display().to_string();
+    inputs.push(InputFile {
+        path: origin.clone(),
+        sha256: sha256_hex(text.as_bytes()),
+    });
     let rows = parse_stations(&text, &origin)?;
     let default_std = [
         args.camera_std_mm,
@@ -218,12 +234,25 @@ fn load_stations(args: &Args) -> Result<Vec<Station>> {
         };
         let locator = match &mut locator {
             Some(l) => l,
-            None => locator.insert(Locator::new(
-                cam,
-                defaults::field(args.field.as_deref())?,
-                LocateOptions::default(),
-            )?),
+            None => {
+                for (p, kind) in [
+                    (&args.camera, FileKind::Camera),
+                    (&args.field, FileKind::Field),
+                ] {
+                    if let Some(p) = p {
+                        inputs.push(hash_file(p, kind)?);
+                    }
+                }
+                locator.insert(Locator::new(
+                    cam,
+                    defaults::field(args.field.as_deref())?,
+                    LocateOptions::default(),
+                )?)
+            }
         };
+        if let Ok(h) = hash_file(&path, FileKind::Image) {
+            inputs.push(h);
+        }
         let pose = locate(locator, &cam, &path)
             .map_err(|e| anyhow::anyhow!("{origin}:{}: station {}: {e}", row.line, row.name))?;
         out.push(Station {

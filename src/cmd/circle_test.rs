@@ -2,12 +2,19 @@
 //! stream (the daemon's JSON lines, docs/streams.md, or `photopose resect`
 //! output), of the projection centres and — with a hand-eye transform — of
 //! the TCP. Writes report.txt, report.json and the figure-2 style plots
-//! circle.svg, radial.svg and angular.svg into the output folder.
+//! circle.svg, radial.svg and angular.svg into the output folder, each with
+//! its provenance (tool, date, input files with their SHA-256). The figures
+//! are ISO 230-4's: the circular deviation `G` always, the radial deviation
+//! `F` when the nominal circle is given (`--nominal-center`,
+//! `--nominal-radius`).
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_circle::pose::tcp_from_camera;
-use photopose_circle::{analyse, plot, report, AnalysisOptions, CircleTest, Isometry3};
+use photopose_circle::{
+    analyse, plot, report, AnalysisOptions, CircleTest, Isometry3, NominalCircle,
+};
+use photopose_formats::provenance::{hash_file, sha256_hex, InputFile, Provenance};
 use photopose_geometry::pose::{camera_pose, isometry_from_xyzabc};
 use photopose_geometry::{rotation, Exterior, Matrix3, Vector3};
 use serde::Serialize;
@@ -39,6 +46,20 @@ pub struct Args {
     /// Print the JSON report on stdout instead of the text report.
     #[arg(long)]
     pub json: bool,
+    /// Centre of the nominal (programmed) circle, X,Y,Z mm in the plate
+    /// frame: of the TCP with `--hand-eye`, else of the projection centre.
+    /// With `--nominal-radius` the report gives ISO 230-4's radial
+    /// deviation F.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        requires = "nominal_radius"
+    )]
+    pub nominal_center: Option<Vec<f64>>,
+    /// Radius of the nominal circle, mm (with `--nominal-center`).
+    #[arg(long, allow_hyphen_values = true, requires = "nominal_center")]
+    pub nominal_radius: Option<f64>,
 }
 
 /// What was read from one pose file.
@@ -53,20 +74,26 @@ pub struct InputSummary {
     /// Lines without a pose, by status (`stale`, `too_few_targets`,
     /// `error`, `failed` for a resect line with `ok: false`).
     pub skipped: BTreeMap<String, usize>,
+    /// SHA-256 of the bytes read (None for an in-memory stream).
+    #[serde(skip)]
+    pub sha256: Option<String>,
 }
 
 /// A hand-eye transform as read.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct HandEye {
     /// `X` as KUKA `X, Y, Z, A, B, C` (mm, degrees).
     pub xyzabc: [f64; 6],
     /// `X = T_tcp←camera`.
     pub camera_in_tcp: Isometry3<f64>,
+    /// The file it was read from, with its SHA-256.
+    pub input: Option<InputFile>,
 }
 
 /// The JSON report (report.json).
 #[derive(Serialize)]
 struct Report<'a> {
+    provenance: &'a Provenance,
     inputs: &'a [InputSummary],
     n_poses: usize,
     hand_eye_xyzabc: Option<[f64; 6]>,
@@ -100,10 +127,26 @@ pub fn run(args: Args) -> Result<ExitCode> {
         bail!("no usable pose in {} file(s)", args.poses.len());
     }
     let hand_eye = args.hand_eye.as_deref().map(read_hand_eye).transpose()?;
-    let out = evaluate(
+    let nominal = match (&args.nominal_center, args.nominal_radius) {
+        (Some(c), Some(r)) => {
+            let [x, y, z] = c[..] else {
+                bail!(
+                    "--nominal-center {}: must be three numbers X,Y,Z (mm)",
+                    c.iter().map(f64::to_string).collect::<Vec<_>>().join(",")
+                );
+            };
+            Some(NominalCircle {
+                center_mm: [x, y, z],
+                radius_mm: r,
+            })
+        }
+        _ => None,
+    };
+    let out = evaluate_against(
         &poses,
         &inputs,
         hand_eye.as_ref(),
+        nominal,
         args.harmonics,
         args.magnify,
     )?;
@@ -133,23 +176,58 @@ pub fn evaluate(
     harmonics: u32,
     magnify: f64,
 ) -> Result<Outputs> {
-    let options = AnalysisOptions { harmonics };
-    let camera = analyse(poses, &options).context("circular test of the projection centres")?;
+    evaluate_against(poses, inputs, hand_eye, None, harmonics, magnify)
+}
+
+/// [`evaluate`] with the nominal circle of the subject (the TCP with a
+/// hand-eye transform, else the projection centre), for ISO 230-4's `F`.
+pub fn evaluate_against(
+    poses: &[Isometry3<f64>],
+    inputs: &[InputSummary],
+    hand_eye: Option<&HandEye>,
+    nominal: Option<NominalCircle>,
+    harmonics: u32,
+    magnify: f64,
+) -> Result<Outputs> {
+    let options = AnalysisOptions {
+        harmonics,
+        nominal: None,
+    };
+    let subject_options = AnalysisOptions { nominal, ..options };
+    let camera_options = if hand_eye.is_some() {
+        &options
+    } else {
+        &subject_options
+    };
+    let camera =
+        analyse(poses, camera_options).context("circular test of the projection centres")?;
     let tcp = match hand_eye {
         Some(h) => {
             let tcp: Vec<Isometry3<f64>> = poses
                 .iter()
                 .map(|c| tcp_from_camera(c, &h.camera_in_tcp))
                 .collect();
-            Some(analyse(&tcp, &options).context("circular test of the TCP")?)
+            Some(analyse(&tcp, &subject_options).context("circular test of the TCP")?)
         }
         None => None,
     };
+    let mut files: Vec<InputFile> = inputs
+        .iter()
+        .filter_map(|i| {
+            i.sha256.as_ref().map(|h| InputFile {
+                path: i.path.clone(),
+                sha256: h.clone(),
+            })
+        })
+        .collect();
+    files.extend(hand_eye.and_then(|h| h.input.clone()));
+    let provenance = Provenance::now(files);
     let (subject, plotted) = match &tcp {
         Some(t) => ("TCP", t),
         None => ("projection centre", &camera),
     };
     let report = Report {
+        provenance: &provenance,
         inputs,
         n_poses: poses.len(),
         hand_eye_xyzabc: hand_eye.map(|h| h.xyzabc),
@@ -159,7 +237,7 @@ pub fn evaluate(
         tcp: tcp.as_ref(),
     };
     let json = serde_json::to_string_pretty(&report)?;
-    let mut text = String::new();
+    let mut text = provenance.to_text();
     for i in inputs {
         let skipped: Vec<String> = i.skipped.iter().map(|(k, n)| format!("{n} {k}")).collect();
         text.push_str(&format!(
@@ -192,15 +270,25 @@ pub fn evaluate(
         ("report.json", json.clone() + "\n"),
         (
             "circle.svg",
-            plot::path_svg(plotted, &format!("Circular path of the {subject}"), magnify),
+            provenance.insert_into_svg(&plot::path_svg(
+                plotted,
+                &format!("Circular path of the {subject}"),
+                magnify,
+            )),
         ),
         (
             "radial.svg",
-            plot::radial_svg(plotted, &format!("Radial deviation of the {subject}")),
+            provenance.insert_into_svg(&plot::radial_svg(
+                plotted,
+                &format!("Radial deviation of the {subject}"),
+            )),
         ),
         (
             "angular.svg",
-            plot::angular_svg(plotted, &format!("Orientation deviation of the {subject}")),
+            provenance.insert_into_svg(&plot::angular_svg(
+                plotted,
+                &format!("Orientation deviation of the {subject}"),
+            )),
         ),
     ];
     Ok(Outputs { text, json, files })
@@ -227,6 +315,7 @@ pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSum
         lines: 0,
         used: 0,
         skipped: BTreeMap::new(),
+        sha256: Some(sha256_hex(text.as_bytes())),
     };
     for (k, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -278,5 +367,6 @@ pub fn read_hand_eye(path: &Path) -> Result<HandEye> {
     Ok(HandEye {
         xyzabc,
         camera_in_tcp: isometry_from_xyzabc(xyzabc),
+        input: Some(hash_file(path, photopose_formats::FileKind::HandEye)?),
     })
 }

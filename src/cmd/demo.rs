@@ -252,10 +252,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
     println!("\n{}", out.text);
     let report: serde_json::Value = serde_json::from_str(&out.json)?;
     println!(
-        "injected F = {:.1} µm, measured at the TCP F = {:.1} µm (filtered {:.1} µm)",
+        "injected F = {:.1} µm, measured at the TCP G = {:.1} µm (filtered {:.1} µm)",
         cell.error.radial_f_mm() * 1000.0,
-        report["tcp"]["f_mm"].as_f64().unwrap_or(f64::NAN) * 1000.0,
-        report["tcp"]["f_filtered_mm"].as_f64().unwrap_or(f64::NAN) * 1000.0
+        report["tcp"]["g_um"].as_f64().unwrap_or(f64::NAN),
+        report["tcp"]["g_filtered_um"].as_f64().unwrap_or(f64::NAN)
     );
     println!(
         "written to {}: {}, poses.jsonl, hand-eye.toml",

@@ -1,5 +1,7 @@
 //! `photopose field`: test-field tools. `field svg` draws a plate at 1:1
-//! for printing; `field new` designs a rectangular plate (grid of uncoded
+//! for printing, with a scale-check bar, the field's origin and axes, its
+//! name and checksum, on one sheet of `--paper` or tiled over several;
+//! `field new` designs a rectangular plate (grid of uncoded
 //! targets, coded targets on a coarser sub-grid, even codes) and writes
 //! its CSV.
 
@@ -8,7 +10,9 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use photopose_field::design::PlateDesign;
 use photopose_field::{Field, TargetKind};
-use photopose_render::svg::{plate_svg, SvgOptions};
+use photopose_formats::provenance::{self, hash_file, Provenance};
+use photopose_render::sheet::{annotate, layout, sheets, Paper, SheetText};
+use photopose_render::svg::{plate_drawing, SvgOptions};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -45,6 +49,19 @@ pub struct SvgArgs {
     /// Dark border around the outermost quiet zones, mm.
     #[arg(long, default_value_t = SvgOptions::default().border_mm)]
     pub border_mm: f64,
+    /// Paper to print on at 1:1 (A4, A3, A2, A1, A0): one page with the
+    /// drawing centred when it fits, else tiles `OUT-r1c1.svg`, … beside
+    /// `--out`. Without it the SVG has the drawing's own size.
+    #[arg(long, value_parser = parse_paper)]
+    pub paper: Option<Paper>,
+    /// Least overlap of neighbouring tiles, mm (raised to the largest
+    /// target's diameter plus 2 mm so every target is whole on a tile).
+    #[arg(long, default_value_t = 20.0)]
+    pub overlap_mm: f64,
+}
+
+fn parse_paper(text: &str) -> Result<Paper, String> {
+    Paper::parse(text).ok_or_else(|| format!("{text:?}: one of A4, A3, A2, A1, A0"))
 }
 
 /// Arguments of `photopose field new` (defaults: the default plate).
@@ -89,6 +106,27 @@ struct Written {
     coded: usize,
 }
 
+/// What `field svg` wrote.
+#[derive(Serialize)]
+struct Drawn {
+    out: String,
+    ok: bool,
+    targets: usize,
+    coded: usize,
+    /// Drawing size, mm.
+    width_mm: f64,
+    height_mm: f64,
+    /// The paper, its orientation and the files written (one per sheet).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    paper: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    landscape: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    overlap_mm: Option<f64>,
+    sheets: Vec<String>,
+    field_sha256: String,
+}
+
 fn svg(args: SvgArgs) -> Result<ExitCode> {
     for (name, v) in [
         ("--label-mm", args.label_mm),
@@ -98,25 +136,97 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
             bail!("{name} {v}: must be a length ≥ 0 in mm");
         }
     }
+    if !(args.overlap_mm.is_finite() && args.overlap_mm >= 0.0) {
+        bail!(
+            "--overlap-mm {}: must be a length ≥ 0 in mm",
+            args.overlap_mm
+        );
+    }
     let field = defaults::field(args.field.as_deref())?;
-    let text = plate_svg(
+    let (name, sha256) = match &args.field {
+        Some(p) => (
+            p.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| p.display().to_string()),
+            hash_file(p, photopose_formats::FileKind::Field)?.sha256,
+        ),
+        None => (
+            "built-in plate (config/plate.csv)".to_string(),
+            provenance::sha256_hex(defaults::PLATE_CSV.as_bytes()),
+        ),
+    };
+    let plain = plate_drawing(
         &field,
         &SvgOptions {
             border_mm: args.border_mm,
             label_mm: args.label_mm,
         },
     )?;
-    std::fs::write(&args.out, text)
-        .with_context(|| format!("{}: cannot write", args.out.display()))?;
-    println!(
-        "{}",
-        serde_json::to_string(&Written {
-            out: args.out.display().to_string(),
-            ok: true,
-            targets: field.len(),
-            coded: field.coded().count(),
-        })?
+    let footer = format!(
+        "{} targets ({} coded), drawn 1:1 by {}",
+        field.len(),
+        field.coded().count(),
+        Provenance::now(vec![]).headline()
     );
+    let drawing = annotate(
+        &plain,
+        &SheetText {
+            name: &name,
+            checksum: &sha256[..12],
+            footer: &footer,
+        },
+    );
+    let mut written = Drawn {
+        out: args.out.display().to_string(),
+        ok: true,
+        targets: field.len(),
+        coded: field.coded().count(),
+        width_mm: drawing.width_mm,
+        height_mm: drawing.height_mm,
+        paper: None,
+        landscape: None,
+        overlap_mm: None,
+        sheets: Vec::new(),
+        field_sha256: sha256.clone(),
+    };
+    let write = |path: &std::path::Path, text: &str| {
+        std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+    };
+    match args.paper {
+        None => {
+            write(&args.out, &drawing.to_svg())?;
+            written.sheets.push(args.out.display().to_string());
+        }
+        Some(paper) => {
+            let largest = field
+                .targets()
+                .iter()
+                .map(|t| t.bright_radius())
+                .fold(0.0, f64::max);
+            let overlap = args.overlap_mm.max(2.0 * largest + 2.0);
+            let l = layout(drawing.width_mm, drawing.height_mm, paper, overlap)?;
+            let pages = sheets(&drawing, &l);
+            for page in &pages {
+                let path = if pages.len() == 1 {
+                    args.out.clone()
+                } else {
+                    let stem = args
+                        .out
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_else(|| "plate".into());
+                    args.out
+                        .with_file_name(format!("{stem}-{}.svg", page.label))
+                };
+                write(&path, &page.svg)?;
+                written.sheets.push(path.display().to_string());
+            }
+            written.paper = Some(paper.name());
+            written.landscape = Some(l.landscape);
+            written.overlap_mm = Some(overlap);
+        }
+    }
+    println!("{}", serde_json::to_string(&written)?);
     Ok(ExitCode::SUCCESS)
 }
 

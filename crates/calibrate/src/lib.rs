@@ -33,4 +33,4 @@ pub use calibrate::{
 };
 pub use error::CalibrateError;
 pub use params::{Fixed, Param};
-pub use report::Report;
+pub use report::{natural_cmp, Report};

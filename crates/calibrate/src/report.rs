@@ -6,7 +6,15 @@
 use crate::calibrate::{Calibration, Skipped};
 use crate::params::{values, Fixed, Param};
 use serde::Serialize;
+use std::cmp::Ordering;
 use std::fmt::Write;
+
+/// Natural order of names: digit runs compare as numbers (`v1, v2, …,
+/// v10`), the rest as text. The one sort of image names, for the report's
+/// lines, the plots and the command's inputs.
+pub fn natural_cmp(a: &str, b: &str) -> Ordering {
+    alphanumeric_sort::compare_str(a, b)
+}
 
 /// Correlations above this are named.
 pub const CORRELATION_LIMIT: f64 = 0.9;
@@ -126,7 +134,7 @@ impl Report {
         }
         let mut total = 0.0;
         let mut count = 0usize;
-        let images: Vec<ImageLine> = cal
+        let mut images: Vec<ImageLine> = cal
             .images
             .iter()
             .map(|im| {
@@ -148,6 +156,7 @@ impl Report {
                 }
             })
             .collect();
+        images.sort_by(|a, b| natural_cmp(&a.image, &b.image));
         let mut warnings: Vec<String> = correlations
             .iter()
             .map(|c| {
@@ -269,5 +278,22 @@ impl Report {
             }
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order_counts_digit_runs_as_numbers() {
+        let mut names = vec![
+            "v10.pgm", "v2.pgm", "v1.pgm", "v11.pgm", "a/v9.pgm", "v1b.pgm",
+        ];
+        names.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(
+            names,
+            ["a/v9.pgm", "v1.pgm", "v1b.pgm", "v2.pgm", "v10.pgm", "v11.pgm"]
+        );
     }
 }

@@ -1,7 +1,12 @@
 //! The circular test of a sequence of poses (in time order): plane and
 //! least-squares circle of the positions, per-sample phase angle, radial and
 //! out-of-plane deviation, orientation deviation from the mean orientation,
-//! and the summary figures of ISO 230-4 (radial deviation `F`).
+//! and the summary figures of ISO 230-4 by their names: the circular
+//! deviation `G` (radial range of the path about the least-squares circle's
+//! centre) always, the radial deviation `F` (max and min of the path's
+//! deviation from the nominal circle) only when the nominal circle is given.
+//! One analysis is one run in one direction, so the circular hysteresis `H`
+//! (between a clockwise and a counter-clockwise run) is not among them.
 
 use crate::error::CircleError;
 use crate::fit::{Circle, Plane};
@@ -16,12 +21,38 @@ pub struct AnalysisOptions {
     /// Highest order (undulations per revolution) kept by the harmonic
     /// filter of the profiles; 0 disables the filter.
     pub harmonics: u32,
+    /// The nominal circle the robot was programmed to follow; with it the
+    /// radial deviation `F` is reported.
+    pub nominal: Option<NominalCircle>,
 }
 
 impl Default for AnalysisOptions {
     fn default() -> Self {
-        AnalysisOptions { harmonics: 15 }
+        AnalysisOptions {
+            harmonics: 15,
+            nominal: None,
+        }
     }
+}
+
+/// The nominal (programmed) circle of a test, in the frame of the poses.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NominalCircle {
+    /// Centre, mm.
+    pub center_mm: [f64; 3],
+    /// Radius, mm.
+    pub radius_mm: f64,
+}
+
+/// ISO 230-4's radial deviation `F`: the deviation of the path from the
+/// nominal circle, positive away from its centre; its largest and smallest
+/// value over the samples, µm.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RadialDeviation {
+    /// Largest radial deviation (`F max`), µm.
+    pub max: f64,
+    /// Smallest radial deviation (`F min`, negative inside the nominal circle), µm.
+    pub min: f64,
 }
 
 /// Direction of travel seen from the plane normal's tip.
@@ -129,11 +160,18 @@ pub struct CircleTest {
     pub coverage_deg: f64,
     /// Highest harmonic order of the filter (0: no filter).
     pub harmonics_upr: u32,
-    /// Radial deviation `F`: max − min of the samples' radial deviations
-    /// from the least-squares circle, mm.
-    pub f_mm: f64,
-    /// `F` of the filtered radial profile, mm.
-    pub f_filtered_mm: Option<f64>,
+    /// Circular deviation `G` (ISO 230-4): the radial separation of the two
+    /// circles about the least-squares circle's centre that enclose the
+    /// samples (max − min radial deviation from the least-squares circle), µm.
+    pub g_um: f64,
+    /// `G` of the harmonic-filtered radial profile, µm.
+    pub g_filtered_um: Option<f64>,
+    /// The nominal circle, when given.
+    pub nominal: Option<NominalCircle>,
+    /// Radial deviation `F` (ISO 230-4) from the nominal circle, measured
+    /// in the least-squares plane from the nominal centre projected into
+    /// it; only with a nominal circle.
+    pub f_um: Option<RadialDeviation>,
     /// Radial deviations, mm.
     pub radial_mm: Profile,
     /// Out-of-plane deviations, mm.
@@ -205,10 +243,39 @@ pub fn analyse(
             });
         }
     }
+    if let Some(n) = &options.nominal {
+        if let Some(&v) = n.center_mm.iter().find(|v| !v.is_finite()) {
+            return Err(CircleError::BadParameter {
+                name: "nominal centre",
+                value: v,
+                why: "must be finite (mm)",
+            });
+        }
+        if !(n.radius_mm.is_finite() && n.radius_mm > 0.0) {
+            return Err(CircleError::BadParameter {
+                name: "nominal radius",
+                value: n.radius_mm,
+                why: "must be a positive length (mm)",
+            });
+        }
+    }
     let positions: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
     let plane = Plane::fit(&positions)?;
     let in_plane: Vec<_> = positions.iter().map(|p| plane.to_plane(p)).collect();
     let circle = Circle::fit(&in_plane)?;
+    let f_um = options.nominal.map(|n| {
+        let c = plane.to_plane(&Vector3::from(n.center_mm));
+        let (mut max, mut min) = (f64::NEG_INFINITY, f64::INFINITY);
+        for q in &in_plane {
+            let f = (q - c).norm() - n.radius_mm;
+            max = max.max(f);
+            min = min.min(f);
+        }
+        RadialDeviation {
+            max: max * 1e3,
+            min: min * 1e3,
+        }
+    });
 
     let mut phases = Vec::with_capacity(poses.len());
     let mut radial = Vec::with_capacity(poses.len());
@@ -297,8 +364,10 @@ pub fn analyse(
         direction,
         coverage_deg: swept.abs().to_degrees(),
         harmonics_upr: order,
-        f_mm: radial_mm.span,
-        f_filtered_mm: radial_mm.filtered.as_ref().map(|f| f.span),
+        g_um: radial_mm.span * 1e3,
+        g_filtered_um: radial_mm.filtered.as_ref().map(|f| f.span * 1e3),
+        nominal: options.nominal,
+        f_um,
         radial_mm,
         out_of_plane_mm,
         mean_orientation_abc_deg: photopose_geometry::rotation::kuka_abc_deg_from_matrix(&m),
@@ -410,12 +479,57 @@ mod tests {
         assert!((r.radius_mm - 149.9).abs() < 1e-9);
         assert!((r.center_mm[0] - 10.0).abs() < 1e-9 && (r.center_mm[1] + 5.0).abs() < 1e-9);
         assert!((r.center_mm[2] - 600.0).abs() < 1e-9);
-        assert!(r.f_mm < 1e-9 && r.f_filtered_mm.unwrap() < 1e-9);
+        assert!(r.g_um < 1e-6 && r.g_filtered_um.unwrap() < 1e-6);
+        assert_eq!((r.nominal, r.f_um), (None, None));
         assert!(r.rotation_max_angle_deg < 1e-9);
         assert_eq!(r.direction, Direction::Ccw);
         assert!((r.coverage_deg - 359.5).abs() < 1e-6);
         assert!((r.samples[90].phase_deg - 45.0).abs() < 1e-9);
         assert_eq!(r.plane.normal, [0.0, 0.0, 1.0]);
+    }
+
+    /// A circle of radius 100.02 mm about (0.01, 0, 600) with a 10 µm
+    /// two-lobe radial error: G is the 20 µm range about the least-squares
+    /// centre whatever the nominal circle; F is measured from the nominal
+    /// circle and follows its centre and radius.
+    #[test]
+    fn g_is_about_the_least_squares_centre_and_f_about_the_nominal_circle() {
+        let poses: Vec<_> = (0..720)
+            .map(|i| {
+                let t = (i as f64 * 0.5).to_radians();
+                let r = 100.02 + 0.010 * (2.0 * t).cos();
+                from_xyzabc([0.01 + r * t.cos(), r * t.sin(), 600.0, 0.0, 0.0, 180.0])
+            })
+            .collect();
+        let plain = analyse(&poses, &AnalysisOptions::default()).unwrap();
+        assert!((plain.g_um - 20.0).abs() < 1e-3, "{}", plain.g_um);
+        assert_eq!(plain.f_um, None);
+        let nominal = NominalCircle {
+            center_mm: [0.0, 0.0, 600.0],
+            radius_mm: 100.0,
+        };
+        let options = AnalysisOptions {
+            nominal: Some(nominal),
+            ..AnalysisOptions::default()
+        };
+        let r = analyse(&poses, &options).unwrap();
+        assert_eq!(r.g_um, plain.g_um);
+        assert_eq!(r.nominal, Some(nominal));
+        let f = r.f_um.unwrap();
+        // F(θ) = 20 + 10 cos 2θ + 10 cos θ µm (radius, lobes, the 10 µm
+        // centre offset along X): largest 40 µm at θ = 0, smallest
+        // 8.75 µm at cos θ = −1/4.
+        assert!((f.max - 40.0).abs() < 0.01, "{f:?}");
+        assert!((f.min - 8.75).abs() < 0.01, "{f:?}");
+        let bad = AnalysisOptions {
+            nominal: Some(NominalCircle {
+                radius_mm: -1.0,
+                ..nominal
+            }),
+            ..AnalysisOptions::default()
+        };
+        let e = analyse(&poses, &bad).unwrap_err().to_string();
+        assert!(e.contains("nominal radius") && e.contains("-1"), "{e}");
     }
 
     #[test]

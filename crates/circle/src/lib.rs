@@ -6,8 +6,9 @@
 //! the least-squares plane of their positions, then the least-squares circle
 //! in that plane (ISO 230-4: algebraic start, then Gauss–Newton on the
 //! orthogonal distances). It reports the centre, radius, each sample's phase
-//! angle, radial and out-of-plane deviation, the radial deviation `F`
-//! (max − min radial deviation from the least-squares circle), the
+//! angle, radial and out-of-plane deviation, ISO 230-4's circular
+//! deviation `G` (radial range about the least-squares centre) and, with
+//! the nominal circle given, its radial deviation `F`, the
 //! orientation deviations along the path (small rotations about the field's
 //! axes from the mean orientation), and each of these profiles also through
 //! a Fourier (harmonic) filter in the phase angle ([`harmonics`]).
@@ -27,6 +28,9 @@ pub mod plot;
 pub mod pose;
 pub mod report;
 
-pub use analysis::{analyse, AnalysisOptions, CircleTest, Direction, Profile, SampleDeviation};
+pub use analysis::{
+    analyse, AnalysisOptions, CircleTest, Direction, NominalCircle, Profile, RadialDeviation,
+    SampleDeviation,
+};
 pub use error::CircleError;
 pub use nalgebra::Isometry3;

@@ -15,6 +15,13 @@ const COLORS: [&str; 3] = ["#d62728", "#2ca02c", "#1f77b4"];
 /// Points on which a filtered series is drawn.
 const CURVE_POINTS: usize = 720;
 
+/// ` · F max …, min … µm` when the nominal circle was given, else nothing.
+fn f_text(test: &CircleTest) -> String {
+    test.f_um
+        .map(|f| format!(" · F max {:+.1}, min {:+.1} µm", f.max, f.min))
+        .unwrap_or_default()
+}
+
 /// A "nice" step (1, 2 or 5 × 10ⁿ) of about `raw`.
 fn nice_step(raw: f64) -> f64 {
     if !(raw.is_finite() && raw > 0.0) {
@@ -100,8 +107,8 @@ pub fn path_svg(test: &CircleTest, title: &str, magnify: f64) -> String {
     open(&mut s, w, h);
     text(&mut s, w / 2.0, 30.0, 18.0, "middle", title);
     let filtered = test
-        .f_filtered_mm
-        .map(|f| format!(", filtered {:.1} µm ({} UPR)", f * 1e3, test.harmonics_upr))
+        .g_filtered_um
+        .map(|g| format!(", filtered {g:.1} µm ({} UPR)", test.harmonics_upr))
         .unwrap_or_default();
     text(
         &mut s,
@@ -110,9 +117,10 @@ pub fn path_svg(test: &CircleTest, title: &str, magnify: f64) -> String {
         13.0,
         "middle",
         &format!(
-            "LSQ circle R = {:.4} mm · F = {:.1} µm{filtered}",
+            "LSQ circle R = {:.4} mm · circular deviation G = {:.1} µm{filtered}{}",
             r,
-            test.f_mm * 1e3
+            test.g_um,
+            f_text(test)
         ),
     );
     text(
@@ -400,14 +408,8 @@ pub fn radial_svg(test: &CircleTest, title: &str) -> String {
     open(&mut s, w, h);
     text(&mut s, w / 2.0, 28.0, 17.0, "middle", title);
     let filtered = test
-        .f_filtered_mm
-        .map(|f| {
-            format!(
-                " · filtered ({} UPR) F = {:.2} µm",
-                test.harmonics_upr,
-                f * 1e3
-            )
-        })
+        .g_filtered_um
+        .map(|g| format!(" · filtered ({} UPR) G = {g:.2} µm", test.harmonics_upr))
         .unwrap_or_default();
     text(
         &mut s,
@@ -415,7 +417,11 @@ pub fn radial_svg(test: &CircleTest, title: &str) -> String {
         50.0,
         13.0,
         "middle",
-        &format!("radial deviation F = {:.2} µm{filtered}", test.f_mm * 1e3),
+        &format!(
+            "circular deviation G = {:.2} µm{filtered}{}",
+            test.g_um,
+            f_text(test)
+        ),
     );
     chart.axes(&mut s, "radial deviation [µm]");
     chart.samples(

@@ -1,6 +1,8 @@
-//! The circular test as text, the way ballbar software summarises a run:
-//! the fitted circle, `F` raw and filtered, out-of-plane and orientation
-//! deviations, and the largest radial harmonics. (The JSON report is the
+//! The circular test as text, the way ballbar software summarises a run,
+//! in ISO 230-4's words: the fitted circle, the circular deviation `G` raw
+//! and filtered, the radial deviation `F` when the nominal circle is given,
+//! out-of-plane and orientation deviations, and the largest radial
+//! harmonics. (The JSON report is the
 //! serde serialisation of [`crate::CircleTest`].)
 
 use crate::analysis::{CircleTest, Profile};
@@ -36,25 +38,46 @@ pub fn text(title: &str, test: &CircleTest) -> String {
     let _ = writeln!(s);
     let _ = writeln!(
         s,
-        "radial deviation F   {:.4} mm (max − min of the samples' radial deviations)",
-        test.f_mm
+        "circular deviation G {:.1} µm (radial range of the samples about the least-squares centre)",
+        test.g_um
     );
-    match test.f_filtered_mm {
-        Some(f) => {
+    match test.g_filtered_um {
+        Some(g) => {
             let _ = writeln!(
                 s,
-                "F filtered           {:.4} mm (harmonics up to {} per revolution)",
-                f, test.harmonics_upr
+                "G filtered           {:.1} µm (harmonics up to {} per revolution)",
+                g, test.harmonics_upr
             );
         }
         None if test.harmonics_upr > 0 => {
             let _ = writeln!(
                 s,
-                "F filtered           — (the samples do not cover the circle densely enough)"
+                "G filtered           — (the samples do not cover the circle densely enough)"
             );
         }
         None => {}
     }
+    match (&test.nominal, &test.f_um) {
+        (Some(n), Some(f)) => {
+            let c = n.center_mm;
+            let _ = writeln!(
+                s,
+                "radial deviation F   max {:+.1} µm, min {:+.1} µm from the nominal circle \
+                 (centre {:.4}, {:.4}, {:.4} mm, radius {:.4} mm)",
+                f.max, f.min, c[0], c[1], c[2], n.radius_mm
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                s,
+                "radial deviation F   — (no nominal circle given for this path: --nominal-center, --nominal-radius)"
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "circular hysteresis H — (needs a clockwise and a counter-clockwise run)"
+    );
     let _ = writeln!(s);
     let _ = writeln!(
         s,

@@ -1,6 +1,6 @@
 //! Acceptance of the circular test on the simulated cell (issue 7): the
-//! injected radial deviation pattern's `F` recovered within 5 µm, the
-//! injected orientation wobble within 0.001°, and — with the hand-eye
+//! circular deviation `G` of the injected radial pattern recovered within
+//! 5 µm, the injected orientation wobble within 0.001°, and — with the hand-eye
 //! transform — the TCP's deviations matching the injected TCP error; both
 //! noise-free and with photopose's pose noise (the covariance the resection
 //! predicts for the default camera and plate at each camera pose).
@@ -108,11 +108,11 @@ fn noise_free_cell_recovers_the_injected_tcp_error_exactly() {
     assert!(injected_f > 0.04, "{injected_f}");
     assert!((tcp.radius_mm - 149.9).abs() < 1e-4, "{}", tcp.radius_mm);
     assert!(
-        (tcp.f_mm - injected_f).abs() < 1e-4,
+        ((tcp.g_um * 1e-3) - injected_f).abs() < 1e-4,
         "{} vs {injected_f}",
-        tcp.f_mm
+        (tcp.g_um * 1e-3)
     );
-    assert!((tcp.f_filtered_mm.unwrap() - injected_f).abs() < 1e-4);
+    assert!(((tcp.g_filtered_um.unwrap() * 1e-3) - injected_f).abs() < 1e-4);
     // Per sample: the radial deviation is the injected one at the commanded
     // phase, the orientation deviation the injected wobble (from its mean).
     let mean = wobble_mean(&samples, &cell.error);
@@ -153,7 +153,7 @@ fn clockwise_noise_free_path_from_another_start() {
     let tcp = analyse(&tcp_poses(&cell, &camera), &AnalysisOptions::default()).unwrap();
     assert_eq!(tcp.direction, photopose_circle::Direction::Cw);
     assert!((tcp.samples[0].phase_deg - 123.0).abs() < 1e-3);
-    assert!((tcp.f_mm - cell.error.radial_f_mm()).abs() < 1e-5);
+    assert!(((tcp.g_um * 1e-3) - cell.error.radial_f_mm()).abs() < 1e-5);
     assert!(wobble_error(&tcp, &samples, &cell.error) < 1e-7);
 }
 
@@ -170,7 +170,10 @@ fn noisy_run(
     let covs = covariances(&samples, sigma_px);
     let rate = cell.path.rate_hz;
     let camera = measure(&samples, |s| covs[(s.time_s * rate).round() as usize], seed);
-    let options = AnalysisOptions { harmonics };
+    let options = AnalysisOptions {
+        harmonics,
+        ..AnalysisOptions::default()
+    };
     let tcp = analyse(&tcp_poses(&cell, &camera), &options).unwrap();
     let cam = analyse(&camera, &options).unwrap();
     (cell, samples, tcp, cam)
@@ -180,13 +183,17 @@ fn noisy_run(
 fn noisy_cell_recovers_f_within_5_um_and_wobble_within_a_thousandth_degree() {
     let (cell, samples, tcp, _) = noisy_run(11, SIGMA_PX, 15);
     let injected_f = cell.error.radial_f_mm();
-    let f = tcp.f_filtered_mm.unwrap();
+    let f = tcp.g_filtered_um.unwrap() * 1e-3;
     assert!(
         (f - injected_f).abs() < 0.005,
         "F {f} vs injected {injected_f}"
     );
     // The raw F carries the noise's extremes: far above the injected value.
-    assert!(tcp.f_mm > injected_f + 0.03, "raw F {}", tcp.f_mm);
+    assert!(
+        (tcp.g_um * 1e-3) > injected_f + 0.03,
+        "raw F {}",
+        (tcp.g_um * 1e-3)
+    );
     let w = wobble_error(&tcp, &samples, &cell.error);
     assert!(w < 0.001, "wobble off by {w}°");
     // The filtered TCP profile follows the injected pattern to within the
@@ -214,11 +221,11 @@ fn recovery_errors_over_seeds() {
         "noise-free, {} poses: injected F {:.3} µm; TCP F {:.3} µm (filtered {:.3} µm), profile error {:.4} µm, wobble error {:.2e}°; camera without hand-eye: F {:.3} µm, profile off by {:.2} µm",
         samples.len(),
         cell.error.radial_f_mm() * 1e3,
-        tcp.f_mm * 1e3,
-        tcp.f_filtered_mm.unwrap() * 1e3,
+        tcp.g_um,
+        tcp.g_filtered_um.unwrap(),
         radial_error(&tcp, &cell.error) * 1e3,
         wobble_error(&tcp, &samples, &cell.error),
-        cam.f_mm * 1e3,
+        cam.g_um,
         radial_error(&cam, &cell.error) * 1e3
     );
     for sigma_px in [0.01, 0.02] {
@@ -228,7 +235,7 @@ fn recovery_errors_over_seeds() {
             let seeds = 40;
             for seed in 1..=seeds {
                 let (cell, samples, tcp, _) = noisy_run(seed, sigma_px, harmonics);
-                let df = tcp.f_filtered_mm.unwrap() - cell.error.radial_f_mm();
+                let df = (tcp.g_filtered_um.unwrap() * 1e-3) - cell.error.radial_f_mm();
                 f_max = f_max.max(df.abs());
                 f_sum += df;
                 within += usize::from(df.abs() < 0.005);

@@ -1,5 +1,9 @@
 //! The camera file (TOML, `docs/conventions.md`): `[sensor]`, `[interior]`,
-//! optional `[distortion]`. Unknown keys and missing required keys are errors
+//! optional `[distortion]`, and optional `[calibration]`: how a calibrated
+//! camera's parameters were found (σ of each parameter, σ0, images,
+//! observations, date, tool, input files with their SHA-256; written by
+//! `photopose calibrate camera`, checked here, never used for numerics).
+//! Unknown keys and missing required keys are errors
 //! that name the file and the key.
 //!
 //! Values are range-checked at load, naming the key: sensor sides
@@ -8,9 +12,11 @@
 //! correction stays finite and smaller than the sensor diagonal at every
 //! corner of the sensor.
 
+use crate::provenance::{self, InputFile};
 use crate::FormatError;
 use photopose_geometry::{Camera, Distortion, Interior, Sensor};
 use serde::Deserialize;
+use std::fmt::Write;
 use std::path::Path;
 
 #[derive(Deserialize)]
@@ -20,6 +26,113 @@ struct File {
     interior: InteriorToml,
     #[serde(default)]
     distortion: DistortionToml,
+    calibration: Option<CalibrationRecord>,
+}
+
+/// The names of the camera parameters a calibration estimates, in the
+/// order of the file, with their units.
+pub const PARAMETERS: [(&str, &str); 10] = [
+    ("c", "mm"),
+    ("x0", "mm"),
+    ("y0", "mm"),
+    ("k1", "mm^-2"),
+    ("k2", "mm^-4"),
+    ("k3", "mm^-6"),
+    ("p1", "mm^-1"),
+    ("p2", "mm^-1"),
+    ("b1", "1"),
+    ("b2", "1"),
+];
+
+/// A-posteriori standard deviations of the camera parameters, in the units
+/// of the parameters (`c`, `x0`, `y0` mm; `k1` mm⁻², `k2` mm⁻⁴, `k3` mm⁻⁶;
+/// `p1`, `p2` mm⁻¹; `b1`, `b2` unitless); a fixed parameter has none.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ParameterStd {
+    /// σ of `c`, mm.
+    pub c: Option<f64>,
+    /// σ of `x0`, mm.
+    pub x0: Option<f64>,
+    /// σ of `y0`, mm.
+    pub y0: Option<f64>,
+    /// σ of `k1`, mm⁻².
+    pub k1: Option<f64>,
+    /// σ of `k2`, mm⁻⁴.
+    pub k2: Option<f64>,
+    /// σ of `k3`, mm⁻⁶.
+    pub k3: Option<f64>,
+    /// σ of `p1`, mm⁻¹.
+    pub p1: Option<f64>,
+    /// σ of `p2`, mm⁻¹.
+    pub p2: Option<f64>,
+    /// σ of `b1`.
+    pub b1: Option<f64>,
+    /// σ of `b2`.
+    pub b2: Option<f64>,
+}
+
+impl ParameterStd {
+    /// The values in the order of [`PARAMETERS`].
+    pub fn values(&self) -> [Option<f64>; 10] {
+        [
+            self.c, self.x0, self.y0, self.k1, self.k2, self.k3, self.p1, self.p2, self.b1, self.b2,
+        ]
+    }
+
+    /// Standard deviations from values in the order of [`PARAMETERS`].
+    pub fn from_values(v: [Option<f64>; 10]) -> ParameterStd {
+        let [c, x0, y0, k1, k2, k3, p1, p2, b1, b2] = v;
+        ParameterStd {
+            c,
+            x0,
+            y0,
+            k1,
+            k2,
+            k3,
+            p1,
+            p2,
+            b1,
+            b2,
+        }
+    }
+}
+
+/// The `[calibration]` section of a calibrated camera file: how the
+/// parameters were found.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationRecord {
+    /// When: UTC, RFC 3339.
+    pub date: String,
+    /// Tool and version (`photopose 0.1.0`).
+    pub tool: String,
+    /// Images used by the adjustment.
+    pub images: u32,
+    /// Image points used (observations of targets).
+    pub observations: u32,
+    /// A-posteriori σ0 of an image coordinate, px.
+    pub sigma0_px: f64,
+    /// The same, mm in the image plane.
+    pub sigma0_mm: f64,
+    /// Parameters held at their initial value.
+    #[serde(default)]
+    pub fixed: Vec<String>,
+    /// Standard deviations of the estimated parameters (`[calibration.std]`).
+    pub std: ParameterStd,
+    /// Input files: the images, the initial camera, the field
+    /// (`[[calibration.inputs]]`).
+    #[serde(default)]
+    pub inputs: Vec<InputFile>,
+}
+
+/// A camera file: the camera and, for a calibrated camera, its record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraFile {
+    /// The camera.
+    pub camera: Camera,
+    /// The `[calibration]` section, when the file has one.
+    pub calibration: Option<CalibrationRecord>,
 }
 
 #[derive(Deserialize)]
@@ -52,6 +165,12 @@ struct DistortionToml {
 
 /// Parses camera TOML text; `origin` names the file in errors.
 pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
+    parse_camera_file(text, origin).map(|f| f.camera)
+}
+
+/// Parses camera TOML text with its `[calibration]` section, if any;
+/// `origin` names the file in errors.
+pub fn parse_camera_file(text: &str, origin: &str) -> Result<CameraFile, FormatError> {
     let err = |what: String| FormatError::Camera {
         origin: origin.into(),
         what,
@@ -115,7 +234,48 @@ pub fn parse_camera(text: &str, origin: &str) -> Result<Camera, FormatError> {
     )
     .map_err(|e| err(e.to_string()))?;
     check_distortion(&camera).map_err(err)?;
-    Ok(camera)
+    if let Some(c) = &f.calibration {
+        check_record(c).map_err(err)?;
+    }
+    Ok(CameraFile {
+        camera,
+        calibration: f.calibration,
+    })
+}
+
+/// Checks the values of a `[calibration]` section, naming the key.
+fn check_record(c: &CalibrationRecord) -> Result<(), String> {
+    provenance::parse_rfc3339(&c.date).map_err(|e| format!("calibration.date = {e}"))?;
+    for (key, v) in [("sigma0_px", c.sigma0_px), ("sigma0_mm", c.sigma0_mm)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("calibration.{key} = {v} must be a finite σ ≥ 0"));
+        }
+    }
+    for ((name, unit), v) in PARAMETERS.iter().zip(c.std.values()) {
+        if let Some(v) = v {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!(
+                    "calibration.std.{name} = {v} must be a finite σ ≥ 0 {unit}"
+                ));
+            }
+        }
+    }
+    for (k, name) in c.fixed.iter().enumerate() {
+        if !PARAMETERS.iter().any(|(p, _)| p == name) {
+            return Err(format!(
+                "calibration.fixed[{k}] = {name:?} is not a camera parameter (c, x0, y0, k1, k2, k3, p1, p2, b1, b2)"
+            ));
+        }
+    }
+    for (k, input) in c.inputs.iter().enumerate() {
+        if !provenance::is_sha256_hex(&input.sha256) {
+            return Err(format!(
+                "calibration.inputs[{k}].sha256 = {:?} must be 64 hex digits",
+                input.sha256
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Largest sensor side of a camera file, px.
@@ -181,8 +341,13 @@ pub fn default_camera() -> Camera {
 
 /// Loads a camera file.
 pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
+    load_camera_file(path).map(|f| f.camera)
+}
+
+/// Loads a camera file with its `[calibration]` section, if any.
+pub fn load_camera_file(path: &Path) -> Result<CameraFile, FormatError> {
     let text = crate::read_text(path, crate::FileKind::Camera)?;
-    parse_camera(&text, &path.display().to_string())
+    parse_camera_file(&text, &path.display().to_string())
 }
 
 /// The TOML text of a camera (round-trips through [`parse_camera`]).
@@ -208,6 +373,57 @@ pub fn camera_to_toml(cam: &Camera) -> String {
     )
 }
 
+/// A TOML string (quoted and escaped).
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+/// The TOML text of a calibrated camera: the parameters, then the
+/// `[calibration]` section (round-trips through [`parse_camera_file`]).
+pub fn camera_file_to_toml(file: &CameraFile) -> String {
+    let mut s = camera_to_toml(&file.camera);
+    let Some(c) = &file.calibration else {
+        return s;
+    };
+    let _ = write!(
+        s,
+        "\n[calibration]         # how these parameters were found\n\
+         date = {}\n\
+         tool = {}\n\
+         images = {}\n\
+         observations = {}    # image points used\n\
+         sigma0_px = {:?}     # a-posteriori σ0 of an image coordinate, px\n\
+         sigma0_mm = {:?}     # the same, mm\n\
+         fixed = [{}]         # held at their initial value\n\
+         \n[calibration.std]     # a-posteriori standard deviations, units of the parameters\n",
+        toml_string(&c.date),
+        toml_string(&c.tool),
+        c.images,
+        c.observations,
+        c.sigma0_px,
+        c.sigma0_mm,
+        c.fixed
+            .iter()
+            .map(|f| toml_string(f))
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
+    for ((name, unit), v) in PARAMETERS.iter().zip(c.std.values()) {
+        if let Some(v) = v {
+            let _ = writeln!(s, "{name} = {v:?}   # {unit}");
+        }
+    }
+    for input in &c.inputs {
+        let _ = write!(
+            s,
+            "\n[[calibration.inputs]]\npath = {}\nsha256 = {}\n",
+            toml_string(&input.path),
+            toml_string(&input.sha256)
+        );
+    }
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,6 +444,92 @@ mod tests {
         strong.distortion.k1 = -2.5e-3;
         strong.distortion.b2 = 1.0 / 3.0;
         assert_eq!(parse_camera(&camera_to_toml(&strong), "x").unwrap(), strong);
+    }
+
+    fn calibrated() -> CameraFile {
+        let mut camera = parse_camera(GOOD, "cam.toml").unwrap();
+        camera.distortion.k1 = -2.5e-3;
+        CameraFile {
+            camera,
+            calibration: Some(CalibrationRecord {
+                date: "2026-11-24T16:08:08Z".into(),
+                tool: "photopose 0.1.0".into(),
+                images: 12,
+                observations: 2345,
+                sigma0_px: 0.031,
+                sigma0_mm: 0.031 * 0.0067,
+                fixed: vec!["k3".into()],
+                std: ParameterStd {
+                    c: Some(1.5e-4),
+                    x0: Some(2.0e-4),
+                    k1: Some(3.0e-7),
+                    ..ParameterStd::default()
+                },
+                inputs: vec![InputFile {
+                    path: "images/v \"1\".pgm".into(),
+                    sha256: crate::provenance::sha256_hex(b"v1"),
+                }],
+            }),
+        }
+    }
+
+    #[test]
+    fn a_calibration_section_round_trips_and_plain_loading_accepts_it() {
+        let file = calibrated();
+        let text = camera_file_to_toml(&file);
+        assert!(text.contains("[calibration.std]") && text.contains("c = 0.00015   # mm"));
+        assert!(text.contains("k1 = 3e-7   # mm^-2"), "{text}");
+        assert_eq!(parse_camera_file(&text, "cam.toml").unwrap(), file);
+        assert_eq!(parse_camera(&text, "cam.toml").unwrap(), file.camera);
+        // Without a section: none, and the plain writer stays as it was.
+        let plain = CameraFile {
+            calibration: None,
+            ..file
+        };
+        assert_eq!(camera_file_to_toml(&plain), camera_to_toml(&plain.camera));
+        assert_eq!(
+            parse_camera_file(&camera_to_toml(&plain.camera), "x").unwrap(),
+            plain
+        );
+    }
+
+    #[test]
+    fn a_bad_calibration_section_is_refused_naming_the_key() {
+        let text = camera_file_to_toml(&calibrated());
+        let cases = [
+            (text.replace("k1 = 3e-7", "k4 = 3e-7"), "k4"),
+            (
+                text.replace("images = 12", "images = 12\nweather = 1"),
+                "weather",
+            ),
+            (
+                text.replace("2026-11-24T16:08:08Z", "yesterday"),
+                "calibration.date",
+            ),
+            (
+                text.replace("c = 0.00015", "c = -0.00015"),
+                "calibration.std.c = -0.00015",
+            ),
+            (
+                text.replace("[\"k3\"]", "[\"k9\"]"),
+                "calibration.fixed[0] = \"k9\"",
+            ),
+            (
+                text.replace(&crate::provenance::sha256_hex(b"v1"), "beef"),
+                "calibration.inputs[0].sha256",
+            ),
+            (
+                text.replace("sigma0_px = 0.031", "sigma0_px = nan"),
+                "calibration.sigma0_px",
+            ),
+        ];
+        for (bad, want) in cases {
+            let e = parse_camera_file(&bad, "cam.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("cam.toml: ") && e.contains(want),
+                "{e:?} lacks {want:?}"
+            );
+        }
     }
 
     #[test]

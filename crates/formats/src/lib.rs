@@ -1,7 +1,8 @@
 //! photopose-formats: reading and writing the project's files.
 //!
 //! Owns the camera TOML file, loading of test-field CSV files, the
-//! observation CSV (`id,col,row`) and image files (greyscale PGM and PNG),
+//! observation CSV (`id,col,row`), image files (greyscale PGM and PNG),
+//! the provenance of reports ([`provenance`]: tool, date, input hashes)
 //! and reading files with limits ([`file`](mod@file): every file photopose reads goes
 //! through [`read_text`] or [`read_bytes`]). Parsing functions take text and
 //! an origin (file name) for error messages; `load_*` functions read the file
@@ -12,8 +13,12 @@ pub mod file;
 pub mod hand_eye;
 pub mod image;
 pub mod observations;
+pub mod provenance;
 
-pub use camera::{camera_to_toml, default_camera, load_camera, parse_camera};
+pub use camera::{
+    camera_file_to_toml, camera_to_toml, default_camera, load_camera, load_camera_file,
+    parse_camera, parse_camera_file, CalibrationRecord, CameraFile, ParameterStd,
+};
 pub use file::{read_bytes, read_bytes_limited, read_text, FileError, FileKind};
 pub use image::{
     check_size, decode_image, decode_image_for, decode_pgm, decode_png, encode_pgm, encode_png,

@@ -53,7 +53,9 @@
 //! Modules: `renderer` (the frame: exposure, outlines, per-pixel coverage),
 //! `pattern` (a target's reflectance and a pixel's exact coverage),
 //! `blur`, `quantise` (grey values and noise), `truth`, `options`;
-//! [`plate`] (the plate's frame) and [`svg`] (the drawing for printing).
+//! [`plate`] (the plate's frame), [`svg`] (the drawing for printing) and
+//! [`sheet`] (its annotations and its layout on paper, tiled when it does
+//! not fit one sheet).
 
 mod blur;
 mod noise;
@@ -62,6 +64,7 @@ mod pattern;
 pub mod plate;
 mod quantise;
 mod renderer;
+pub mod sheet;
 pub mod svg;
 mod truth;
 
@@ -110,6 +113,12 @@ pub enum RenderError {
     /// The field is empty.
     #[error("the test field has no targets")]
     EmptyField,
+    /// A drawing cannot be laid out on paper as asked.
+    #[error("cannot lay the drawing out on paper: {what}")]
+    BadSheet {
+        /// What is wrong (the value and the limit).
+        what: String,
+    },
 }
 
 #[cfg(test)]

@@ -68,6 +68,63 @@ fn box_distance(p: Vector2<f64>, lo: Vector2<f64>, hi: Vector2<f64>) -> f64 {
 
 /// The SVG text of the plate.
 pub fn plate_svg(field: &Field, options: &SvgOptions) -> Result<String, RenderError> {
+    Ok(plate_drawing(field, options)?.to_svg())
+}
+
+/// A target as drawn: its centre in drawing coordinates (mm, `y` down)
+/// and the radius of its bright figure (dot or code ring), mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DrawnTarget {
+    /// Target id.
+    pub id: u64,
+    /// Centre, drawing mm from the left.
+    pub x: f64,
+    /// Centre, drawing mm from the top.
+    pub y: f64,
+    /// Radius of what is drawn of it, mm.
+    pub radius: f64,
+}
+
+/// The plate drawn at 1:1: its size, the SVG elements (drawing
+/// coordinates, mm) and where things are, for sheets and tiles.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drawing {
+    /// Width, mm.
+    pub width_mm: f64,
+    /// Height, mm.
+    pub height_mm: f64,
+    /// An XML comment describing the drawing.
+    pub comment: String,
+    /// The SVG elements.
+    pub content: String,
+    /// Every target as drawn.
+    pub targets: Vec<DrawnTarget>,
+    /// The field's origin `(X, Y) = (0, 0)` in drawing coordinates.
+    pub origin: (f64, f64),
+    /// Unit directions of the field's `X` and `Y` axes in the drawing
+    /// (`y` down).
+    pub axes: [(f64, f64); 2],
+}
+
+impl Drawing {
+    /// The drawing as a standalone SVG of its own size, 1:1 in mm.
+    pub fn to_svg(&self) -> String {
+        let (w, h) = (num(self.width_mm), num(self.height_mm));
+        let mut s = String::new();
+        let _ = writeln!(s, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
+        let _ = writeln!(
+            s,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{h}mm" viewBox="0 0 {w} {h}">"#
+        );
+        s.push_str(&self.comment);
+        s.push_str(&self.content);
+        let _ = writeln!(s, "</svg>");
+        s
+    }
+}
+
+/// The plate drawn at 1:1 (see the module's description).
+pub fn plate_drawing(field: &Field, options: &SvgOptions) -> Result<Drawing, RenderError> {
     let plate = Plate::fit(field)?;
     let flat: Vec<(Vector2<f64>, &photopose_field::Target)> = field
         .targets()
@@ -107,16 +164,11 @@ pub fn plate_svg(field: &Field, options: &SvgOptions) -> Result<String, RenderEr
     let size = hi - lo;
     let to_svg = |p: Vector2<f64>| (num(p.x - lo.x), num(hi.y - p.y));
 
-    let mut s = String::new();
+    let mut comment = String::new();
     let (w, hh) = (num(size.x), num(size.y));
     // Writing into a String cannot fail.
-    let _ = writeln!(s, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
     let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}mm" height="{hh}mm" viewBox="0 0 {w} {hh}">"#
-    );
-    let _ = writeln!(
-        s,
+        comment,
         "<!-- photopose test field: {} targets ({} coded), 1:1 in mm, seen from +Z \
          (the targets' side); plate axes u right, v up; plate origin (centroid of the \
          targets) at ({}, {}) in the drawing. Code sector k spans [k*30, (k+1)*30) degrees \
@@ -126,6 +178,7 @@ pub fn plate_svg(field: &Field, options: &SvgOptions) -> Result<String, RenderEr
         num(-lo.x),
         num(hi.y),
     );
+    let mut s = String::new();
     let _ = writeln!(
         s,
         r##"<rect x="0" y="0" width="{w}" height="{hh}" fill="#000"/>"##
@@ -165,8 +218,36 @@ pub fn plate_svg(field: &Field, options: &SvgOptions) -> Result<String, RenderEr
         }
         let _ = writeln!(s, "</g>");
     }
-    let _ = writeln!(s, "</svg>");
-    Ok(s)
+    let at = |p: Vector2<f64>| (p.x - lo.x, hi.y - p.y);
+    let o = plate.to_plate(&nalgebra::Vector3::zeros());
+    let direction = |axis: nalgebra::Vector3<f64>| {
+        let d = plate.to_plate(&axis) - o;
+        let n = d.norm().max(f64::MIN_POSITIVE);
+        (d.x / n, -d.y / n)
+    };
+    Ok(Drawing {
+        width_mm: size.x,
+        height_mm: size.y,
+        comment,
+        content: s,
+        targets: flat
+            .iter()
+            .map(|(p, t)| {
+                let (x, y) = at(*p);
+                DrawnTarget {
+                    id: t.id,
+                    x,
+                    y,
+                    radius: t.bright_radius(),
+                }
+            })
+            .collect(),
+        origin: at(o),
+        axes: [
+            direction(nalgebra::Vector3::x()),
+            direction(nalgebra::Vector3::y()),
+        ],
+    })
 }
 
 /// Runs of consecutive bright sectors `(first sector, length)`, cyclic.
