@@ -240,6 +240,8 @@ pub type GCWritePort = unsafe extern "C" fn(
     buffer: *const c_void,
     size: *mut usize,
 ) -> GC_ERROR;
+pub type GCGetPortURL =
+    unsafe extern "C" fn(port: PORT_HANDLE, url: *mut c_char, size: *mut usize) -> GC_ERROR;
 pub type GCRegisterEvent = unsafe extern "C" fn(
     source: EVENTSRC_HANDLE,
     event: EVENT_TYPE,

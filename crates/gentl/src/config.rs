@@ -22,6 +22,11 @@ pub struct GentlConfig {
     /// Buffers of ours announced to the data stream (≥ 2; more if the
     /// producer asks for more), allocated at each opening.
     pub buffers: usize,
+    /// Bytes of one buffer when the producer's data stream does not define
+    /// the payload size (it then comes from the remote device's
+    /// `PayloadSize` feature, which photopose does not read): e.g.
+    /// width × height × bytes per pixel. Ignored when the stream says it.
+    pub payload_size: Option<usize>,
     /// No buffer at all for this long means the device is lost (also the
     /// timeout of device discovery).
     pub timeout: Duration,
@@ -38,6 +43,7 @@ impl GentlConfig {
             producer,
             device: None,
             buffers: 8,
+            payload_size: None,
             timeout: Duration::from_secs(2),
             backoff_initial: Duration::from_millis(100),
             backoff_max: Duration::from_secs(5),

@@ -102,6 +102,10 @@ struct Table {
     gc_close_lib: abi::GCCloseLib,
     gc_get_last_error: abi::GCGetLastError,
     gc_register_event: abi::GCRegisterEvent,
+    gc_read_port: abi::GCReadPort,
+    gc_write_port: abi::GCWritePort,
+    gc_get_port_url: abi::GCGetPortURL,
+    dev_get_port: abi::DevGetPort,
     gc_unregister_event: abi::GCUnregisterEvent,
     event_get_data: abi::EventGetData,
     event_kill: abi::EventKill,
@@ -207,6 +211,10 @@ impl Library {
             gc_close_lib: sym!("GCCloseLib", abi::GCCloseLib),
             gc_get_last_error: sym!("GCGetLastError", abi::GCGetLastError),
             gc_register_event: sym!("GCRegisterEvent", abi::GCRegisterEvent),
+            gc_read_port: sym!("GCReadPort", abi::GCReadPort),
+            gc_write_port: sym!("GCWritePort", abi::GCWritePort),
+            gc_get_port_url: sym!("GCGetPortURL", abi::GCGetPortURL),
+            dev_get_port: sym!("DevGetPort", abi::DevGetPort),
             gc_unregister_event: sym!("GCUnregisterEvent", abi::GCUnregisterEvent),
             event_get_data: sym!("EventGetData", abi::EventGetData),
             event_kill: sym!("EventKill", abi::EventKill),
@@ -465,6 +473,41 @@ impl Library {
         })?;
         count(Kind::Stream, 1);
         Ok(Handle(h))
+    }
+
+    /// The device's remote port (`DevGetPort`): the camera's registers.
+    /// Not a handle to close (it lives as long as the device).
+    pub(crate) fn remote_port(&self, dev: Handle) -> Call<Handle> {
+        let mut h = std::ptr::null_mut();
+        // SAFETY: `dev` is an open device; `h` is writable.
+        self.check("DevGetPort", unsafe { (self.f.dev_get_port)(dev.0, &mut h) })?;
+        Ok(Handle(h))
+    }
+
+    /// The first URL of a port's description file (`GCGetPortURL`).
+    pub(crate) fn port_url(&self, port: Handle) -> Call<String> {
+        self.string("GCGetPortURL", |buf, size| {
+            // SAFETY: `port` is a live port; `buf`/`size` describe a writable buffer.
+            unsafe { (self.f.gc_get_port_url)(port.0, buf, size) }
+        })
+    }
+
+    /// `GCReadPort` of `out.len()` bytes at `address`.
+    pub(crate) fn read_port(&self, port: Handle, address: u64, out: &mut [u8]) -> Call<()> {
+        let mut size = out.len();
+        // SAFETY: `port` is a live port; `out` is writable for `size` bytes.
+        self.check("GCReadPort", unsafe {
+            (self.f.gc_read_port)(port.0, address, out.as_mut_ptr().cast::<c_void>(), &mut size)
+        })
+    }
+
+    /// `GCWritePort` of `bytes` at `address`.
+    pub(crate) fn write_port(&self, port: Handle, address: u64, bytes: &[u8]) -> Call<()> {
+        let mut size = bytes.len();
+        // SAFETY: `port` is a live port; `bytes` is readable for `size` bytes.
+        self.check("GCWritePort", unsafe {
+            (self.f.gc_write_port)(port.0, address, bytes.as_ptr().cast::<c_void>(), &mut size)
+        })
     }
 
     /// A number of `DSGetInfo` (`None` when the producer has none).

@@ -21,6 +21,7 @@
 pub mod abi;
 pub mod config;
 pub mod error;
+pub mod genapi;
 #[allow(unsafe_code)]
 mod ffi;
 pub mod pixel;

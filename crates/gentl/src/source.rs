@@ -113,7 +113,12 @@ impl GentlSource {
             .name(format!("{name}-open"))
             .spawn(move || {
                 for () in open_rx {
-                    let r = sys.open_device(cfg.device.as_deref(), cfg.buffers, cfg.timeout);
+                    let r = sys.open_device(
+                        cfg.device.as_deref(),
+                        cfg.buffers,
+                        cfg.payload_size,
+                        cfg.timeout,
+                    );
                     if opened_tx.send(r).is_err() {
                         break;
                     }

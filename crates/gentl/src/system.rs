@@ -194,12 +194,14 @@ impl System {
 
     /// Opens the device whose id or serial number is `wanted` (the first
     /// device found when `None`) with its first data stream, announces
-    /// `buffers` buffers of ours (more if the producer asks for more),
+    /// `buffers` buffers of ours (more if the producer asks for more) of
+    /// the stream's payload size (`payload_size` when it does not say),
     /// queues them and starts acquisition.
     pub fn open_device(
         self: &Arc<System>,
         wanted: Option<&str>,
         buffers: usize,
+        payload_size: Option<usize>,
         timeout: Duration,
     ) -> Result<Opened, GentlError> {
         let (iface, info) = {
@@ -261,13 +263,15 @@ impl System {
             event: None,
             buffers: None,
             started: false,
+            remote: None,
+            camera_started: false,
             timestamp_hz: None,
         };
         opened.timestamp_hz = lib
             .device_info_u64(iface, &opened.info.id, abi::DEVICE_INFO_TIMESTAMP_FREQUENCY)
             .filter(|&hz| hz > 0);
         // On a failure below, dropping `opened` closes what it got.
-        opened.set_up(buffers)?;
+        opened.set_up(buffers, payload_size)?;
         Ok(opened)
     }
 }
@@ -367,6 +371,10 @@ pub struct Opened {
     event: Option<Handle>,
     buffers: Option<Announced>,
     started: bool,
+    /// The camera's registers and description, when readable.
+    remote: Option<(Handle, String)>,
+    /// `AcquisitionStart` was executed on the camera.
+    camera_started: bool,
     timestamp_hz: Option<u64>,
 }
 
@@ -380,7 +388,7 @@ impl std::fmt::Debug for Opened {
 }
 
 impl Opened {
-    fn set_up(&mut self, buffers: usize) -> Result<(), GentlError> {
+    fn set_up(&mut self, buffers: usize, payload_size: Option<usize>) -> Result<(), GentlError> {
         let lib = self.system.lib;
         let device = self.info.id.clone();
         let stream_err = |reason: &str| GentlError::Stream {
@@ -395,10 +403,18 @@ impl Opened {
             .open_stream(self.dev.ok_or_else(|| stream_err("closed"))?, &id)
             .map_err(|e| self.system.err(e))?;
         self.ds = Some(ds);
+        self.remote = self.describe_remote();
         let payload = lib
             .stream_info(ds, abi::STREAM_INFO_PAYLOAD_SIZE)
             .filter(|&n| n > 0)
-            .ok_or_else(|| stream_err("its data stream does not say its payload size"))?;
+            .or_else(|| self.read_feature("PayloadSize").filter(|&n| n > 0))
+            .or(payload_size.map(|n| n as u64))
+            .ok_or_else(|| {
+                stream_err(
+                    "its data stream does not define the payload size (the remote device's \
+                     PayloadSize does): set `payload_size` (bytes of one frame)",
+                )
+            })?;
         let min = lib
             .stream_info(ds, abi::STREAM_INFO_BUF_ANNOUNCE_MIN)
             .unwrap_or(1) as usize;
@@ -419,7 +435,67 @@ impl Opened {
         );
         lib.start(ds).map_err(|e| self.system.err(e))?;
         self.started = true;
+        // The camera itself (a frame grabber's producer starts only the
+        // grabber): its AcquisitionStart, when its description has one.
+        match self.execute("AcquisitionStart") {
+            Some(Ok(())) => self.camera_started = true,
+            Some(Err(e)) => return Err(self.system.err(e)),
+            None => tracing::debug!(device = %self.info.id,
+                "no AcquisitionStart register found: the camera is expected to stream by itself"),
+        }
         Ok(())
+    }
+
+    /// The camera's port and description file (best effort: `None` when
+    /// the producer has no remote port or the file is not readable here).
+    fn describe_remote(&self) -> Option<(Handle, String)> {
+        let lib = self.system.lib;
+        let port = lib.remote_port(self.dev?).ok()?;
+        let url = lib.port_url(port).ok()?;
+        let xml = match crate::genapi::parse_url(&url)? {
+            crate::genapi::Url::Local {
+                name,
+                address,
+                length,
+            } => {
+                if name.to_ascii_lowercase().ends_with(".zip") || length > 64 << 20 {
+                    tracing::debug!(%url, "camera description is zipped or too large: not read");
+                    return None;
+                }
+                let mut bytes = vec![0u8; length];
+                lib.read_port(port, address, &mut bytes).ok()?;
+                String::from_utf8_lossy(&bytes)
+                    .trim_end_matches('\0')
+                    .to_string()
+            }
+            crate::genapi::Url::File(path) => std::fs::read_to_string(path).ok()?,
+        };
+        Some((port, xml))
+    }
+
+    /// An integer feature of the camera read from its register.
+    fn read_feature(&self, feature: &str) -> Option<u64> {
+        let (port, xml) = self.remote.as_ref()?;
+        let reg = crate::genapi::integer(xml, feature)?;
+        let mut bytes = [0u8; 8];
+        let n = reg.length.min(8);
+        self.system
+            .lib
+            .read_port(*port, reg.address, &mut bytes[..n])
+            .ok()?;
+        Some(reg.decode(&bytes[..n]))
+    }
+
+    /// Executes a command feature of the camera (`None` when its
+    /// description has no such register).
+    fn execute(&self, feature: &str) -> Option<Result<(), CallError>> {
+        let (port, xml) = self.remote.as_ref()?;
+        let (reg, value) = crate::genapi::command(xml, feature)?;
+        Some(
+            self.system
+                .lib
+                .write_port(*port, reg.address, &reg.encode(value)),
+        )
     }
 
     /// What the producer says of the device.
@@ -516,6 +592,12 @@ impl Opened {
         let log = |what: &str, e: CallError| {
             tracing::debug!(device = %id, error = %e, "GenTL {what}");
         };
+        if self.camera_started {
+            if let Some(Err(e)) = self.execute("AcquisitionStop") {
+                log("camera stop", e);
+            }
+            self.camera_started = false;
+        }
         if let Some(ds) = self.ds.take() {
             // Stop (if started) and flush every queue before revoking.
             if let Err(e) = lib.stop(ds) {
