@@ -826,3 +826,32 @@ unsafe extern "C" fn EventGetData(event: EVENT_HANDLE, out: *mut c_void, size: *
         std::thread::sleep(Duration::from_millis(2));
     }
 }
+
+// The device has no register space: the data stream defines the payload
+// size and frames flow once the stream is started (as a frame grabber's
+// producer with a free-running camera).
+
+#[no_mangle]
+unsafe extern "C" fn DevGetPort(dev: DEV_HANDLE, _port: *mut PORT_HANDLE) -> GC_ERROR {
+    with(|s| {
+        if dev != handle(&DEV) || !s.dev_open {
+            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
+        }
+        fail(s, GC_ERR_NOT_IMPLEMENTED, "no remote device port")
+    })
+}
+
+#[no_mangle]
+unsafe extern "C" fn GCGetPortURL(_port: PORT_HANDLE, _url: *mut c_char, _size: *mut usize) -> GC_ERROR {
+    with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
+}
+
+#[no_mangle]
+unsafe extern "C" fn GCReadPort(_port: PORT_HANDLE, _address: u64, _out: *mut c_void, _size: *mut usize) -> GC_ERROR {
+    with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
+}
+
+#[no_mangle]
+unsafe extern "C" fn GCWritePort(_port: PORT_HANDLE, _address: u64, _bytes: *const c_void, _size: *mut usize) -> GC_ERROR {
+    with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
+}
