@@ -100,7 +100,10 @@ fn poses_from_the_test_producer_agree_with_the_render_truth() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");
-    assert!(stdout.contains("20 frames in, 0 dropped"), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("20 frames in, 0 dropped"),
+        "{stdout}\n{stderr}"
+    );
     let msgs = messages(&rx);
     let frames: Vec<_> = msgs.iter().filter(|v| v["status"] != "stale").collect();
     assert_eq!(frames.len(), 20, "{msgs:?}");
@@ -168,11 +171,7 @@ fn a_missing_or_invalid_producer_is_named() {
         &format!("producer = \"{}\"\n", missing.display()),
         &rx,
     );
-    let out = bin()
-        .args(["check-config"])
-        .arg(&config)
-        .output()
-        .unwrap();
+    let out = bin().args(["check-config"]).arg(&config).output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
@@ -235,5 +234,8 @@ fn run_on_viky_ends_with_its_twenty_frames() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");
-    assert!(stdout.contains("20 frames in, 0 dropped"), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("20 frames in, 0 dropped"),
+        "{stdout}\n{stderr}"
+    );
 }

@@ -164,7 +164,10 @@ fn the_gentl_loader_is_only_reachable_with_its_feature() {
         "photopose-pipeline",
         &["--no-default-features", "--features", "gentl"],
     );
-    assert!(has(&with, "libloading"), "the gentl feature brings the loader");
+    assert!(
+        has(&with, "libloading"),
+        "the gentl feature brings the loader"
+    );
     // In code, the loader is named by the quarantined module only.
     let mut files = Vec::new();
     rust_files(&root().join("crates"), &mut files);
@@ -181,7 +184,10 @@ fn the_gentl_loader_is_only_reachable_with_its_feature() {
         })
         .map(|f| f.display().to_string())
         .collect();
-    assert!(found.is_empty(), "libloading named outside the GenTL ffi: {found:?}");
+    assert!(
+        found.is_empty(),
+        "libloading named outside the GenTL ffi: {found:?}"
+    );
 }
 
 #[test]
@@ -200,14 +206,24 @@ fn unsafe_code_is_allowed_in_the_quarantined_modules_only() {
     rust_files(&root().join("tests"), &mut files);
     let needle = concat!("allow(", "unsafe_code)");
     let mut found = Vec::new();
-    for f in files.iter().filter(|f| !f.to_string_lossy().contains("/target/")) {
-        let rel = f.strip_prefix(root()).unwrap().to_string_lossy().into_owned();
+    for f in files
+        .iter()
+        .filter(|f| !f.to_string_lossy().contains("/target/"))
+    {
+        let rel = f
+            .strip_prefix(root())
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         let text = std::fs::read_to_string(f).unwrap();
         if text.lines().any(|l| code(l).contains(needle)) && !allowed.contains(&rel.as_str()) {
             found.push(rel);
         }
     }
-    assert!(found.is_empty(), "unsafe allowed outside the quarantine: {found:?}");
+    assert!(
+        found.is_empty(),
+        "unsafe allowed outside the quarantine: {found:?}"
+    );
 }
 
 #[test]

@@ -81,12 +81,11 @@ fn fail(s: &mut State, code: GC_ERROR, text: &str) -> GC_ERROR {
     code
 }
 
-const WIDTH_HEIGHT_UNSET: (u32, u32) = (0, 0);
-
-fn size(s: &State) -> (u32, u32) {
+/// The frame size (0 × 0 before the device was first opened).
+fn frame_size(s: &State) -> (u32, u32) {
     s.renderer
         .as_ref()
-        .map_or(WIDTH_HEIGHT_UNSET, |(_, img)| (img.width(), img.height()))
+        .map_or((0, 0), |(_, img)| (img.width(), img.height()))
 }
 
 /// Writes `bytes` into the consumer's info buffer (`out`, `*size` bytes),
@@ -133,7 +132,12 @@ fn c_bytes(s: &str) -> Vec<u8> {
 
 /// # Safety
 /// As [`write_info`].
-unsafe fn write_string(s: &str, ty: *mut INFO_DATATYPE, out: *mut c_void, size: *mut usize) -> GC_ERROR {
+unsafe fn write_string(
+    s: &str,
+    ty: *mut INFO_DATATYPE,
+    out: *mut c_void,
+    size: *mut usize,
+) -> GC_ERROR {
     // SAFETY: forwarded contract.
     unsafe { write_info(INFO_DATATYPE_STRING, &c_bytes(s), ty, out, size) }
 }
@@ -191,7 +195,11 @@ unsafe extern "C" fn GCCloseLib() -> GC_ERROR {
 }
 
 #[no_mangle]
-unsafe extern "C" fn GCGetLastError(code: *mut GC_ERROR, text: *mut c_char, size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn GCGetLastError(
+    code: *mut GC_ERROR,
+    text: *mut c_char,
+    size: *mut usize,
+) -> GC_ERROR {
     let message = lock()
         .as_ref()
         .map(|s| s.last_error.clone())
@@ -232,7 +240,11 @@ unsafe extern "C" fn TLClose(tl: TL_HANDLE) -> GC_ERROR {
 }
 
 #[no_mangle]
-unsafe extern "C" fn TLUpdateInterfaceList(tl: TL_HANDLE, changed: *mut bool8_t, _timeout: u64) -> GC_ERROR {
+unsafe extern "C" fn TLUpdateInterfaceList(
+    tl: TL_HANDLE,
+    changed: *mut bool8_t,
+    _timeout: u64,
+) -> GC_ERROR {
     with(|s| {
         if tl != handle(&TL) || !s.tl_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
@@ -257,7 +269,12 @@ unsafe extern "C" fn TLGetNumInterfaces(tl: TL_HANDLE, n: *mut u32) -> GC_ERROR 
 }
 
 #[no_mangle]
-unsafe extern "C" fn TLGetInterfaceID(tl: TL_HANDLE, index: u32, id: *mut c_char, size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn TLGetInterfaceID(
+    tl: TL_HANDLE,
+    index: u32,
+    id: *mut c_char,
+    size: *mut usize,
+) -> GC_ERROR {
     with(|s| {
         if tl != handle(&TL) || !s.tl_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
@@ -271,7 +288,11 @@ unsafe extern "C" fn TLGetInterfaceID(tl: TL_HANDLE, index: u32, id: *mut c_char
 }
 
 #[no_mangle]
-unsafe extern "C" fn TLOpenInterface(tl: TL_HANDLE, id: *const c_char, iface: *mut IF_HANDLE) -> GC_ERROR {
+unsafe extern "C" fn TLOpenInterface(
+    tl: TL_HANDLE,
+    id: *const c_char,
+    iface: *mut IF_HANDLE,
+) -> GC_ERROR {
     with(|s| {
         if tl != handle(&TL) || !s.tl_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
@@ -304,7 +325,11 @@ unsafe extern "C" fn IFClose(iface: IF_HANDLE) -> GC_ERROR {
 }
 
 #[no_mangle]
-unsafe extern "C" fn IFUpdateDeviceList(iface: IF_HANDLE, changed: *mut bool8_t, _timeout: u64) -> GC_ERROR {
+unsafe extern "C" fn IFUpdateDeviceList(
+    iface: IF_HANDLE,
+    changed: *mut bool8_t,
+    _timeout: u64,
+) -> GC_ERROR {
     with(|s| {
         if iface != handle(&IF) || !s.if_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
@@ -329,7 +354,12 @@ unsafe extern "C" fn IFGetNumDevices(iface: IF_HANDLE, n: *mut u32) -> GC_ERROR 
 }
 
 #[no_mangle]
-unsafe extern "C" fn IFGetDeviceID(iface: IF_HANDLE, index: u32, id: *mut c_char, size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn IFGetDeviceID(
+    iface: IF_HANDLE,
+    index: u32,
+    id: *mut c_char,
+    size: *mut usize,
+) -> GC_ERROR {
     with(|s| {
         if iface != handle(&IF) || !s.if_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
@@ -370,7 +400,13 @@ unsafe extern "C" fn IFGetDeviceInfo(
             DEVICE_INFO_TIMESTAMP_FREQUENCY => {
                 // SAFETY: the consumer's info buffer, `*size` bytes.
                 return unsafe {
-                    write_info(INFO_DATATYPE_UINT64, &1_000_000_000u64.to_ne_bytes(), ty, out, size)
+                    write_info(
+                        INFO_DATATYPE_UINT64,
+                        &1_000_000_000u64.to_ne_bytes(),
+                        ty,
+                        out,
+                        size,
+                    )
                 };
             }
             _ => return fail(s, GC_ERR_NOT_IMPLEMENTED, "device info not implemented"),
@@ -447,7 +483,12 @@ unsafe extern "C" fn DevGetNumDataStreams(dev: DEV_HANDLE, n: *mut u32) -> GC_ER
 }
 
 #[no_mangle]
-unsafe extern "C" fn DevGetDataStreamID(dev: DEV_HANDLE, index: u32, id: *mut c_char, size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn DevGetDataStreamID(
+    dev: DEV_HANDLE,
+    index: u32,
+    id: *mut c_char,
+    size: *mut usize,
+) -> GC_ERROR {
     with(|s| {
         if dev != handle(&DEV) || !s.dev_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
@@ -461,7 +502,11 @@ unsafe extern "C" fn DevGetDataStreamID(dev: DEV_HANDLE, index: u32, id: *mut c_
 }
 
 #[no_mangle]
-unsafe extern "C" fn DevOpenDataStream(dev: DEV_HANDLE, id: *const c_char, ds: *mut DS_HANDLE) -> GC_ERROR {
+unsafe extern "C" fn DevOpenDataStream(
+    dev: DEV_HANDLE,
+    id: *const c_char,
+    ds: *mut DS_HANDLE,
+) -> GC_ERROR {
     with(|s| {
         if dev != handle(&DEV) || !s.dev_open {
             return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
@@ -517,7 +562,7 @@ unsafe extern "C" fn DSGetInfo(
         if let Err(e) = check_ds(s, ds) {
             return e;
         }
-        let (w, h) = size_of(s);
+        let (w, h) = frame_size(s);
         let announced = s.buffers.iter().filter(|b| b.is_some()).count();
         let (t, v): (INFO_DATATYPE, u64) = match cmd {
             STREAM_INFO_PAYLOAD_SIZE => (INFO_DATATYPE_SIZET, u64::from(w) * u64::from(h)),
@@ -526,7 +571,11 @@ unsafe extern "C" fn DSGetInfo(
             STREAM_INFO_NUM_DELIVERED => (INFO_DATATYPE_UINT64, s.delivered),
             STREAM_INFO_BUF_ANNOUNCE_MIN => (INFO_DATATYPE_SIZET, 1),
             STREAM_INFO_IS_GRABBING | STREAM_INFO_DEFINES_PAYLOADSIZE => {
-                let b = if cmd == STREAM_INFO_IS_GRABBING { s.acquiring } else { true };
+                let b = if cmd == STREAM_INFO_IS_GRABBING {
+                    s.acquiring
+                } else {
+                    true
+                };
                 // SAFETY: the consumer's info buffer, `*size` bytes.
                 return unsafe { write_info(INFO_DATATYPE_BOOL8, &[u8::from(b)], ty, out, size) };
             }
@@ -540,10 +589,6 @@ unsafe extern "C" fn DSGetInfo(
         // SAFETY: the consumer's info buffer, `*size` bytes.
         unsafe { write_info(t, &bytes, ty, out, size) }
     })
-}
-
-fn size_of(s: &State) -> (u32, u32) {
-    size(s)
 }
 
 #[no_mangle]
@@ -585,7 +630,8 @@ unsafe extern "C" fn DSRevokeBuffer(
         if let Err(e) = check_ds(s, ds) {
             return e;
         }
-        let Some(i) = buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
+        let Some(i) =
+            buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
         else {
             return fail(s, GC_ERR_INVALID_HANDLE, "unknown buffer");
         };
@@ -614,7 +660,8 @@ unsafe extern "C" fn DSQueueBuffer(ds: DS_HANDLE, buffer: BUFFER_HANDLE) -> GC_E
         if let Err(e) = check_ds(s, ds) {
             return e;
         }
-        let Some(i) = buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
+        let Some(i) =
+            buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
         else {
             return fail(s, GC_ERR_INVALID_HANDLE, "unknown buffer");
         };
@@ -651,7 +698,11 @@ unsafe extern "C" fn DSFlushQueue(ds: DS_HANDLE, op: ACQ_QUEUE_TYPE) -> GC_ERROR
 }
 
 #[no_mangle]
-unsafe extern "C" fn DSStartAcquisition(ds: DS_HANDLE, _flags: ACQ_START_FLAGS, _count: u64) -> GC_ERROR {
+unsafe extern "C" fn DSStartAcquisition(
+    ds: DS_HANDLE,
+    _flags: ACQ_START_FLAGS,
+    _count: u64,
+) -> GC_ERROR {
     with(|s| {
         if let Err(e) = check_ds(s, ds) {
             return e;
@@ -691,23 +742,30 @@ unsafe extern "C" fn DSGetBufferInfo(
         if let Err(e) = check_ds(s, ds) {
             return e;
         }
-        let (w, h) = size_of(s);
+        let (w, h) = frame_size(s);
         let pfnc = s.pfnc;
-        let Some(b) = buffer_index(buffer).and_then(|i| s.buffers.get(i)).and_then(Option::as_ref)
+        let Some(b) = buffer_index(buffer)
+            .and_then(|i| s.buffers.get(i))
+            .and_then(Option::as_ref)
         else {
             return fail(s, GC_ERR_INVALID_HANDLE, "unknown buffer");
         };
         let sizet = |v: usize| (INFO_DATATYPE_SIZET, v.to_ne_bytes().to_vec());
         let u64v = |v: u64| (INFO_DATATYPE_UINT64, v.to_ne_bytes().to_vec());
         let (t, bytes) = match cmd {
-            BUFFER_INFO_BASE => (INFO_DATATYPE_PTR, (b.memory as usize).to_ne_bytes().to_vec()),
+            BUFFER_INFO_BASE => (
+                INFO_DATATYPE_PTR,
+                (b.memory as usize).to_ne_bytes().to_vec(),
+            ),
             BUFFER_INFO_SIZE => sizet(b.size),
             BUFFER_INFO_SIZE_FILLED => sizet(b.filled),
             BUFFER_INFO_WIDTH => sizet(w as usize),
             BUFFER_INFO_HEIGHT | BUFFER_INFO_DELIVERED_IMAGEHEIGHT => sizet(h as usize),
             BUFFER_INFO_XPADDING | BUFFER_INFO_IMAGEOFFSET => sizet(0),
             BUFFER_INFO_FRAMEID => u64v(b.frame_id),
-            BUFFER_INFO_TIMESTAMP | BUFFER_INFO_TIMESTAMP_NS => u64v(crate::timestamp_ns(b.frame_id)),
+            BUFFER_INFO_TIMESTAMP | BUFFER_INFO_TIMESTAMP_NS => {
+                u64v(crate::timestamp_ns(b.frame_id))
+            }
             BUFFER_INFO_PIXELFORMAT => u64v(pfnc),
             BUFFER_INFO_PIXELFORMAT_NAMESPACE => u64v(PIXELFORMAT_NAMESPACE_PFNC_32BIT),
             BUFFER_INFO_PAYLOADTYPE => sizet(PAYLOAD_TYPE_IMAGE as usize),
@@ -720,7 +778,11 @@ unsafe extern "C" fn DSGetBufferInfo(
 }
 
 #[no_mangle]
-unsafe extern "C" fn GCRegisterEvent(source: EVENTSRC_HANDLE, kind: EVENT_TYPE, event: *mut EVENT_HANDLE) -> GC_ERROR {
+unsafe extern "C" fn GCRegisterEvent(
+    source: EVENTSRC_HANDLE,
+    kind: EVENT_TYPE,
+    event: *mut EVENT_HANDLE,
+) -> GC_ERROR {
     with(|s| {
         if let Err(e) = check_ds(s, source) {
             return e;
@@ -787,7 +849,12 @@ fn fill(s: &mut State, i: usize) -> Result<(), String> {
 }
 
 #[no_mangle]
-unsafe extern "C" fn EventGetData(event: EVENT_HANDLE, out: *mut c_void, size: *mut usize, timeout_ms: u64) -> GC_ERROR {
+unsafe extern "C" fn EventGetData(
+    event: EVENT_HANDLE,
+    out: *mut c_void,
+    size: *mut usize,
+    timeout_ms: u64,
+) -> GC_ERROR {
     let deadline = Instant::now() + Duration::from_millis(timeout_ms.min(3_600_000));
     loop {
         let r = with(|s| {
@@ -805,7 +872,9 @@ unsafe extern "C" fn EventGetData(event: EVENT_HANDLE, out: *mut c_void, size: *
                 return fail(s, GC_ERR_ERROR, &e);
             }
             s.delivered += 1;
-            let user = s.buffers[i].as_ref().map_or(std::ptr::null_mut(), |b| b.user);
+            let user = s.buffers[i]
+                .as_ref()
+                .map_or(std::ptr::null_mut(), |b| b.user);
             let data = EVENT_NEW_BUFFER_DATA {
                 BufferHandle: buffer_handle(i),
                 pUserPointer: user,
@@ -817,7 +886,13 @@ unsafe extern "C" fn EventGetData(event: EVENT_HANDLE, out: *mut c_void, size: *
                     (&raw const data).cast::<u8>(),
                     std::mem::size_of::<EVENT_NEW_BUFFER_DATA>(),
                 );
-                write_info(INFO_DATATYPE_UNKNOWN, bytes, std::ptr::null_mut(), out, size)
+                write_info(
+                    INFO_DATATYPE_UNKNOWN,
+                    bytes,
+                    std::ptr::null_mut(),
+                    out,
+                    size,
+                )
             }
         });
         if r != GC_ERR_TIMEOUT || Instant::now() >= deadline {
@@ -842,16 +917,30 @@ unsafe extern "C" fn DevGetPort(dev: DEV_HANDLE, _port: *mut PORT_HANDLE) -> GC_
 }
 
 #[no_mangle]
-unsafe extern "C" fn GCGetPortURL(_port: PORT_HANDLE, _url: *mut c_char, _size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn GCGetPortURL(
+    _port: PORT_HANDLE,
+    _url: *mut c_char,
+    _size: *mut usize,
+) -> GC_ERROR {
     with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
 }
 
 #[no_mangle]
-unsafe extern "C" fn GCReadPort(_port: PORT_HANDLE, _address: u64, _out: *mut c_void, _size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn GCReadPort(
+    _port: PORT_HANDLE,
+    _address: u64,
+    _out: *mut c_void,
+    _size: *mut usize,
+) -> GC_ERROR {
     with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
 }
 
 #[no_mangle]
-unsafe extern "C" fn GCWritePort(_port: PORT_HANDLE, _address: u64, _bytes: *const c_void, _size: *mut usize) -> GC_ERROR {
+unsafe extern "C" fn GCWritePort(
+    _port: PORT_HANDLE,
+    _address: u64,
+    _bytes: *const c_void,
+    _size: *mut usize,
+) -> GC_ERROR {
     with(|s| fail(s, GC_ERR_NOT_IMPLEMENTED, "no ports"))
 }

@@ -139,7 +139,10 @@ mod tests {
             "{e}"
         );
         let e = find_producer(None, None, "source.gentl.producer").unwrap_err();
-        assert!(e.to_string().contains("GENICAM_GENTL64_PATH is not set"), "{e}");
+        assert!(
+            e.to_string().contains("GENICAM_GENTL64_PATH is not set"),
+            "{e}"
+        );
         let empty = scratch("find-empty");
         let e = find_producer(None, Some(empty.as_os_str()), "k").unwrap_err();
         assert!(e.to_string().contains("no .cti file"), "{e}");

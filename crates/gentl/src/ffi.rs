@@ -198,12 +198,7 @@ impl Library {
                 // the returned `Library`, never unloaded) is alive.
                 let s: Result<libloading::Symbol<'_, $ty>, _> =
                     unsafe { lib.get(concat!($name, "\0").as_bytes()) };
-                *s.map_err(|_| {
-                    invalid(format!(
-                        "it exports no `{}`: not a GenTL producer",
-                        $name
-                    ))
-                })?
+                *s.map_err(|_| invalid(format!("it exports no `{}`: not a GenTL producer", $name)))?
             }};
         }
         let f = Table {
@@ -480,7 +475,9 @@ impl Library {
     pub(crate) fn remote_port(&self, dev: Handle) -> Call<Handle> {
         let mut h = std::ptr::null_mut();
         // SAFETY: `dev` is an open device; `h` is writable.
-        self.check("DevGetPort", unsafe { (self.f.dev_get_port)(dev.0, &mut h) })?;
+        self.check("DevGetPort", unsafe {
+            (self.f.dev_get_port)(dev.0, &mut h)
+        })?;
         Ok(Handle(h))
     }
 
@@ -497,7 +494,12 @@ impl Library {
         let mut size = out.len();
         // SAFETY: `port` is a live port; `out` is writable for `size` bytes.
         self.check("GCReadPort", unsafe {
-            (self.f.gc_read_port)(port.0, address, out.as_mut_ptr().cast::<c_void>(), &mut size)
+            (self.f.gc_read_port)(
+                port.0,
+                address,
+                out.as_mut_ptr().cast::<c_void>(),
+                &mut size,
+            )
         })
     }
 
@@ -696,8 +698,8 @@ impl Announced {
         align: usize,
     ) -> Result<Announced, (CallError, Announced)> {
         let align = align.clamp(8, 4096).next_power_of_two();
-        let layout = Layout::from_size_align(size.max(1), align)
-            .unwrap_or_else(|_| Layout::new::<u64>());
+        let layout =
+            Layout::from_size_align(size.max(1), align).unwrap_or_else(|_| Layout::new::<u64>());
         let mut this = Announced {
             ds,
             layout,

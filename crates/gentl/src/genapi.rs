@@ -167,7 +167,10 @@ mod tests {
     #[test]
     fn features_lead_to_their_registers() {
         let p = integer(XML, "PayloadSize").unwrap();
-        assert_eq!((p.address, p.length, p.little_endian), (0x5000_000C, 4, true));
+        assert_eq!(
+            (p.address, p.length, p.little_endian),
+            (0x5000_000C, 4, true)
+        );
         let (a, v) = command(XML, "AcquisitionStart").unwrap();
         assert_eq!((a.address, v, a.little_endian), (0x5000_0010, 1, false));
         assert_eq!(a.encode(1), vec![0, 0, 0, 1]);

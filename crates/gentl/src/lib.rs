@@ -21,9 +21,9 @@
 pub mod abi;
 pub mod config;
 pub mod error;
-pub mod genapi;
 #[allow(unsafe_code)]
 mod ffi;
+pub mod genapi;
 pub mod pixel;
 pub mod source;
 pub mod system;

@@ -392,9 +392,7 @@ mod tests {
     fn colour_becomes_grey_with_bt601_weights() {
         let mut image = Image::new_mono8(4, 1);
         // white, red, green, blue
-        let rgba = [
-            255, 255, 255, 0, 255, 0, 0, 7, 0, 255, 0, 7, 0, 0, 255, 7u8,
-        ];
+        let rgba = [255, 255, 255, 0, 255, 0, 0, 7, 0, 255, 0, 7, 0, 0, 255, 7u8];
         convert(PixelFormat::Rgba8, layout(4, 1), &rgba, &mut image).unwrap();
         assert_eq!(image.pixels(), &Pixels::Mono8(vec![255, 77, 149, 29]));
         let bgr = [255, 0, 0, 0, 0, 255u8];
@@ -459,7 +457,17 @@ mod tests {
     fn short_and_empty_payloads_are_errors_not_panics() {
         let mut image = Image::new_mono8(1, 1);
         let e = convert(PixelFormat::Rgba8, layout(4, 4), &[0; 63], &mut image).unwrap_err();
-        assert!(matches!(e, ConvertError::Short { need: 64, got: 63, .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                ConvertError::Short {
+                    need: 64,
+                    got: 63,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         let e = convert(PixelFormat::Mono8, layout(0, 4), &[], &mut image).unwrap_err();
         assert!(matches!(e, ConvertError::Empty { .. }));
         let e = ConvertError::Unsupported { pfnc: 0x0108_0009 };

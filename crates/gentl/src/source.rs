@@ -256,9 +256,9 @@ impl GentlSource {
             });
         };
         let image = &mut slot.image;
-        let took = live.opened.next(timeout, |d: &Delivered, bytes: &[u8]| {
-            take(d, bytes, image)
-        });
+        let took = live
+            .opened
+            .next(timeout, |d: &Delivered, bytes: &[u8]| take(d, bytes, image));
         let host_mono_ns = monotonic_ns();
         let host_time_ns = self.clock.now_ns();
         let (took, d) = match took {
@@ -328,7 +328,10 @@ fn take(d: &Delivered, bytes: &[u8], image: &mut photopose_frame::Image) -> (Too
     );
     let Some(format) = PixelFormat::from_pfnc(d.pfnc).filter(|_| pfnc_like) else {
         let e = ConvertError::Unsupported { pfnc: d.pfnc };
-        return (Took::Refused(format!("{e} (namespace {})", d.namespace)), *d);
+        return (
+            Took::Refused(format!("{e} (namespace {})", d.namespace)),
+            *d,
+        );
     };
     let layout = Layout {
         width: d.width,

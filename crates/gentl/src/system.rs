@@ -148,11 +148,7 @@ impl System {
                     h
                 }
             };
-            for dev in self
-                .lib
-                .device_ids(iface, ms)
-                .map_err(|e| self.err(e))?
-            {
+            for dev in self.lib.device_ids(iface, ms).map_err(|e| self.err(e))? {
                 devices.push((iface, dev));
             }
         }
@@ -553,7 +549,9 @@ impl Opened {
             .or_else(|| n(abi::BUFFER_INFO_HEIGHT))
             .unwrap_or(0);
         let d = Delivered {
-            width: n(abi::BUFFER_INFO_WIDTH).unwrap_or(0).min(u64::from(u32::MAX)) as u32,
+            width: n(abi::BUFFER_INFO_WIDTH)
+                .unwrap_or(0)
+                .min(u64::from(u32::MAX)) as u32,
             height: height.min(u64::from(u32::MAX)) as u32,
             pfnc: n(abi::BUFFER_INFO_PIXELFORMAT).unwrap_or(0),
             namespace: n(abi::BUFFER_INFO_PIXELFORMAT_NAMESPACE).unwrap_or(0),
@@ -573,7 +571,9 @@ impl Opened {
         out.ok_or_else(|| {
             WaitError::Failed(GentlError::Stream {
                 device: self.info.id.clone(),
-                reason: format!("the producer delivered a buffer not announced by us (user pointer {index})"),
+                reason: format!(
+                    "the producer delivered a buffer not announced by us (user pointer {index})"
+                ),
             })
         })
     }

@@ -119,15 +119,15 @@ fn a_missing_or_invalid_producer_is_named() {
     assert!(matches!(e, GentlError::InvalidProducer { .. }), "{e}");
     assert!(e.to_string().contains("text.cti"), "{e}");
     // A shared library that is no GenTL producer: the C library itself.
-    let libc = ["/lib/x86_64-linux-gnu/libc.so.6", "/usr/lib/x86_64-linux-gnu/libc.so.6"]
-        .into_iter()
-        .map(PathBuf::from)
-        .find(|p| p.is_file());
+    let libc = [
+        "/lib/x86_64-linux-gnu/libc.so.6",
+        "/usr/lib/x86_64-linux-gnu/libc.so.6",
+    ]
+    .into_iter()
+    .map(PathBuf::from)
+    .find(|p| p.is_file());
     if let Some(libc) = libc {
         let e = GentlSource::new("x", GentlConfig::new(libc)).unwrap_err();
-        assert!(
-            e.to_string().contains("exports no `GCInitLib`"),
-            "{e}"
-        );
+        assert!(e.to_string().contains("exports no `GCInitLib`"), "{e}");
     }
 }

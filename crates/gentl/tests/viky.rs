@@ -116,7 +116,11 @@ fn viky_streams_stops_reopens_and_leaks_nothing() {
     source.stop();
     let t0 = Instant::now();
     while open_handles().devices != 0 {
-        assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", open_handles());
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "{:?}",
+            open_handles()
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
     assert_eq!(open_handles().buffers, 0, "buffers revoked at stop");

@@ -92,7 +92,11 @@ pub(crate) fn validate(g: GentlSection, bad: Bad<'_>) -> Result<GentlConfig, Con
             g.backoff_initial_ms,
             d.backoff_initial,
         )?,
-        backoff_max: ms("source.gentl.backoff_max_ms", g.backoff_max_ms, d.backoff_max)?,
+        backoff_max: ms(
+            "source.gentl.backoff_max_ms",
+            g.backoff_max_ms,
+            d.backoff_max,
+        )?,
         ..d
     };
     if config.backoff_max < config.backoff_initial {
@@ -145,11 +149,23 @@ mod tests {
         );
         let e = parse(&format!("producer = \"{}\"\nbuffers = 1\n", cti.display())).unwrap_err();
         assert!(e.contains("source.gentl.buffers"), "{e}");
-        let e = parse(&format!("producer = \"{}\"\ndevice = \" \"\n", cti.display())).unwrap_err();
+        let e = parse(&format!(
+            "producer = \"{}\"\ndevice = \" \"\n",
+            cti.display()
+        ))
+        .unwrap_err();
         assert!(e.contains("source.gentl.device"), "{e}");
-        let e = parse(&format!("producer = \"{}\"\ncamera = \"x\"\n", cti.display())).unwrap_err();
+        let e = parse(&format!(
+            "producer = \"{}\"\ncamera = \"x\"\n",
+            cti.display()
+        ))
+        .unwrap_err();
         assert!(e.contains("camera"), "unknown key refused: {e}");
-        let e = parse(&format!("producer = \"{}\"\ntimeout_ms = 0.0\n", cti.display())).unwrap_err();
+        let e = parse(&format!(
+            "producer = \"{}\"\ntimeout_ms = 0.0\n",
+            cti.display()
+        ))
+        .unwrap_err();
         assert!(e.contains("source.gentl.timeout_ms"), "{e}");
     }
 }
