@@ -33,6 +33,10 @@ struct State {
     delivered: u64,
     next_frame_id: u64,
     pfnc: u64,
+    /// Deliveries after which the device "unplugs" once (test hook).
+    unplug_after: Option<u64>,
+    /// Unplugged: the stream fails until the device is opened again.
+    gone: bool,
     renderer: Option<(Renderer, Image)>,
     last_error: String,
 }
@@ -176,9 +180,13 @@ unsafe extern "C" fn GCInitLib() -> GC_ERROR {
             }
         })
         .unwrap_or(photopose_gentl::pixel::pfnc::MONO8);
+    let unplug_after = std::env::var(crate::UNPLUG_VAR)
+        .ok()
+        .and_then(|v| v.trim().parse().ok());
     *guard = Some(State {
         initialised: true,
         pfnc,
+        unplug_after,
         next_frame_id: 1,
         ..State::default()
     });
@@ -452,6 +460,8 @@ unsafe extern "C" fn IFOpenDevice(
             }
         }
         s.dev_open = true;
+        // Plugged in again.
+        s.gone = false;
         // SAFETY: the consumer passes a writable handle.
         unsafe { put(dev, handle(&DEV)) }
     })
@@ -860,6 +870,14 @@ unsafe extern "C" fn EventGetData(
         let r = with(|s| {
             if event != handle(&EVENT) || !s.event {
                 return fail(s, GC_ERR_INVALID_HANDLE, "not the registered event");
+            }
+            if s.gone {
+                return fail(s, GC_ERR_IO, "device unplugged");
+            }
+            if s.unplug_after.is_some_and(|n| s.delivered >= n) {
+                s.unplug_after = None;
+                s.gone = true;
+                return fail(s, GC_ERR_IO, "device unplugged");
             }
             if !s.acquiring {
                 return GC_ERR_TIMEOUT;

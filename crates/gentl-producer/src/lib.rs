@@ -9,7 +9,10 @@
 //!
 //! The rlib gives tests the truth. Set `PHOTOPOSE_TEST_PRODUCER_PFNC` (a
 //! number, e.g. `0x01080009`) before `GCInitLib` to make the device report
-//! another pixel format (a consumer must refuse it).
+//! another pixel format (a consumer must refuse it), and
+//! `PHOTOPOSE_TEST_PRODUCER_UNPLUG_AFTER` (a count) to make the stream fail
+//! once after that many frames, as an unplugged camera does, until the
+//! device is opened again.
 
 #[allow(unsafe_code)]
 mod exports;
@@ -24,6 +27,8 @@ pub const INTERFACE_ID: &str = "photopose-render-if";
 pub const PERIOD_NS: u64 = 50_000_000;
 /// The variable that overrides the reported pixel format.
 pub const PFNC_VAR: &str = "PHOTOPOSE_TEST_PRODUCER_PFNC";
+/// The variable that makes the device fail once after that many frames.
+pub const UNPLUG_VAR: &str = "PHOTOPOSE_TEST_PRODUCER_UNPLUG_AFTER";
 
 /// The camera pose (KUKA `X, Y, Z` in mm, `A, B, C` in degrees, camera in
 /// the plate frame) of frame `frame_id`: a deterministic walk over
