@@ -4,6 +4,10 @@
 //!   circle, handeye, calibrate) use no files, sockets, threads or clocks in
 //!   their sources, carry the `clippy.toml` that makes clippy refuse them,
 //!   and have neither tokio nor aravis (nor glib) in their dependency tree;
+//! - the GenTL loader (`libloading`) is reachable only through the `gentl`
+//!   feature: named in one module's code (`photopose-gentl`'s `ffi`), absent
+//!   from the binary's and the pipeline's trees without their features;
+//! - `unsafe` is allowed in the quarantined modules only;
 //! - every module opens with a `//!` comment saying what it owns;
 //! - no document of the repository points outside it (`../shared`).
 
@@ -132,12 +136,94 @@ fn pure_crates_depend_on_neither_tokio_nor_aravis() {
 #[test]
 fn the_binary_without_default_features_links_no_aravis_and_has_tokio() {
     let lean = tree("photopose", &["--no-default-features"]);
-    for bad in ["aravis", "aravis-sys", "glib"] {
+    for bad in [
+        "aravis",
+        "aravis-sys",
+        "glib",
+        "libloading",
+        "photopose-gentl",
+    ] {
         assert!(!has(&lean, bad), "--no-default-features still has {bad}");
     }
     let full = tree("photopose", &[]);
     assert!(has(&full, "tokio"), "tokio in the binary's tree");
     assert!(has(&full, "aravis"), "the default build has GigE");
+    assert!(has(&full, "libloading"), "the default build has GenTL");
+}
+
+#[test]
+fn the_gentl_loader_is_only_reachable_with_its_feature() {
+    let pipeline = tree("photopose-pipeline", &["--no-default-features"]);
+    for bad in ["libloading", "photopose-gentl"] {
+        assert!(
+            !has(&pipeline, bad),
+            "photopose-pipeline without features has {bad}"
+        );
+    }
+    let with = tree(
+        "photopose-pipeline",
+        &["--no-default-features", "--features", "gentl"],
+    );
+    assert!(
+        has(&with, "libloading"),
+        "the gentl feature brings the loader"
+    );
+    // In code, the loader is named by the quarantined module only.
+    let mut files = Vec::new();
+    rust_files(&root().join("crates"), &mut files);
+    rust_files(&root().join("src"), &mut files);
+    let ffi = root().join("crates/gentl/src/ffi.rs");
+    let found: Vec<String> = files
+        .iter()
+        .filter(|f| **f != ffi && !f.to_string_lossy().contains("/target/"))
+        .filter(|f| {
+            std::fs::read_to_string(f)
+                .unwrap()
+                .lines()
+                .any(|l| code(l).contains("libloading"))
+        })
+        .map(|f| f.display().to_string())
+        .collect();
+    assert!(
+        found.is_empty(),
+        "libloading named outside the GenTL ffi: {found:?}"
+    );
+}
+
+#[test]
+fn unsafe_code_is_allowed_in_the_quarantined_modules_only() {
+    // The crate roots that allow `unsafe` for one private module (or, for
+    // the test kit, the whole crate).
+    let allowed = [
+        "crates/acquire/src/lib.rs",
+        "crates/gentl/src/lib.rs",
+        "crates/gentl-producer/src/lib.rs",
+        "crates/testkit/src/lib.rs",
+    ];
+    let mut files = Vec::new();
+    rust_files(&root().join("crates"), &mut files);
+    rust_files(&root().join("src"), &mut files);
+    rust_files(&root().join("tests"), &mut files);
+    let needle = concat!("allow(", "unsafe_code)");
+    let mut found = Vec::new();
+    for f in files
+        .iter()
+        .filter(|f| !f.to_string_lossy().contains("/target/"))
+    {
+        let rel = f
+            .strip_prefix(root())
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let text = std::fs::read_to_string(f).unwrap();
+        if text.lines().any(|l| code(l).contains(needle)) && !allowed.contains(&rel.as_str()) {
+            found.push(rel);
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "unsafe allowed outside the quarantine: {found:?}"
+    );
 }
 
 #[test]

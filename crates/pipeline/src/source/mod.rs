@@ -5,12 +5,16 @@
 //!
 //! - [`synthetic`]: frames rendered of the plate (no hardware; the default);
 //! - [`replay`]: recordings, as recorded or as fast as the workers take them;
-//! - `gige` (the `gige` feature): a GigE Vision camera through aravis.
+//! - `gige` (the `gige` feature): a GigE Vision camera through aravis;
+//! - `gentl` (the `gentl` feature): a frame grabber or camera through its
+//!   vendor's GenTL producer (`photopose-gentl`).
 //!
 //! Adding a source: a module here with its section type, its `validate`
 //! and its `FrameSource`; one variant in `SourceKind`, `SourceSection`
 //! and [`Source`], one arm in `Source::from_section` and in [`open`].
 
+#[cfg(feature = "gentl")]
+pub mod gentl;
 #[cfg(feature = "gige")]
 pub mod gige;
 pub mod replay;
@@ -37,6 +41,7 @@ pub(crate) enum SourceKind {
     Synthetic,
     Replay,
     Gige,
+    Gentl,
 }
 
 /// `[source]` as written: the kind and each source's own section.
@@ -53,6 +58,12 @@ pub(crate) struct SourceSection {
     #[cfg(not(feature = "gige"))]
     #[allow(dead_code)]
     gige: Option<toml::Value>,
+    #[cfg(feature = "gentl")]
+    gentl: Option<gentl::GentlSection>,
+    /// Read but refused by kind in a build without GenTL.
+    #[cfg(not(feature = "gentl"))]
+    #[allow(dead_code)]
+    gentl: Option<toml::Value>,
 }
 
 impl Default for SourceSection {
@@ -62,6 +73,7 @@ impl Default for SourceSection {
             synthetic: None,
             replay: None,
             gige: None,
+            gentl: None,
         }
     }
 }
@@ -76,6 +88,9 @@ pub enum Source {
     /// A GigE Vision camera (aravis).
     #[cfg(feature = "gige")]
     Gige(photopose_acquire::GigeConfig),
+    /// A device through a GenTL producer.
+    #[cfg(feature = "gentl")]
+    Gentl(photopose_gentl::GentlConfig),
 }
 
 impl Source {
@@ -101,6 +116,18 @@ impl Source {
                     "this build has no GigE Vision support (cargo feature `gige`)",
                 ))
             }
+            #[cfg(feature = "gentl")]
+            SourceKind::Gentl => {
+                Source::Gentl(gentl::validate(section.gentl.unwrap_or_default(), bad)?)
+            }
+            #[cfg(not(feature = "gentl"))]
+            SourceKind::Gentl => {
+                return Err(bad(
+                    "source.kind",
+                    "\"gentl\"".into(),
+                    "this build has no GenTL support (cargo feature `gentl`)",
+                ))
+            }
         })
     }
 }
@@ -118,6 +145,10 @@ pub enum OpenError {
     /// The GigE source refused its settings.
     #[error("GigE source ([source.gige]): {0}")]
     Gige(SourceError),
+    /// The GenTL producer cannot be loaded or initialised.
+    #[cfg(feature = "gentl")]
+    #[error("GenTL source ([source.gentl]): {0}")]
+    Gentl(photopose_gentl::GentlError),
 }
 
 /// Builds the source `source` names for `camera` (not started: the
@@ -133,6 +164,10 @@ pub fn open(
         #[cfg(feature = "gige")]
         Source::Gige(g) => Box::new(
             photopose_acquire::GigeSource::new("gige", g.clone()).map_err(OpenError::Gige)?,
+        ),
+        #[cfg(feature = "gentl")]
+        Source::Gentl(g) => Box::new(
+            photopose_gentl::GentlSource::new("gentl", g.clone()).map_err(OpenError::Gentl)?,
         ),
     })
 }
