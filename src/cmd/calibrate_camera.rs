@@ -65,7 +65,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     let mut inputs = Vec::with_capacity(args.images.len());
     let mut unreadable = Vec::new();
+    let bar = crate::cmd::progress::bar(Some(args.images.len() as u64), "images detected");
     for path in &args.images {
+        bar.inc(1);
         let name = path.display().to_string();
         let image = match load_frame(path, &initial) {
             Ok(i) => i,
@@ -100,11 +102,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
             .collect();
         inputs.push(ImageDetections { name, blobs });
     }
+    bar.finish_and_clear();
     let detected = std::time::Instant::now();
+    let adjusting = crate::cmd::progress::status();
+    adjusting.set_message(format!("bundle adjustment of {} images", inputs.len()));
     let mut options = CalibrationOptions::default();
     options.bundle.fixed = fixed;
     options.bundle.free_targets = args.free_targets;
-    let cal = match calibrate(&initial, &field, &inputs, &options) {
+    let adjusted = calibrate(&initial, &field, &inputs, &options);
+    adjusting.finish_and_clear();
+    let cal = match adjusted {
         Ok(c) => c,
         Err(e) => {
             let mut msg = e.to_string();
@@ -127,8 +134,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     std::fs::write(&args.out, photopose_formats::camera_to_toml(&camera))
         .with_context(|| format!("writing {}", args.out.display()))?;
     let report = Report::new(&cal, &fixed, &unreadable);
-    print!("{}", report.to_text());
-    println!("camera written to {}", args.out.display());
+    out!("{}", report.to_text())?;
+    outln!("camera written to {}", args.out.display())?;
     if let Some(p) = &args.report_json {
         std::fs::write(p, serde_json::to_string_pretty(&report)? + "\n")
             .with_context(|| format!("writing {}", p.display()))?;

@@ -155,9 +155,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
             iterations: he.iterations,
             residuals: he.residuals.iter().map(ResidualJson::new).collect(),
         };
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!("{}", text_report(&he, &file, &args.out));
+        out!("{}", text_report(&he, &file, &args.out))?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -108,7 +108,7 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
     )?;
     std::fs::write(&args.out, text)
         .with_context(|| format!("{}: cannot write", args.out.display()))?;
-    println!(
+    outln!(
         "{}",
         serde_json::to_string(&Written {
             out: args.out.display().to_string(),
@@ -116,7 +116,7 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
             targets: field.len(),
             coded: field.coded().count(),
         })?
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -187,11 +187,11 @@ fn new(args: NewArgs) -> Result<ExitCode> {
     let field = design(&args)?;
     let csv = field.to_csv();
     match &args.out {
-        None => print!("{csv}"),
+        None => out!("{csv}")?,
         Some(path) => {
             std::fs::write(path, csv)
                 .with_context(|| format!("{}: cannot write", path.display()))?;
-            println!(
+            outln!(
                 "{}",
                 serde_json::to_string(&Written {
                     out: path.display().to_string(),
@@ -199,7 +199,7 @@ fn new(args: NewArgs) -> Result<ExitCode> {
                     targets: field.len(),
                     coded: field.coded().count(),
                 })?
-            );
+            )?;
         }
     }
     Ok(ExitCode::SUCCESS)
