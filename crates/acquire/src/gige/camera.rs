@@ -179,6 +179,11 @@ fn set_feature(camera: &Camera, name: &str, value: &FeatureValue) -> Result<(), 
             "no such feature in the camera's node map (arv-tool-0.8 features lists them)".into(),
         ));
     };
+    if let Some(f) = node.downcast_ref::<aravis::GcFeatureNode>() {
+        if f.actual_access_mode() == aravis::GcAccessMode::Ro {
+            return Err(refused("the feature is read-only".into()));
+        }
+    }
     if let (Some(e), FeatureValue::Text(v)) = (node.downcast_ref::<aravis::GcEnumeration>(), value)
     {
         let entries: Vec<String> = e
@@ -198,11 +203,19 @@ fn set_feature(camera: &Camera, name: &str, value: &FeatureValue) -> Result<(), 
         FeatureValue::Bool(v) => camera.set_boolean(name, *v),
         FeatureValue::Text(v) => camera.set_string(name, v),
     };
+    // An integer the camera silently clamps or rounds is a value it refused.
+    let written = written.and_then(|()| match value {
+        FeatureValue::Int(v) => camera
+            .integer(name)
+            .map(|kept| (kept != *v).then_some(kept)),
+        _ => Ok(None),
+    });
     match written {
-        Ok(()) => {
+        Ok(None) => {
             tracing::debug!(feature = name, %value, "feature set");
             Ok(())
         }
+        Ok(Some(kept)) => Err(refused(format!("{value} refused: the camera keeps {kept}"))),
         Err(e) if transient(&e) => Err(OpenError::Absent(format!("{what}: {e}"))),
         Err(e) => Err(refused(format!("{value} refused: {e}"))),
     }
