@@ -67,12 +67,15 @@ pub struct Found {
     pub address: String,
 }
 
+/// How a transport lists the cameras it finds.
+type Lister = fn() -> Vec<Found>;
+
 /// The transports this build can list cameras of, each a function giving
 /// what it finds (a GenTL producer goes here once the crate has one).
-fn transports() -> Vec<(&'static str, fn() -> Vec<Found>)> {
+fn transports() -> Vec<(&'static str, Lister)> {
     #[cfg(feature = "gige")]
     {
-        vec![("aravis", aravis_cameras as fn() -> Vec<Found>)]
+        vec![("aravis", aravis_cameras as Lister)]
     }
     #[cfg(not(feature = "gige"))]
     {
@@ -228,7 +231,7 @@ fn grab(args: GrabArgs) -> Result<ExitCode> {
                 .is_some_and(|d| d.capacity().0 >= w && d.capacity().1 >= h);
             if !fits {
                 detector = Some(
-                    photopose_vision::Detector::new(w, h, options.clone())
+                    photopose_vision::Detector::new(w, h, options)
                         .context("the detector refuses the frame size")?,
                 );
             }

@@ -36,8 +36,7 @@ pub(crate) struct GigeSection {
 #[derive(Debug, Clone, Default)]
 struct Features(Vec<(String, FeatureToml)>);
 
-#[derive(Debug, Deserialize, Clone)]
-#[serde(untagged)]
+#[derive(Debug, Clone)]
 enum FeatureToml {
     Bool(bool),
     Int(i64),
@@ -55,7 +54,18 @@ impl<'de> Deserialize<'de> for Features {
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Features, A::Error> {
                 let mut out = Vec::new();
-                while let Some((k, v)) = map.next_entry::<String, FeatureToml>()? {
+                while let Some((k, v)) = map.next_entry::<String, toml::Value>()? {
+                    let v = match v {
+                        toml::Value::Boolean(b) => FeatureToml::Bool(b),
+                        toml::Value::Integer(i) => FeatureToml::Int(i),
+                        toml::Value::Float(f) => FeatureToml::Float(f),
+                        toml::Value::String(t) => FeatureToml::Text(t),
+                        other => {
+                            return Err(serde::de::Error::custom(format!(
+                                "`source.gige.features.{k}` = {other}: must be an integer, float, boolean or string"
+                            )))
+                        }
+                    };
                     out.push((k, v));
                 }
                 Ok(Features(out))
