@@ -551,14 +551,14 @@ mod tests {
     #[test]
     fn host_names_are_resolved_for_bind_and_controllers() {
         let c = RsiConfig::from_toml(
-            "[rsi]\nenabled = true\nbind = \"localhost\"\ncontrollers = [\"localhost\"]\n",
+            "[rsi]\nenabled = true\nport = 49152\nbind = \"localhost\"\ncontrollers = [\"localhost\"]\n",
         )
         .unwrap();
         let s = c.settings(None).unwrap();
         assert_eq!(s.bind, "127.0.0.1:49152".parse().unwrap());
         assert_eq!(s.controllers, vec!["127.0.0.1".parse::<IpAddr>().unwrap()]);
         let c = RsiConfig::from_toml(
-            "[rsi]\nenabled = true\ncontrollers = [\"no-such-robot.invalid\"]\n",
+            "[rsi]\nenabled = true\nport = 49152\ncontrollers = [\"no-such-robot.invalid\"]\n",
         )
         .unwrap();
         let e = c.settings(None).unwrap_err().to_string();
@@ -654,7 +654,7 @@ mod tests {
             ),
             (
                 RsiConfig {
-                    bind: "localhost".into(),
+                    bind: "no-such-host.invalid".into(),
                     ..base.clone()
                 },
                 "bind",
