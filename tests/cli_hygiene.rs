@@ -273,3 +273,40 @@ fn progress_is_not_drawn_into_a_pipe() {
     assert!(o.status.success(), "{err}");
     assert!(!err.contains('\x1b') && !err.contains('\r'), "{err:?}");
 }
+
+#[test]
+fn calibrate_stations_always_ends_with_a_last_line() {
+    let dir = scratch("stations-line");
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    // A "daemon" that sends one line without RIst, then closes.
+    let server = std::thread::spawn(move || {
+        use std::io::Write;
+        let (mut s, _) = listener.accept().unwrap();
+        let _ = s.write_all(b"{\"seq\":0,\"status\":\"too_few_targets\"}\n");
+    });
+    let out = dir.join("stations.csv");
+    let o = bin()
+        .args([
+            "calibrate",
+            "stations",
+            "--count",
+            "2",
+            "--timeout-s",
+            "20",
+            "--stream",
+        ])
+        .arg(addr.to_string())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    server.join().unwrap();
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!("0 of 2 stations written to {}", out.display())),
+        "{err}"
+    );
+    assert!(!err.contains('\x1b') && !err.contains('\r'), "{err:?}");
+}
