@@ -1,6 +1,25 @@
 //! `photopose`: the command-line front end and daemon entry point. Glue only:
 //! every subcommand lives in `cmd/` and calls into the library crates.
 
+/// Writes one line to stdout, returning the IO error instead of panicking
+/// as `println!` does when the reader has gone (a closed pipe): every
+/// command prints through it and passes the error up with `?`, and `main`
+/// ends quietly on a broken pipe.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($arg)*)
+    }};
+}
+
+/// [`outln!`] without the line end (text that brings its own).
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($arg)*)
+    }};
+}
+
 mod cmd;
 
 use clap::{Parser, Subcommand};
@@ -47,6 +66,12 @@ enum Command {
     RsiSim(cmd::rsi_sim::Args),
     /// KUKA RSI tools: `rsi kit` writes the controller-side files.
     Rsi(cmd::rsi_kit::Args),
+    /// GigE Vision camera tools: list the cameras, grab stills.
+    Camera(cmd::camera::Args),
+    /// The man page and shell completions, generated from this CLI
+    /// (packaging).
+    #[command(hide = true)]
+    Generate(cmd::generate::Args),
 }
 
 fn main() -> ExitCode {
@@ -68,14 +93,92 @@ fn main() -> ExitCode {
         Command::CircleTest(args) => cmd::circle_test::run(args),
         Command::RsiSim(args) => cmd::rsi_sim::run(args),
         Command::Rsi(args) => cmd::rsi_kit::run(args),
+        Command::Camera(args) => cmd::camera::run(args),
+        Command::Generate(args) => cmd::generate::run(args),
     };
     match result {
         Ok(code) => code,
+        // The reader of our output went away (`photopose detect … | head
+        // -1`): nothing more to say, and no one to say it to. The status a
+        // process killed by SIGPIPE shows in a shell.
+        Err(e) if broken_pipe(&e) => ExitCode::from(141),
         Err(e) => {
             let priority = if stderr_is_journal() { "<3>" } else { "" };
-            eprintln!("{priority}photopose: error: {e:#}");
+            eprintln!("{priority}photopose: error: {}", error_text(&e));
             ExitCode::from(2)
         }
+    }
+}
+
+/// Whether an error is, at its root, a write to a closed pipe.
+fn broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// An error and its causes on one line, each said once: library errors
+/// often show their source in their own message (`{path}: cannot read:
+/// {source}`) and also return it as `source()`, so anyhow's `{:#}` would
+/// print the innermost cause twice. A cause whose text the line already
+/// holds is left out.
+/// A cause that starts with the text of the context above it (a context
+/// naming the file, a cause naming it again with what went wrong) takes
+/// that context's place.
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    let mut last = 0;
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() && text.starts_with(&line[last..]) {
+            line.truncate(last);
+        } else if !line.is_empty() {
+            line.push_str(": ");
+        }
+        last = line.len();
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An error that shows its source in its own message and returns it.
+    #[derive(Debug)]
+    struct Write(std::io::Error);
+
+    impl std::fmt::Display for Write {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "out.pgm: cannot write: {}", self.0)
+        }
+    }
+
+    impl std::error::Error for Write {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.0)
+        }
+    }
+
+    #[test]
+    fn each_cause_is_said_once() {
+        let io = || std::io::Error::from(std::io::ErrorKind::NotFound);
+        let e = anyhow::Error::new(Write(io())).context("render");
+        let text = error_text(&e);
+        assert_eq!(text, format!("render: out.pgm: cannot write: {}", io()));
+        assert_eq!(format!("{e:#}").matches(&io().to_string()).count(), 2);
+        let e = anyhow::Error::new(Write(io())).context("out.pgm");
+        assert_eq!(error_text(&e), format!("out.pgm: cannot write: {}", io()));
+        let e = anyhow::anyhow!("inner").context("outer");
+        assert_eq!(error_text(&e), "outer: inner");
+        let pipe = anyhow::Error::new(std::io::Error::from(std::io::ErrorKind::BrokenPipe))
+            .context("printing");
+        assert!(broken_pipe(&pipe) && !broken_pipe(&e));
     }
 }
 

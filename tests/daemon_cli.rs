@@ -219,7 +219,7 @@ fn the_systemd_unit_verifies() {
     let dir = scratch("unit");
     let unit = std::fs::read_to_string(root().join("systemd/photopose.service"))
         .unwrap()
-        .replace("/usr/local/bin/photopose", env!("CARGO_BIN_EXE_photopose"));
+        .replace("/usr/bin/photopose", env!("CARGO_BIN_EXE_photopose"));
     let path = dir.join("photopose.service");
     std::fs::write(&path, unit).unwrap();
     let out = Command::new(analyze)

@@ -96,6 +96,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mut rng = SplitMix64::new(7);
     let mut frames = Vec::with_capacity(args.frames);
     let mut targets = 0;
+    let bar = crate::cmd::progress::bar(Some(args.frames as u64), "frames rendered");
     for k in 0..args.frames {
         let distance = 800.0 + 400.0 * rng.unit();
         let tilt = (30.0 * rng.unit()).to_radians();
@@ -116,7 +117,10 @@ pub fn run(args: Args) -> Result<ExitCode> {
         renderer.render(&e, &mut img)?;
         targets += renderer.truth().iter().filter(|t| t.visible).count();
         frames.push(img);
+        bar.inc(1);
     }
+    bar.finish_and_clear();
+    let bar = crate::cmd::progress::bar(Some((args.frames * args.rounds) as u64), "frames timed");
     let mut locator = Locator::new(camera, field, LocateOptions::default())?;
     let mut times: Vec<Vec<f64>> = (0..NAMES.len())
         .map(|_| Vec::with_capacity(args.frames * args.rounds))
@@ -139,6 +143,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 loc.status.clone()
             };
             acc[8] = t0.elapsed().as_secs_f64() * 1e6;
+            bar.inc(1);
             if status != PoseStatus::Ok {
                 failed += 1;
                 continue;
@@ -148,6 +153,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             }
         }
     }
+    bar.finish_and_clear();
     if times[8].is_empty() {
         bail!("no frame gave a pose ({failed} failed)");
     }
@@ -193,34 +199,36 @@ pub fn run(args: Args) -> Result<ExitCode> {
             "failed": failed,
             "stages_us": serde_json::Value::Object(stages),
         });
-        println!("{obj}");
+        outln!("{obj}")?;
     } else {
-        println!(
+        outln!(
             "frame pipeline, single thread: {} frames × {} rounds, {:.0} visible targets per frame on average, {} failed",
             args.frames,
             args.rounds,
             targets as f64 / args.frames as f64,
             failed
-        );
-        println!(
+        )?;
+        outln!(
             "{:>12} | {:>11} | {:>11}",
-            "stage", "median [µs]", "p99 [µs]"
-        );
+            "stage",
+            "median [µs]",
+            "p99 [µs]"
+        )?;
         for (n, t) in names.iter().zip(&times) {
-            println!(
+            outln!(
                 "{:>12} | {:>11.1} | {:>11.1}",
                 n,
                 percentile(t, 0.5),
                 percentile(t, 0.99)
-            );
+            )?;
         }
-        println!(
+        outln!(
             "{:>12} | {:>11.1} | {:>11.1}",
             "full_frame",
             percentile(&full, 0.5),
             percentile(&full, 0.99)
-        );
-        println!(
+        )?;
+        outln!(
             "{:>12} | {:>11.1} | {:>11.1}   ({} frames along the moving circle at {} frames/s, {:.0} targets per frame, {} located whole)",
             "tracking",
             percentile(&tracking.times, 0.5),
@@ -229,7 +237,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             args.track_rate,
             tracking.targets_mean,
             tracking.fallbacks
-        );
+        )?;
     }
     Ok(ExitCode::SUCCESS)
 }

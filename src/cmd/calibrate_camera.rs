@@ -117,7 +117,9 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             hashes.push(hash_file(p, kind)?);
         }
     }
+    let bar = crate::cmd::progress::bar(Some(args.images.len() as u64), "images detected");
     for path in &args.images {
+        bar.inc(1);
         let name = path.display().to_string();
         if let Ok(h) = hash_file(path, FileKind::Image) {
             hashes.push(h);
@@ -155,11 +157,16 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             .collect();
         inputs.push(ImageDetections { name, blobs });
     }
+    bar.finish_and_clear();
     let detected = std::time::Instant::now();
+    let adjusting = crate::cmd::progress::status();
+    adjusting.set_message(format!("bundle adjustment of {} images", inputs.len()));
     let mut options = CalibrationOptions::default();
     options.bundle.fixed = fixed;
     options.bundle.free_targets = args.free_targets;
-    let cal = match calibrate(&initial, &field, &inputs, &options) {
+    let adjusted = calibrate(&initial, &field, &inputs, &options);
+    adjusting.finish_and_clear();
+    let cal = match adjusted {
         Ok(c) => c,
         Err(e) => {
             let mut msg = e.to_string();
@@ -187,8 +194,8 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     };
     std::fs::write(&args.out, photopose_formats::camera_file_to_toml(&file))
         .with_context(|| format!("writing {}", args.out.display()))?;
-    print!("{}{}", provenance.to_text(), report.to_text());
-    println!("camera written to {}", args.out.display());
+    out!("{}{}", provenance.to_text(), report.to_text())?;
+    outln!("camera written to {}", args.out.display())?;
     if let Some(p) = &args.report_json {
         let json = JsonReport {
             provenance: &provenance,

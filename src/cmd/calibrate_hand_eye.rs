@@ -163,13 +163,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
             iterations: he.iterations,
             residuals: he.residuals.iter().map(ResidualJson::new).collect(),
         };
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!(
+        out!(
             "{}{}",
             provenance.to_text(),
             text_report(&he, &file, &args.out)
-        );
+        )?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -5,6 +5,10 @@
 //! enough (and has moved on since the previous station) it appends a
 //! station — the robot pose and the mean camera pose — to the station file
 //! that `photopose calibrate hand-eye` reads.
+//!
+//! While it waits it says why on stderr (a terminal only), rewritten in
+//! place: "still 0.4/1.0 s, moved 3.1/5.0 mm, 4/12 stations"; a last line
+//! with the stations taken is always printed.
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -98,11 +102,54 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     writeln!(out, "{STATIONS_HEADER}")?;
     let mut gatherer = Gatherer::new(settings);
+    let status = crate::cmd::progress::status();
+    let result = gather(&args, &mut gatherer, stream, &mut out, &status);
+    status.finish_and_clear();
+    let progress = gatherer.progress();
+    eprintln!(
+        "photopose: {} of {} stations written to {}",
+        progress.taken,
+        args.count,
+        args.out.display()
+    );
+    result?;
+    outln!("{}: {} stations", args.out.display(), gatherer.taken())?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What the gatherer is waiting for, in words: "still 0.4/1.0 s, moved
+/// 3.1/5.0 mm, 4/12 stations".
+fn waiting(g: &Gatherer, s: &GatherSettings, count: usize, lines: u64) -> String {
+    let p = g.progress();
+    let moved = match p.moved {
+        Some((mm, deg)) => format!(
+            "moved {mm:.1}/{:.1} mm {deg:.1}/{:.1}° (waiting for the robot to move on)",
+            s.move_mm, s.move_deg
+        ),
+        None => "next station armed".to_string(),
+    };
+    format!(
+        "still {:.1}/{:.1} s, {moved}, {}/{count} stations, {lines} pose lines",
+        p.still_s, s.still_s, p.taken
+    )
+}
+
+/// Reads the stream until `args.count` stations are written, the stream
+/// closes or the time is up.
+fn gather(
+    args: &Args,
+    gatherer: &mut Gatherer,
+    stream: TcpStream,
+    out: &mut std::fs::File,
+    status: &indicatif::ProgressBar,
+) -> Result<()> {
+    let settings = *gatherer.settings();
     let (mut lines, mut without_robot) = (0u64, 0u64);
     let started = Instant::now();
     let mut reader = BufReader::new(stream);
     let mut line = String::new();
     while gatherer.taken() < args.count {
+        status.set_message(waiting(gatherer, &settings, args.count, lines));
         if started.elapsed().as_secs_f64() > args.timeout_s {
             bail!(
                 "{} of {} stations after {} s ({lines} pose lines, {without_robot} ok without RIst: is [rsi] enabled and the controller sending RIst?)",
@@ -142,12 +189,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
         if let Some(row) = gatherer.push(s) {
             writeln!(out, "{}", row.csv_line()?)?;
             out.flush()?;
-            println!(
-                "station {} of {}: robot {:?}",
-                row.name, args.count, row.robot_xyzabc
-            );
+            status.suspend(|| {
+                outln!(
+                    "station {} of {}: robot {:?}",
+                    row.name,
+                    args.count,
+                    row.robot_xyzabc
+                )
+            })?;
         }
     }
-    println!("{}: {} stations", args.out.display(), gatherer.taken());
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }

@@ -152,17 +152,17 @@ pub fn run(args: Args) -> Result<ExitCode> {
     )?;
     let written = write_outputs(&args.out_dir, &out)?;
     if args.json {
-        println!("{}", out.json);
+        outln!("{}", out.json)?;
     } else {
-        print!("{}", out.text);
-        println!(
+        out!("{}", out.text)?;
+        outln!(
             "\nwritten: {}",
             written
                 .iter()
                 .map(|p| p.display().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        )?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -111,7 +111,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         samples.iter().map(|s| s.exterior()).collect(),
     )
     .context("synthetic source")?;
-    println!(
+    outln!(
         "photopose demo: circle of {:.1} mm at {} mm/s, {} frames at {} frames/s over the default plate; \
          injected radial deviation F = {:.1} µm",
         cell.path.radius_mm,
@@ -119,18 +119,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
         frames,
         args.rate,
         cell.error.radial_f_mm() * 1000.0
-    );
+    )?;
     let pipeline = Pipeline::start(&config, camera, field, Box::new(source))
         .context("cannot start the pipeline")?;
     let rsi_addr = pipeline
         .rsi_addr()
         .context("the RSI server did not start")?;
     if let Some(tcp) = pipeline.tcp_addr() {
-        println!(
+        outln!(
             "poses: TCP JSON lines on {tcp} (nc {} {}), RSI server on {rsi_addr}",
             tcp.ip(),
             tcp.port()
-        );
+        )?;
     }
     let cycle = Duration::from_millis(4);
     let cycles = (frames as f64 / args.rate / cycle.as_secs_f64()).ceil() as u64;
@@ -199,15 +199,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 rsi.as_ref().map_or(0, |s| s.delay_last),
             );
             if terminal {
-                print!("\r{line}\x1b[K");
+                out!("\r{line}\x1b[K")?;
                 std::io::stdout().flush()?;
             } else {
-                println!("{line}");
+                outln!("{line}")?;
             }
         }
     }
     if terminal {
-        println!();
+        outln!()?;
     }
     stream.flush()?;
     drop(stream);
@@ -215,7 +215,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let counters = pipeline.join();
     let sim = controller.stop().context("the simulated controller")?;
     let secs = started.elapsed().as_secs_f64();
-    println!(
+    outln!(
         "{} frames in {:.1} s: {} poses ok, {} dropped; latency p50 {:.2} ms, p99 {:.2} ms",
         counters.frames_in.get(),
         secs,
@@ -223,9 +223,9 @@ pub fn run(args: Args) -> Result<ExitCode> {
         counters.frames_dropped.get(),
         counters.latency_quantile_us(0.5).unwrap_or(f64::NAN) / 1000.0,
         counters.latency_quantile_us(0.99).unwrap_or(f64::NAN) / 1000.0
-    );
+    )?;
     if let Some(r) = counters.rsi.as_ref().map(|r| r.snapshot()) {
-        println!(
+        outln!(
             "RSI: {} cycles answered of {} sent by the simulated controller, {} late, {} mismatched; \
              reply latency p99 {} µs (measure-only: zero correction)",
             r.replies,
@@ -233,7 +233,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             sim.late,
             sim.mismatched,
             r.latency_p99_us.map_or("-".into(), |v| format!("{v:.0}"))
-        );
+        )?;
     }
 
     // The circular test of the recorded stream, as `photopose circle-test`.
@@ -249,15 +249,15 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let he = read_hand_eye(&hand_eye)?;
     let out = evaluate(&poses, &inputs, Some(&he), 15, 25.0)?;
     let written = write_outputs(&args.out, &out)?;
-    println!("\n{}", out.text);
+    outln!("\n{}", out.text)?;
     let report: serde_json::Value = serde_json::from_str(&out.json)?;
-    println!(
+    outln!(
         "injected F = {:.1} µm, measured at the TCP G = {:.1} µm (filtered {:.1} µm)",
         cell.error.radial_f_mm() * 1000.0,
         report["tcp"]["g_um"].as_f64().unwrap_or(f64::NAN),
         report["tcp"]["g_filtered_um"].as_f64().unwrap_or(f64::NAN)
-    );
-    println!(
+    )?;
+    outln!(
         "written to {}: {}, poses.jsonl, hand-eye.toml",
         args.out.display(),
         written
@@ -265,6 +265,6 @@ pub fn run(args: Args) -> Result<ExitCode> {
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
             .collect::<Vec<_>>()
             .join(", ")
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }

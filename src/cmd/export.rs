@@ -32,11 +32,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         std::fs::write(&path, &bytes)
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
-    println!(
+    outln!(
         "{}: {} frames written to {}",
         recording.path(),
         recording.len(),
         args.out.display()
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }

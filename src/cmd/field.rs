@@ -226,7 +226,7 @@ fn svg(args: SvgArgs) -> Result<ExitCode> {
             written.overlap_mm = Some(overlap);
         }
     }
-    println!("{}", serde_json::to_string(&written)?);
+    outln!("{}", serde_json::to_string(&written)?)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -297,11 +297,11 @@ fn new(args: NewArgs) -> Result<ExitCode> {
     let field = design(&args)?;
     let csv = field.to_csv();
     match &args.out {
-        None => print!("{csv}"),
+        None => out!("{csv}")?,
         Some(path) => {
             std::fs::write(path, csv)
                 .with_context(|| format!("{}: cannot write", path.display()))?;
-            println!(
+            outln!(
                 "{}",
                 serde_json::to_string(&Written {
                     out: path.display().to_string(),
@@ -309,7 +309,7 @@ fn new(args: NewArgs) -> Result<ExitCode> {
                     targets: field.len(),
                     coded: field.coded().count(),
                 })?
-            );
+            )?;
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -36,8 +36,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if let (Some(n), Source::Synthetic(s)) = (args.frames, &mut config.source) {
         s.frames = n;
     }
-    let camera = defaults::camera(config.camera_file.as_deref())?;
-    let field = defaults::field(config.field_file.as_deref())?;
+    let camera = defaults::camera(config.camera_file.as_deref()).context(run::CAMERA_KEY)?;
+    let field = defaults::field(config.field_file.as_deref()).context(run::FIELD_KEY)?;
     let mut source = photopose_pipeline::source::open(&config.source, &camera, &field)?;
     let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
@@ -50,6 +50,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         camera.sensor.height,
     ));
     source.start().context("cannot start the source")?;
+    let bar = crate::cmd::progress::bar(args.frames, "frames recorded");
     let mut n = 0u64;
     while !stop.load(Ordering::Acquire) && args.frames.is_none_or(|max| n < max) {
         match source.next_frame(&mut slot, Duration::from_millis(200)) {
@@ -61,22 +62,25 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 };
                 recorder.write(meta, &slot.image)?;
                 n += 1;
+                bar.inc(1);
             }
             Err(SourceError::Ended) => break,
             Err(e) if e.is_fatal() => {
+                bar.finish_and_clear();
                 source.stop();
                 recorder.finish()?;
                 return Err(e).context("the source failed");
             }
             Err(e @ (SourceError::Lost { .. } | SourceError::Frame { .. })) => {
-                tracing::warn!(error = %e, "recording goes on")
+                bar.suspend(|| tracing::warn!(error = %e, "recording goes on"))
             }
             Err(_) => {}
         }
     }
+    bar.finish_and_clear();
     source.stop();
     // Finished even after a signal: the file stays readable.
     recorder.finish()?;
-    println!("{}: {n} frames recorded", args.out.display());
+    outln!("{}: {n} frames recorded", args.out.display())?;
     Ok(ExitCode::SUCCESS)
 }

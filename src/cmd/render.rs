@@ -245,7 +245,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     if visible == 0 {
         tracing::warn!("no target of the field is wholly in view from this pose");
     }
-    println!(
+    outln!(
         "{}",
         serde_json::to_string(&Summary {
             image: args.out.display().to_string(),
@@ -254,7 +254,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             targets: field.len(),
             visible,
         })?
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }
 

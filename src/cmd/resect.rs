@@ -140,11 +140,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let (camera, field) = match setup {
         Ok(cf) => cf,
         Err(e) => {
-            let error = format!("{e:#}");
+            let error = crate::error_text(&e);
             for path in args.observations.iter().chain(&args.images) {
                 let name = path.display().to_string();
                 let line = ErrorLine::new(&name, error.clone());
-                println!("{}", serde_json::to_string(&line)?);
+                outln!("{}", serde_json::to_string(&line)?)?;
             }
             return Ok(exit_status(args.observations.len() + args.images.len()));
         }

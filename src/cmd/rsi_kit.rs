@@ -84,16 +84,19 @@ fn kit(args: KitArgs) -> Result<ExitCode> {
         let path = args.out.join(f.name);
         std::fs::write(&path, &f.text)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("wrote {}", path.display());
+        outln!("wrote {}", path.display())?;
     }
     let l = kit.limits;
-    println!(
+    outln!(
         "POSCORR ±{} mm, MaxRotAngle {}°; POSCORRMON MaxTrans {} mm, MaxRotAngle {}°",
-        l.poscorr_mm, l.poscorr_deg, l.monitor_mm, l.monitor_deg
-    );
+        l.poscorr_mm,
+        l.poscorr_deg,
+        l.monitor_mm,
+        l.monitor_deg
+    )?;
     for n in &kit.notes {
         eprintln!("photopose: note: {n}");
     }
-    println!("next: copy the files to the controller (docs/rsi.md, \"The integration kit\")");
+    outln!("next: copy the files to the controller (docs/rsi.md, \"The integration kit\")")?;
     Ok(ExitCode::SUCCESS)
 }

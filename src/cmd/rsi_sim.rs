@@ -3,8 +3,8 @@
 //! `<Rob>` every cycle on its own clock, late and mismatched replies counted
 //! into `Delay`, stop after `Timeout` faults — for commissioning without a
 //! robot and for measuring the daemon's reply timing. Shows its progress on
-//! a terminal (one line rewritten in place; nothing when stdout is not a
-//! terminal), then the run's summary. Exit status 1 if nothing ever
+//! stderr when that is a terminal (a bar; nothing otherwise), then the
+//! run's summary. Exit status 1 if nothing ever
 //! answered ("nothing answers at ADDR"), if no reply ever matched, or if the
 //! simulated controller stopped on `Timeout`. A run whose replies were all
 //! zero (the daemon's `measure_only`, or no fresh measurement) says that no
@@ -17,7 +17,6 @@ use photopose_rsi::controller::{SimConfig, SimController, SimReport};
 use photopose_rsi::ethernet_config::EthernetConfig;
 use photopose_rsi::server::RsiClock;
 use photopose_rsi::CorrectionMode;
-use std::io::{IsTerminal, Write};
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -26,9 +25,10 @@ use std::time::Duration;
 /// Arguments of `photopose rsi-sim`.
 #[derive(Parser, Debug)]
 pub struct Args {
-    /// The daemon's RSI address (`[rsi] bind` and `port`).
+    /// The daemon's RSI address (`[rsi] bind` and `port`): an IP address
+    /// or a host name, and the port (`localhost:49152`).
     #[arg(long)]
-    pub server: SocketAddr,
+    pub server: String,
     /// Cycles to send.
     #[arg(long, default_value_t = 10_000)]
     pub cycles: u64,
@@ -72,10 +72,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         }
         None => photopose_rsi::SenFormat::default(),
     };
-    let defaults = SimConfig::new(args.server);
+    let server = resolve_server(&args.server)?;
+    let defaults = SimConfig::new(server);
     // Loopback servers are reached from loopback; any other from every
     // interface of the family.
-    let bind = match args.server.ip() {
+    let bind = match server.ip() {
         ip if ip.is_loopback() => defaults.bind,
         IpAddr::V4(_) => SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)),
         IpAddr::V6(_) => SocketAddr::from((Ipv6Addr::UNSPECIFIED, 0)),
@@ -91,40 +92,50 @@ pub fn run(args: Args) -> Result<ExitCode> {
         ..defaults
     };
     let controller = SimController::spawn(config, RsiClock::new())
-        .with_context(|| format!("cannot start the simulated controller for {}", args.server))?;
-    if std::io::stdout().is_terminal() {
-        let probe = controller.probe();
-        let mut out = std::io::stdout();
-        while !probe.is_finished() {
-            let s = probe.state();
-            let t = &s.total;
-            let _ = write!(
-                out,
-                "\r\x1b[Kcycle {}/{}, correction {:.4} {:.4} {:.4} mm {:.5} {:.5} {:.5}°",
-                s.cycle + 1,
-                args.cycles,
-                t[0],
-                t[1],
-                t[2],
-                t[3],
-                t[4],
-                t[5]
-            );
-            let _ = out.flush();
-            std::thread::sleep(Duration::from_millis(200));
-        }
-        let _ = write!(out, "\r\x1b[K");
-        let _ = out.flush();
+        .with_context(|| format!("cannot start the simulated controller for {server}"))?;
+    // Live progress on stderr (a terminal only): cycles done and the
+    // correction the controller is applying.
+    let bar = crate::cmd::progress::bar(Some(args.cycles), "cycles");
+    let probe = controller.probe();
+    while !probe.is_finished() {
+        let s = probe.state();
+        let t = &s.total;
+        bar.set_position(s.cycle);
+        bar.set_message(format!(
+            "correction {:.4} {:.4} {:.4} mm {:.5} {:.5} {:.5}°",
+            t[0], t[1], t[2], t[3], t[4], t[5]
+        ));
+        std::thread::sleep(Duration::from_millis(100));
     }
+    bar.finish_and_clear();
     let r = controller
         .join()
         .context("the simulated controller failed")?;
-    let (line, code) = outcome(&r, args.server);
+    let (line, code) = outcome(&r, server);
     match code {
-        0 => println!("{line}"),
+        0 => outln!("{line}")?,
         _ => eprintln!("photopose: error: {line}"),
     }
     Ok(ExitCode::from(code))
+}
+
+/// `--server`: an IP address with its port, or a host name with its port
+/// resolved now (its IPv4 address if it has one); the error names the flag.
+fn resolve_server(text: &str) -> Result<SocketAddr> {
+    use std::net::ToSocketAddrs;
+    if let Ok(a) = text.parse::<SocketAddr>() {
+        return Ok(a);
+    }
+    let found: Vec<SocketAddr> = text
+        .to_socket_addrs()
+        .with_context(|| format!("--server {text:?}: not host:port, or the host does not resolve"))?
+        .collect();
+    found
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(found.first())
+        .copied()
+        .with_context(|| format!("--server {text:?}: the name resolves to no address"))
 }
 
 /// The run's summary line and exit status.

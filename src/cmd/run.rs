@@ -36,6 +36,11 @@ pub struct Args {
 /// The built-in configuration (`config/photopose.toml`).
 pub const DEFAULT_CONFIG: &str = include_str!("../../config/photopose.toml");
 
+/// What an error with the camera file of a configuration is prefixed with.
+pub const CAMERA_KEY: &str = "`camera.camera_file`";
+/// What an error with the field file of a configuration is prefixed with.
+pub const FIELD_KEY: &str = "`camera.field_file`";
+
 /// Loads the configuration from `path` or the built-in one.
 pub fn load(path: Option<&std::path::Path>) -> Result<Config> {
     Ok(match path {
@@ -74,11 +79,11 @@ pub fn prepare(path: Option<&std::path::Path>, frames: Option<u64>) -> Result<Pr
 
 /// [`prepare`] for a configuration already loaded.
 pub fn prepare_config(config: Config) -> Result<Prepared> {
-    let camera = defaults::camera(config.camera_file.as_deref()).context("camera.camera_file")?;
-    let field = defaults::field(config.field_file.as_deref()).context("camera.field_file")?;
+    let camera = defaults::camera(config.camera_file.as_deref()).context(CAMERA_KEY)?;
+    let field = defaults::field(config.field_file.as_deref()).context(FIELD_KEY)?;
     let mut warnings = Vec::new();
     if let Some(rsi) = &config.rsi {
-        photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye).context("rsi.hand_eye")?;
+        photopose_formats::hand_eye::load_hand_eye(&rsi.hand_eye).context("`rsi.hand_eye`")?;
         warnings.extend(rsi.settings.warnings.iter().map(|w| format!("rsi: {w}")));
     }
     let source = photopose_pipeline::source::open(&config.source, &camera, &field)?;
@@ -233,20 +238,66 @@ fn start(
         ..
     } = prepared;
     let source = start_recording(&mut config, config_file, &camera, source, reloaded)?;
+    let described = source.describe();
     let supervision = Supervision {
         wedge,
         ..Supervision::from_env()
     };
     let pipeline = Pipeline::start_supervised(&config, camera, field, source, supervision)
         .context("cannot start the pipeline")?;
+    let served = Served {
+        udp: &config.udp,
+        tcp: pipeline.tcp_addr(),
+        metrics: pipeline.metrics_addr(),
+        rsi: pipeline.rsi_addr(),
+    };
+    let file = |p: Option<&std::path::Path>, builtin: &str| {
+        p.map_or_else(|| builtin.to_string(), |p| p.display().to_string())
+    };
     tracing::info!(
+        config = %file(config_file, "built-in config/photopose.toml"),
+        camera_file = %file(config.camera_file.as_deref(), "built-in config/camera.toml"),
+        field_file = %file(config.field_file.as_deref(), "built-in config/plate.csv"),
+        camera_id = %config.camera_id,
+        source = %described,
         workers = config.workers,
         slots = config.slots,
-        udp = ?config.udp,
-        tcp = ?pipeline.tcp_addr(),
+        serving = %served,
         "photopose running"
     );
     Ok((pipeline, config))
+}
+
+/// Every address the running daemon serves, as bound (a port 0 in the
+/// configuration shows the port taken): for the start line.
+struct Served<'a> {
+    udp: &'a [std::net::SocketAddr],
+    tcp: Option<std::net::SocketAddr>,
+    metrics: Option<std::net::SocketAddr>,
+    rsi: Option<std::net::SocketAddr>,
+}
+
+impl std::fmt::Display for Served<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut parts = Vec::new();
+        if !self.udp.is_empty() {
+            let to: Vec<String> = self.udp.iter().map(|a| a.to_string()).collect();
+            parts.push(format!("udp to {}", to.join(" ")));
+        }
+        if let Some(a) = self.tcp {
+            parts.push(format!("tcp stream on {a}"));
+        }
+        if let Some(a) = self.metrics {
+            parts.push(format!("metrics on http://{a}/metrics"));
+        }
+        if let Some(a) = self.rsi {
+            parts.push(format!("rsi on udp {a}"));
+        }
+        if parts.is_empty() {
+            return f.write_str("nothing");
+        }
+        f.write_str(&parts.join(", "))
+    }
 }
 
 /// Runs the daemon until a signal or the end of the source; SIGHUP
@@ -296,8 +347,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
     pipeline.stop();
     let started = pipeline_started;
     let c = pipeline.join();
-    summary(&c, started.elapsed().as_secs_f64(), args.latency_histogram);
-    record_summary(&config);
+    summary(&c, started.elapsed().as_secs_f64(), args.latency_histogram)?;
+    record_summary(&config)?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -325,7 +376,10 @@ fn reload(
             p
         }
         Err(e) => {
-            tracing::error!("reload refused, keeping the running configuration: {e:#}");
+            tracing::error!(
+                "reload refused, keeping the running configuration: {}",
+                crate::error_text(&e)
+            );
             notifier.notify("READY=1");
             return Ok((running, current));
         }
@@ -334,7 +388,7 @@ fn reload(
     running.stop();
     let old = running.join();
     tracing::info!(poses_ok = old.poses_ok.get(), "previous pipeline stopped");
-    record_summary(&current);
+    record_summary(&current)?;
     let started = match start(prepared, wedge, Some(path), true) {
         Ok(started) => {
             tracing::info!(config = %path.display(), "configuration reloaded");
@@ -342,7 +396,8 @@ fn reload(
         }
         Err(e) => {
             tracing::error!(
-                "the reloaded configuration did not start ({e:#}); back to the previous one"
+                "the reloaded configuration did not start ({}); back to the previous one",
+                crate::error_text(&e)
             );
             let mut previous = current;
             previous.record.link = None;
@@ -355,15 +410,15 @@ fn reload(
 
 /// The closing figures of the recording, if one ran (closed here if the
 /// pipeline did not).
-fn record_summary(config: &Config) {
+fn record_summary(config: &Config) -> std::io::Result<()> {
     let Some(link) = &config.record.link else {
-        return;
+        return Ok(());
     };
     link.close();
     let s = link.stats();
     let n = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
     let (frames, bytes, pixels) = (n(&s.frames), n(&s.bytes), n(&s.pixel_bytes));
-    println!(
+    outln!(
         "recording {}: {} frames ({} dropped), {} poses ({} dropped), {} files, {} bytes; {:.0} bytes per frame, compression ratio {:.2}",
         link.path().display(),
         frames,
@@ -374,7 +429,7 @@ fn record_summary(config: &Config) {
         bytes,
         bytes as f64 / frames.max(1) as f64,
         pixels as f64 / bytes.max(1) as f64,
-    );
+    )?;
     tracing::info!(
         path = %link.path().display(),
         frames,
@@ -384,20 +439,21 @@ fn record_summary(config: &Config) {
         bytes,
         "recording stopped"
     );
+    Ok(())
 }
 
 /// The closing figures of a run.
-fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
+fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) -> std::io::Result<()> {
     let ok = c.poses_ok.get();
     let done = ok + c.poses_failed.get();
     let q = |p: f64| c.latency_quantile_us(p).map_or(f64::NAN, |us| us / 1000.0);
-    println!(
+    outln!(
         "latency (frame handed over → pose sent): p50 {:.2} ms, p99 {:.2} ms, p99.9 {:.2} ms",
         q(0.5),
         q(0.99),
         q(0.999)
-    );
-    println!(
+    )?;
+    outln!(
         "{} frames in, {} dropped, {} poses ({} ok) in {:.1} s ({:.1} poses/s), mean latency {:.2} ms",
         c.frames_in.get(),
         c.frames_dropped.get(),
@@ -406,14 +462,14 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
         secs,
         done as f64 / secs.max(1e-9),
         c.latency.sum_seconds() / done.max(1) as f64 * 1000.0
-    );
+    )?;
     if histogram {
-        print_histogram(c);
+        print_histogram(c)?;
     }
     if let Some(rsi) = &c.rsi {
         let s = rsi.snapshot();
         let us = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.0} µs"));
-        println!(
+        outln!(
             "RSI: {} cycles, {} replies; reply latency (datagram received → reply sent) p50 {}, p99 {}, p99.9 {}, max {:.0} µs; controller Delay max {}",
             s.cycles,
             s.replies,
@@ -422,7 +478,7 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
             us(s.latency_p999_us),
             s.latency_max_us,
             s.delay_max
-        );
+        )?;
     }
     tracing::info!(
         frames_in = c.frames_in.get(),
@@ -430,29 +486,31 @@ fn summary(c: &photopose_pipeline::Counters, secs: f64, histogram: bool) {
         poses_ok = c.poses_ok.get(),
         "photopose stopped"
     );
+    Ok(())
 }
 
 /// Prints the non-empty buckets of the latency histogram (upper edges,
 /// eight buckets per octave) with a bar each.
-fn print_histogram(c: &photopose_pipeline::Counters) {
+fn print_histogram(c: &photopose_pipeline::Counters) -> std::io::Result<()> {
     let buckets: Vec<(f64, u64)> = c.latency.nonempty_buckets().collect();
     let total: u64 = buckets.iter().map(|b| b.1).sum();
     let most = buckets.iter().map(|b| b.1).max().unwrap_or(1).max(1);
     if total == 0 {
-        return;
+        return Ok(());
     }
-    println!("latency histogram (frame handed over → pose sent):");
+    outln!("latency histogram (frame handed over → pose sent):")?;
     let mut below = 0u64;
     for (edge_s, n) in buckets {
         below += n;
-        println!(
+        outln!(
             "  ≤ {:>9.3} ms {:>8} {:>6.2} % {}",
             edge_s * 1000.0,
             n,
             100.0 * below as f64 / total as f64,
             "#".repeat((n * 50).div_ceil(most) as usize)
-        );
+        )?;
     }
+    Ok(())
 }
 
 /// Arguments of `photopose check-config`.
@@ -481,6 +539,6 @@ pub fn check(args: CheckArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::from(2));
     }
-    println!("{}: ok", args.file.display());
+    outln!("{}: ok", args.file.display())?;
     Ok(ExitCode::SUCCESS)
 }

@@ -181,12 +181,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
     }
     if args.json {
         for r in &rows {
-            println!("{}", serde_json::to_string(r)?);
+            outln!("{}", serde_json::to_string(r)?)?;
         }
         return Ok(ExitCode::SUCCESS);
     }
     let s = &camera.sensor;
-    println!(
+    outln!(
         "Predicted precision of the exterior orientation (a-priori, from image noise)\n\
          camera {}x{} px, pixel {:.4} mm, c = {:.3} mm; pose X,Y,Z,A,B,C = {}; {} of {} targets visible\n",
         s.width,
@@ -196,16 +196,22 @@ pub fn run(args: Args) -> Result<ExitCode> {
         args.pose,
         visible.len(),
         field.len()
-    );
-    println!(
+    )?;
+    outln!(
         "{:>14} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9}",
-        "sigma image", "sX [mm]", "sY [mm]", "sZ [mm]", "sωX [°]", "sωY [°]", "sωZ [°]"
-    );
-    println!("{}", "-".repeat(82));
+        "sigma image",
+        "sX [mm]",
+        "sY [mm]",
+        "sZ [mm]",
+        "sωX [°]",
+        "sωY [°]",
+        "sωZ [°]"
+    )?;
+    outln!("{}", "-".repeat(82))?;
     for (r, label) in rows.iter().zip(&args.sigma_px) {
         let c = r.predicted_std_center;
         let w = r.predicted_std_rotation_deg;
-        println!(
+        outln!(
             "{:>14} | {:>9.4} {:>9.4} {:>9.4} | {:>9.5} {:>9.5} {:>9.5}",
             format!("{label} px"),
             c[0],
@@ -214,11 +220,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
             w[0],
             w[1],
             w[2]
-        );
+        )?;
         if let Some(mc) = &r.monte_carlo {
             let c = mc.std_center;
             let w = mc.std_rotation_deg;
-            println!(
+            outln!(
                 "{:>14} | {:>9.4} {:>9.4} {:>9.4} | {:>9.5} {:>9.5} {:>9.5}",
                 format!("MC n={}", mc.trials),
                 c[0],
@@ -227,13 +233,19 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 w[0],
                 w[1],
                 w[2]
-            );
+            )?;
             let m = mc.mean_error_center;
             let mw = mc.mean_error_rotation_deg;
-            println!(
+            outln!(
                 "{:>14} | {:>9.4} {:>9.4} {:>9.4} | {:>9.5} {:>9.5} {:>9.5}",
-                "MC mean err", m[0], m[1], m[2], mw[0], mw[1], mw[2]
-            );
+                "MC mean err",
+                m[0],
+                m[1],
+                m[2],
+                mw[0],
+                mw[1],
+                mw[2]
+            )?;
         }
     }
     Ok(ExitCode::SUCCESS)

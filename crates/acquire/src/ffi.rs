@@ -115,3 +115,40 @@ pub(crate) fn device_id_of_serial(serial: &str) -> Option<String> {
         })
     }
 }
+
+/// Every device a fresh discovery finds, as (id, vendor, model, serial,
+/// address, protocol); an unknown value is empty. Call with the crate's
+/// opening lock held (discovery is global state in aravis).
+pub(crate) fn devices() -> Vec<[String; 6]> {
+    let text = |p: *const std::ffi::c_char| {
+        if p.is_null() {
+            String::new()
+        } else {
+            // SAFETY: a non-null string of aravis' device list, valid until
+            // the next update of the list, which the caller's lock excludes;
+            // it is copied at once.
+            unsafe { std::ffi::CStr::from_ptr(p) }
+                .to_string_lossy()
+                .into_owned()
+        }
+    };
+    // SAFETY: as in `device_id_of_serial`: the list is global state, and
+    // every caller holds `gige::OPEN_LOCK`; indices stay below the count
+    // of the update just made.
+    unsafe {
+        aravis_sys::arv_update_device_list();
+        let n = aravis_sys::arv_get_n_devices();
+        (0..n)
+            .map(|i| {
+                [
+                    text(aravis_sys::arv_get_device_id(i)),
+                    text(aravis_sys::arv_get_device_vendor(i)),
+                    text(aravis_sys::arv_get_device_model(i)),
+                    text(aravis_sys::arv_get_device_serial_nbr(i)),
+                    text(aravis_sys::arv_get_device_address(i)),
+                    text(aravis_sys::arv_get_device_protocol(i)),
+                ]
+            })
+            .collect()
+    }
+}

@@ -27,7 +27,7 @@ pub mod ring;
 pub mod source;
 
 #[cfg(feature = "gige")]
-pub use gige::{GigeConfig, GigeSource, PixelDepth, Roi};
+pub use gige::{list_cameras, CameraInfo, FeatureValue, GigeConfig, GigeSource, PixelDepth, Roi};
 pub use grabber::{
     spawn_grabber, spawn_grabber_counted, spawn_grabber_with, Grabber, GrabberCounters, GrabberExit,
 };

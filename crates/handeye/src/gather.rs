@@ -66,6 +66,21 @@ pub struct Gatherer {
     window: Vec<Sample>,
     last_station: Option<[f64; 6]>,
     taken: usize,
+    moved: Option<(f64, f64)>,
+}
+
+/// Why the gatherer is waiting, for a live display: how long the robot has
+/// stood still so far, and (until it has moved far enough) how far it has
+/// moved from the previous station.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GatherProgress {
+    /// Time the robot has stood still in the current phase, s.
+    pub still_s: f64,
+    /// Translation (mm) and rotation (degrees) from the previous station
+    /// while the next one is not armed yet; `None`: armed.
+    pub moved: Option<(f64, f64)>,
+    /// Stations taken so far.
+    pub taken: usize,
 }
 
 /// Translation (mm) and rotation (degrees) between two KUKA poses.
@@ -86,7 +101,13 @@ impl Gatherer {
             window: Vec::new(),
             last_station: None,
             taken: 0,
+            moved: None,
         }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &GatherSettings {
+        &self.settings
     }
 
     /// Stations taken so far.
@@ -100,16 +121,31 @@ impl Gatherer {
         self.last_station.is_none()
     }
 
+    /// Where the gatherer stands (see [`GatherProgress`]).
+    pub fn progress(&self) -> GatherProgress {
+        let still_s = match (self.window.first(), self.window.last()) {
+            (Some(a), Some(b)) if self.last_station.is_none() => b.time_s - a.time_s,
+            _ => 0.0,
+        };
+        GatherProgress {
+            still_s,
+            moved: self.last_station.map(|_| self.moved.unwrap_or((0.0, 0.0))),
+            taken: self.taken,
+        }
+    }
+
     /// Feeds one sample; returns a station (named `live1`, `live2`, …) when
     /// a still phase completes.
     pub fn push(&mut self, s: Sample) -> Option<StationRow> {
         let g = self.settings;
         if let Some(last) = &self.last_station {
             let (mm, deg) = distance(last, &s.robot_xyzabc);
+            self.moved = Some((mm, deg));
             if mm < g.move_mm && deg < g.move_deg {
                 return None;
             }
             self.last_station = None;
+            self.moved = None;
         }
         let moved = self.window.first().is_some_and(|first| {
             let (mm, deg) = distance(&first.robot_xyzabc, &s.robot_xyzabc);
@@ -125,6 +161,7 @@ impl Gatherer {
         }
         let station = self.station(&s);
         self.last_station = Some(s.robot_xyzabc);
+        self.moved = Some((0.0, 0.0));
         self.window.clear();
         Some(station)
     }
@@ -228,6 +265,31 @@ mod tests {
         assert!((std.unwrap()[0] - 0.005).abs() < 1e-12);
         // The row writes as a line of the station file.
         assert!(s.csv_line().unwrap().starts_with("live2,420,"));
+    }
+
+    #[test]
+    fn progress_says_how_long_still_and_how_far_moved() {
+        let mut g = Gatherer::new(GatherSettings::default());
+        let p1 = [400.0, 0.0, 600.0, 0.0, 90.0, 0.0];
+        assert_eq!(g.progress().moved, None);
+        for k in 0..10 {
+            g.push(sample(0.04 * k as f64, p1, 100.0));
+        }
+        let p = g.progress();
+        assert!((p.still_s - 0.36).abs() < 1e-9, "{p:?}");
+        assert_eq!((p.moved, p.taken), (None, 0));
+        let mut t = 0.4;
+        while g.taken() == 0 {
+            g.push(sample(t, p1, 100.0));
+            t += 0.04;
+        }
+        assert_eq!(g.progress().moved, Some((0.0, 0.0)));
+        let p2 = [403.0, 0.0, 600.0, 0.0, 90.0, 0.0];
+        g.push(sample(t, p2, 100.0));
+        let p = g.progress();
+        let (mm, deg) = p.moved.unwrap();
+        assert!((mm - 3.0).abs() < 1e-9 && deg.abs() < 1e-9, "{p:?}");
+        assert_eq!((p.still_s, p.taken), (0.0, 1));
     }
 
     #[test]

@@ -4,7 +4,7 @@
 
 use photopose_formats::file::{read_text, FileError, FileKind};
 use serde::Deserialize;
-use std::net::SocketAddr;
+use std::net::{SocketAddr, ToSocketAddrs};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -36,6 +36,19 @@ pub enum ConfigError {
         path: String,
         /// What is wrong with the section.
         source: photopose_rsi::ConfigError,
+    },
+    /// A host name where an address is asked does not resolve (or is not
+    /// `host:port`).
+    #[error("{path}: `{key}` = {value:?}: {reason}")]
+    Resolve {
+        /// The file.
+        path: String,
+        /// The key, dotted.
+        key: &'static str,
+        /// The address as written.
+        value: String,
+        /// Why it gives no address (the resolver's word).
+        reason: String,
     },
     /// A value is out of range.
     #[error("{path}: `{key}` = {value}: {why}")]
@@ -326,26 +339,19 @@ impl Config {
                 "must be > 0",
             ));
         }
-        let mut udp = Vec::new();
-        for d in &f.output.udp {
-            udp.push(d.parse::<SocketAddr>().map_err(|_| {
-                bad(
-                    "output.udp",
-                    d.clone(),
-                    "must be host:port addresses (IP literal)",
-                )
-            })?);
-        }
-        let tcp_listen = match &f.output.tcp_listen {
-            Some(a) => Some(a.parse::<SocketAddr>().map_err(|_| {
-                bad(
-                    "output.tcp_listen",
-                    a.clone(),
-                    "must be an IP:port to listen on",
-                )
-            })?),
-            None => None,
-        };
+        let resolve = |key: &'static str, text: &str| resolve(origin, key, text);
+        let udp = f
+            .output
+            .udp
+            .iter()
+            .map(|d| resolve("output.udp", d))
+            .collect::<Result<Vec<_>, _>>()?;
+        let tcp_listen = f
+            .output
+            .tcp_listen
+            .as_deref()
+            .map(|a| resolve("output.tcp_listen", a))
+            .transpose()?;
         // Per-client memory is bounded: a queue of at most 4096 lines
         // (about 2.5 MB of pose lines), at most 1024 clients.
         if !(1..=photopose_stream::tcp::MAX_CLIENT_QUEUE).contains(&f.output.tcp_client_queue) {
@@ -451,18 +457,48 @@ impl Config {
             tcp_listen,
             tcp_client_queue: f.output.tcp_client_queue,
             tcp_max_clients: f.output.tcp_max_clients,
-            metrics_listen: match &f.metrics.listen {
-                Some(a) => Some(a.parse::<SocketAddr>().map_err(|_| {
-                    bad(
-                        "metrics.listen",
-                        a.clone(),
-                        "must be an IP:port to listen on",
-                    )
-                })?),
-                None => None,
-            },
+            metrics_listen: f
+                .metrics
+                .listen
+                .as_deref()
+                .map(|a| resolve("metrics.listen", a))
+                .transpose()?,
         })
     }
+}
+
+/// An address where one is asked: an IP literal with its port, or a host
+/// name with its port (`localhost:5005`), resolved now; a name with both
+/// gives its IPv4 address (a listener on `localhost` is then reached by
+/// clients that say `127.0.0.1`).
+pub fn resolve(origin: &str, key: &'static str, text: &str) -> Result<SocketAddr, ConfigError> {
+    if let Ok(a) = text.parse::<SocketAddr>() {
+        return Ok(a);
+    }
+    let err = |reason: String| ConfigError::Resolve {
+        path: origin.into(),
+        key,
+        value: text.into(),
+        reason,
+    };
+    if text
+        .rsplit_once(':')
+        .is_none_or(|(_, p)| p.parse::<u16>().is_err())
+    {
+        return Err(err(
+            "must be host:port (an IP address or a host name, and a port)".into(),
+        ));
+    }
+    let found: Vec<SocketAddr> = text
+        .to_socket_addrs()
+        .map_err(|e| err(format!("does not resolve: {e}")))?
+        .collect();
+    found
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(found.first())
+        .copied()
+        .ok_or_else(|| err("the name resolves to no address".into()))
 }
 
 /// Validates `[camera] id`: 1–64 characters of `A–Z a–z 0–9 _ -` (it is
@@ -563,6 +599,66 @@ mod tests {
     }
 
     #[test]
+    fn every_section_may_be_left_out_or_left_empty() {
+        let none = Config::parse("", "x").unwrap();
+        assert!(matches!(none.source, Source::Synthetic(_)));
+        for section in [
+            "camera",
+            "source",
+            "source.synthetic",
+            "pipeline",
+            "output",
+            "metrics",
+            "rsi",
+            "record",
+        ] {
+            let c = Config::parse(&format!("[{section}]\n"), "x")
+                .unwrap_or_else(|e| panic!("[{section}] alone: {e}"));
+            assert_eq!(c, none, "[{section}] alone changes the defaults");
+        }
+        // Only what differs: a synthetic source at another rate, kind implied.
+        let c = Config::parse("[source.synthetic]\nrate_hz = 5.0\n", "x").unwrap();
+        assert!(matches!(c.source, Source::Synthetic(ref s) if s.rate_hz == 5.0));
+    }
+
+    #[test]
+    fn host_names_are_resolved_where_an_address_is_asked() {
+        let c = Config::parse(
+            "[output]\nudp = [\"localhost:5005\", \"127.0.0.1:5007\"]\ntcp_listen = \"localhost:5006\"\n\
+             [metrics]\nlisten = \"localhost:9464\"\n",
+            "x",
+        )
+        .unwrap();
+        let local = |port: u16| SocketAddr::from(([127, 0, 0, 1], port));
+        assert_eq!(c.udp, vec![local(5005), local(5007)]);
+        assert_eq!(c.tcp_listen, Some(local(5006)));
+        assert_eq!(c.metrics_listen, Some(local(9464)));
+        for (text, key, value) in [
+            (
+                "[output]\nudp = [\"no-such-host.invalid:5005\"]\n",
+                "output.udp",
+                "no-such-host.invalid:5005",
+            ),
+            (
+                "[output]\ntcp_listen = \"localhost\"\n",
+                "output.tcp_listen",
+                "localhost",
+            ),
+            (
+                "[metrics]\nlisten = \"localhost:http\"\n",
+                "metrics.listen",
+                "localhost:http",
+            ),
+        ] {
+            let e = Config::parse(text, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(key) && e.contains(value),
+                "{e:?} lacks {key} or {value}"
+            );
+        }
+    }
+
+    #[test]
     fn missing_sections_take_their_defaults() {
         let c = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
         assert_eq!((c.tcp_client_queue, c.tcp_max_clients), (256, 16));
@@ -600,6 +696,47 @@ mod tests {
         // No section: the first camera found, with the defaults.
         let d = Config::parse("[source]\nkind = \"gige\"\n", "x").unwrap();
         assert!(matches!(d.source, Source::Gige(ref g) if g.camera.is_none() && g.buffers == 8));
+    }
+
+    #[test]
+    fn gige_features_keep_their_order_and_types() {
+        use photopose_acquire::FeatureValue;
+        let c = Config::parse(
+            "[source]\nkind = \"gige\"\n[source.gige.features]\nTriggerSelector = \"FrameStart\"\n\
+             TriggerMode = \"On\"\nGevSCPD = 2000\nPtpEnable = true\nAcquisitionFrameRate = 25.5\n",
+            "x",
+        )
+        .unwrap();
+        let Source::Gige(g) = c.source else {
+            panic!("not gige")
+        };
+        assert_eq!(
+            g.features,
+            vec![
+                (
+                    "TriggerSelector".into(),
+                    FeatureValue::Text("FrameStart".into())
+                ),
+                ("TriggerMode".into(), FeatureValue::Text("On".into())),
+                ("GevSCPD".into(), FeatureValue::Int(2000)),
+                ("PtpEnable".into(), FeatureValue::Bool(true)),
+                ("AcquisitionFrameRate".into(), FeatureValue::Float(25.5)),
+            ]
+        );
+        for text in [
+            "[source]\nkind = \"gige\"\n[source.gige.features]\n\"Bad Name\" = 1\n",
+            "[source]\nkind = \"gige\"\n[source.gige.features]\nGain = nan\n",
+        ] {
+            let e = Config::parse(text, "x.toml").unwrap_err().to_string();
+            assert!(e.contains("source.gige.features"), "{e}");
+        }
+        let e = Config::parse(
+            "[source]\nkind = \"gige\"\n[source.gige.features]\nRoi = [1, 2]\n",
+            "x.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("features"), "{e}");
     }
 
     #[test]
@@ -662,7 +799,6 @@ mod tests {
                 EXAMPLE.replace("tcp_max_clients = 16", "tcp_max_clients = 5000"),
                 "output.tcp_max_clients",
             ),
-            ("[source]\n".to_string(), "kind"),
             ("[source]\nkind = \"replay\"\n".to_string(), "source.replay.path"),
             ("[source]\nkind = \"gige\"\n[source.gige]\nbuffers = 1\n".to_string(), "source.gige.buffers"),
             ("[source]\nkind = \"gige\"\n[source.gige]\nroi = [0, 0, 0, 10]\n".to_string(), "source.gige.roi"),

@@ -14,6 +14,28 @@ use std::path::PathBuf;
 use std::time::Duration;
 use thiserror::Error;
 
+/// An IP address as written, or the address a host name resolves to now
+/// (its IPv4 address if it has one).
+fn host_ip(text: &str) -> Option<IpAddr> {
+    use std::net::ToSocketAddrs;
+    if let Ok(ip) = text.parse::<IpAddr>() {
+        return Some(ip);
+    }
+    if text.is_empty() {
+        return None;
+    }
+    let found: Vec<IpAddr> = (text, 0u16)
+        .to_socket_addrs()
+        .ok()?
+        .map(|a| a.ip())
+        .collect();
+    found
+        .iter()
+        .find(|ip| ip.is_ipv4())
+        .or(found.first())
+        .copied()
+}
+
 /// Why the `[rsi]` section was rejected.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
@@ -250,16 +272,25 @@ impl RsiConfig {
             value,
             why,
         };
-        let ip: IpAddr = self
-            .bind
-            .parse()
-            .map_err(|_| bad("bind", format!("{:?}", self.bind), "not an IP address"))?;
+        let ip: IpAddr = host_ip(&self.bind).ok_or_else(|| {
+            bad(
+                "bind",
+                format!("{:?}", self.bind),
+                "not an IP address or a host name that resolves",
+            )
+        })?;
         let mut controllers = Vec::new();
         for c in &self.controllers {
             // An IPv4-mapped IPv6 address is its IPv4 address.
             controllers.push(
-                c.parse::<IpAddr>()
-                    .map_err(|_| bad("controllers", format!("{c:?}"), "not an IP address"))?
+                host_ip(c)
+                    .ok_or_else(|| {
+                        bad(
+                            "controllers",
+                            format!("{c:?}"),
+                            "not an IP address or a host name that resolves",
+                        )
+                    })?
                     .to_canonical(),
             );
         }
@@ -518,6 +549,26 @@ mod tests {
     }
 
     #[test]
+    fn host_names_are_resolved_for_bind_and_controllers() {
+        let c = RsiConfig::from_toml(
+            "[rsi]\nenabled = true\nport = 49152\nbind = \"localhost\"\ncontrollers = [\"localhost\"]\n",
+        )
+        .unwrap();
+        let s = c.settings(None).unwrap();
+        assert_eq!(s.bind, "127.0.0.1:49152".parse().unwrap());
+        assert_eq!(s.controllers, vec!["127.0.0.1".parse::<IpAddr>().unwrap()]);
+        let c = RsiConfig::from_toml(
+            "[rsi]\nenabled = true\nport = 49152\ncontrollers = [\"no-such-robot.invalid\"]\n",
+        )
+        .unwrap();
+        let e = c.settings(None).unwrap_err().to_string();
+        assert!(
+            e.contains("controllers") && e.contains("no-such-robot.invalid"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn unknown_key_is_named() {
         let e = RsiConfig::from_toml("[rsi]\nport = 1\ngian = 0.5\n").unwrap_err();
         assert!(e.to_string().contains("gian"), "{e}");
@@ -603,7 +654,7 @@ mod tests {
             ),
             (
                 RsiConfig {
-                    bind: "localhost".into(),
+                    bind: "no-such-host.invalid".into(),
                     ..base.clone()
                 },
                 "bind",

@@ -4,7 +4,7 @@
 //! blocks about 2.5 s) — done on the source's helper threads, never on the
 //! frame path.
 
-use super::config::{GigeConfig, PixelDepth};
+use super::config::{FeatureValue, GigeConfig, PixelDepth};
 use crate::ffi;
 use aravis::prelude::*;
 use aravis::{AcquisitionMode, Buffer, Camera, DeviceError, PixelFormat, Stream};
@@ -117,6 +117,9 @@ pub(super) fn open(
     if let Some(fps) = config.frame_rate {
         camera.set_frame_rate(fps).map_err(setting("frame rate"))?;
     }
+    for (name, value) in &config.features {
+        set_feature(&camera, name, value)?;
+    }
     if camera.is_gv_device() {
         if let Some(p) = config.packet_size {
             camera
@@ -154,6 +157,104 @@ pub(super) fn open(
         id,
         took: t0.elapsed(),
     })
+}
+
+/// Writes one GenICam feature of `[source.gige.features]`: the feature must
+/// be in the camera's node map, an enumeration's value one of its entries,
+/// and the camera must take it; otherwise the opening fails naming the
+/// feature (a configuration error, not a reason to retry).
+fn set_feature(camera: &Camera, name: &str, value: &FeatureValue) -> Result<(), OpenError> {
+    let what = format!("source.gige.features.{name}");
+    let refused = |reason: String| OpenError::Config {
+        what: what.clone(),
+        reason,
+    };
+    let Some(device) = camera.device() else {
+        return Err(refused(
+            "the camera has no device to set features on".into(),
+        ));
+    };
+    let Some(node) = device.feature(name) else {
+        return Err(refused(
+            "no such feature in the camera's node map (arv-tool-0.8 features lists them)".into(),
+        ));
+    };
+    if let Some(f) = node.downcast_ref::<aravis::GcFeatureNode>() {
+        if f.actual_access_mode() == aravis::GcAccessMode::Ro {
+            return Err(refused("the feature is read-only".into()));
+        }
+    }
+    if let (Some(e), FeatureValue::Text(v)) = (node.downcast_ref::<aravis::GcEnumeration>(), value)
+    {
+        let entries: Vec<String> = e
+            .dup_available_string_values()
+            .map(|l| l.iter().map(|s| s.to_string()).collect())
+            .unwrap_or_default();
+        if !entries.is_empty() && !entries.iter().any(|x| x == v) {
+            return Err(refused(format!(
+                "{v:?} is not one of its entries ({})",
+                entries.join(", ")
+            )));
+        }
+    }
+    let written = match value {
+        FeatureValue::Int(v) => camera.set_integer(name, *v),
+        FeatureValue::Float(v) => camera.set_float(name, *v),
+        FeatureValue::Bool(v) => camera.set_boolean(name, *v),
+        FeatureValue::Text(v) => camera.set_string(name, v),
+    };
+    // An integer the camera silently clamps or rounds is a value it refused.
+    let written = written.and_then(|()| match value {
+        FeatureValue::Int(v) => camera
+            .integer(name)
+            .map(|kept| (kept != *v).then_some(kept)),
+        _ => Ok(None),
+    });
+    match written {
+        Ok(None) => {
+            tracing::debug!(feature = name, %value, "feature set");
+            Ok(())
+        }
+        Ok(Some(kept)) => Err(refused(format!("{value} refused: the camera keeps {kept}"))),
+        Err(e) if transient(&e) => Err(OpenError::Absent(format!("{what}: {e}"))),
+        Err(e) => Err(refused(format!("{value} refused: {e}"))),
+    }
+}
+
+/// One camera a discovery found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CameraInfo {
+    /// The device id `[source.gige] camera` takes (as `arv-tool-0.8` lists it).
+    pub id: String,
+    /// Vendor.
+    pub vendor: String,
+    /// Model.
+    pub model: String,
+    /// Serial number (also accepted by `[source.gige] camera`).
+    pub serial: String,
+    /// Network address (GigE Vision) or bus address.
+    pub address: String,
+    /// Transport as aravis names it (`GigEVision`, `USB3Vision`, `Fake`).
+    pub protocol: String,
+}
+
+/// The cameras aravis finds now (GigE Vision and USB3 Vision), by one
+/// discovery, serialised with every opening in the process.
+pub fn list_cameras() -> Vec<CameraInfo> {
+    let _guard = OPEN_LOCK.lock().unwrap_or_else(PoisonError::into_inner);
+    crate::ffi::devices()
+        .into_iter()
+        .map(
+            |[id, vendor, model, serial, address, protocol]| CameraInfo {
+                id,
+                vendor,
+                model,
+                serial,
+                address,
+                protocol,
+            },
+        )
+        .collect()
 }
 
 /// Stops (unless `lost`) and drops a camera: slow if the camera is dead,

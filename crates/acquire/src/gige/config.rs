@@ -1,6 +1,7 @@
 //! The GigE source's settings: what is asked of the camera (pixel format,
 //! exposure, gain, frame rate, ROI, packet size, packet socket, buffers) and
-//! the loss and back-off timing, with their one set of defaults and checks.
+//! the loss and back-off timing, with their one set of defaults and checks;
+//! and any further GenICam feature by name (`[source.gige.features]`).
 
 use crate::source::SourceError;
 use std::time::Duration;
@@ -26,6 +27,31 @@ pub struct Roi {
     pub width: u32,
     /// Height.
     pub height: u32,
+}
+
+/// The value of a GenICam feature set by name: its type decides how it is
+/// written (an enumeration takes its entry's name as a string).
+#[derive(Debug, Clone, PartialEq)]
+pub enum FeatureValue {
+    /// An integer feature.
+    Int(i64),
+    /// A float feature.
+    Float(f64),
+    /// A boolean feature.
+    Bool(bool),
+    /// A string feature or an enumeration entry.
+    Text(String),
+}
+
+impl std::fmt::Display for FeatureValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FeatureValue::Int(v) => write!(f, "{v}"),
+            FeatureValue::Float(v) => write!(f, "{v}"),
+            FeatureValue::Bool(v) => write!(f, "{v}"),
+            FeatureValue::Text(v) => write!(f, "{v:?}"),
+        }
+    }
 }
 
 /// How to open and run a GigE Vision camera.
@@ -58,6 +84,10 @@ pub struct GigeConfig {
     pub backoff_initial: Duration,
     /// Longest wait between reopening attempts.
     pub backoff_max: Duration,
+    /// Further GenICam features (name, value), written in this order at
+    /// each opening after the settings above; each must exist in the
+    /// camera's node map and take its value, or the opening fails naming it.
+    pub features: Vec<(String, FeatureValue)>,
 }
 
 impl Default for GigeConfig {
@@ -75,6 +105,7 @@ impl Default for GigeConfig {
             lost_after: Duration::from_secs(2),
             backoff_initial: Duration::from_millis(100),
             backoff_max: Duration::from_secs(5),
+            features: Vec::new(),
         }
     }
 }
@@ -121,6 +152,19 @@ impl GigeConfig {
                 || r.x.max(r.y).max(r.width).max(r.height) > i32::MAX as u32
             {
                 return bad("roi", format!("{r:?} is empty or too large"));
+            }
+        }
+        for (name, value) in &self.features {
+            if name.is_empty() || !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
+                return bad(
+                    "features",
+                    format!("{name:?} is not a GenICam feature name"),
+                );
+            }
+            if let FeatureValue::Float(v) = value {
+                if !v.is_finite() {
+                    return bad("features", format!("{name} = {v} is not finite"));
+                }
             }
         }
         if self.lost_after.is_zero() || self.backoff_initial.is_zero() {

@@ -37,7 +37,8 @@ mod camera;
 mod config;
 mod copy;
 
-pub use config::{GigeConfig, PixelDepth, Roi};
+pub use camera::{list_cameras, CameraInfo};
+pub use config::{FeatureValue, GigeConfig, PixelDepth, Roi};
 pub use copy::id_gap;
 
 use crate::ring::Slot;

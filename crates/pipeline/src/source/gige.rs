@@ -5,8 +5,9 @@
 
 use super::Bad;
 use crate::config::ConfigError;
-use photopose_acquire::{GigeConfig, PixelDepth, Roi};
-use serde::Deserialize;
+use photopose_acquire::{FeatureValue, GigeConfig, PixelDepth, Roi};
+use serde::de::{MapAccess, Visitor};
+use serde::{Deserialize, Deserializer};
 
 /// `[source.gige]` as written: every key optional, an absent one takes
 /// [`GigeConfig::default`]'s value.
@@ -25,6 +26,53 @@ pub(crate) struct GigeSection {
     lost_after_ms: Option<f64>,
     backoff_initial_ms: Option<f64>,
     backoff_max_ms: Option<f64>,
+    #[serde(default)]
+    features: Features,
+}
+
+/// `[source.gige.features]`: GenICam feature name → value, kept in the
+/// order written (a selector must be written before the features it
+/// selects, e.g. `TriggerSelector` before `TriggerMode`).
+#[derive(Debug, Clone, Default)]
+struct Features(Vec<(String, FeatureToml)>);
+
+#[derive(Debug, Clone)]
+enum FeatureToml {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+    Text(String),
+}
+
+impl<'de> Deserialize<'de> for Features {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct InOrder;
+        impl<'de> Visitor<'de> for InOrder {
+            type Value = Features;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a table of GenICam feature names and values (integer, float, boolean or string)")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Features, A::Error> {
+                let mut out = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, toml::Value>()? {
+                    let v = match v {
+                        toml::Value::Boolean(b) => FeatureToml::Bool(b),
+                        toml::Value::Integer(i) => FeatureToml::Int(i),
+                        toml::Value::Float(f) => FeatureToml::Float(f),
+                        toml::Value::String(t) => FeatureToml::Text(t),
+                        other => {
+                            return Err(serde::de::Error::custom(format!(
+                                "`source.gige.features.{k}` = {other}: must be an integer, float, boolean or string"
+                            )))
+                        }
+                    };
+                    out.push((k, v));
+                }
+                Ok(Features(out))
+            }
+        }
+        d.deserialize_map(InOrder)
+    }
 }
 
 #[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
@@ -121,6 +169,7 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
             600_000.0,
         )?,
         backoff_max: ms("source.gige.backoff_max_ms", backoff_max_ms, 600_000.0)?,
+        features: features(g.features, bad)?,
     };
     if config.backoff_max < config.backoff_initial {
         return Err(bad(
@@ -130,4 +179,34 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
         ));
     }
     Ok(config)
+}
+
+/// Checks the names and values of `[source.gige.features]` (whether the
+/// camera has them is checked against its node map at each opening).
+fn features(f: Features, bad: Bad<'_>) -> Result<Vec<(String, FeatureValue)>, ConfigError> {
+    let mut out = Vec::with_capacity(f.0.len());
+    for (name, value) in f.0 {
+        if name.is_empty() || !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
+            return Err(bad(
+                "source.gige.features",
+                format!("{name:?}"),
+                "must be GenICam feature names (letters, digits, '_')",
+            ));
+        }
+        let value = match value {
+            FeatureToml::Bool(v) => FeatureValue::Bool(v),
+            FeatureToml::Int(v) => FeatureValue::Int(v),
+            FeatureToml::Float(v) if v.is_finite() => FeatureValue::Float(v),
+            FeatureToml::Float(v) => {
+                return Err(bad(
+                    "source.gige.features",
+                    format!("{name} = {v}"),
+                    "must be a finite number",
+                ))
+            }
+            FeatureToml::Text(v) => FeatureValue::Text(v),
+        };
+        out.push((name, value));
+    }
+    Ok(out)
 }

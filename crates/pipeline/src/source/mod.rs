@@ -34,10 +34,11 @@ use thiserror::Error;
 /// How a section reports a bad value: the key, the value, the valid range.
 pub(crate) type Bad<'a> = &'a dyn Fn(&'static str, String, &'static str) -> ConfigError;
 
-/// `source.kind`.
-#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq)]
+/// `source.kind` (absent: `synthetic`, the shipped default).
+#[derive(Debug, Deserialize, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub(crate) enum SourceKind {
+    #[default]
     Synthetic,
     Replay,
     Gige,
@@ -48,6 +49,7 @@ pub(crate) enum SourceKind {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct SourceSection {
+    #[serde(default)]
     kind: SourceKind,
     synthetic: Option<synthetic::SyntheticSection>,
     replay: Option<replay::ReplaySection>,
