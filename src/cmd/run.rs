@@ -246,6 +246,12 @@ fn start(
         tcp = ?pipeline.tcp_addr(),
         "photopose running"
     );
+    if let Some(a) = pipeline.live_addr() {
+        tracing::info!(
+            address = %format!("ws://{a}"),
+            "live view: in the Foxglove app, Open connection → Foxglove WebSocket → this address"
+        );
+    }
     Ok((pipeline, config))
 }
 

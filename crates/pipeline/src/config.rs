@@ -70,6 +70,89 @@ struct File {
     rsi: photopose_rsi::RsiConfig,
     #[serde(default)]
     record: RecordSection,
+    #[serde(default)]
+    live: LiveSection,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct LiveSection {
+    enabled: bool,
+    address: String,
+    image_hz: f64,
+    image_scale: u32,
+    pose_hz: f64,
+}
+
+impl Default for LiveSection {
+    fn default() -> Self {
+        LiveSection {
+            enabled: false,
+            address: "127.0.0.1:8765".into(),
+            image_hz: 5.0,
+            image_scale: 4,
+            pose_hz: 20.0,
+        }
+    }
+}
+
+/// The live view in Foxglove (`[live]`, docs/live-view.md): a Foxglove
+/// WebSocket server on the edge runtime.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Live {
+    /// Whether the daemon serves it (off by default).
+    pub enabled: bool,
+    /// Where it listens (`ws://ADDRESS`).
+    pub address: SocketAddr,
+    /// Frames per second sent to the view (throttled on the grabber).
+    pub image_hz: f64,
+    /// Downscale factor of the frames (box filter; 1: full size).
+    pub image_scale: u32,
+    /// Poses (and status) per second sent to the view.
+    pub pose_hz: f64,
+}
+
+impl Live {
+    fn from_section(
+        l: &LiveSection,
+        bad: &dyn Fn(&'static str, String, &'static str) -> ConfigError,
+    ) -> Result<Live, ConfigError> {
+        let address = l.address.parse::<SocketAddr>().map_err(|_| {
+            bad(
+                "live.address",
+                l.address.clone(),
+                "must be an IP:port to listen on",
+            )
+        })?;
+        if !(l.image_hz.is_finite() && l.image_hz > 0.0 && l.image_hz <= 60.0) {
+            return Err(bad(
+                "live.image_hz",
+                l.image_hz.to_string(),
+                "must be > 0 and at most 60 frames per second",
+            ));
+        }
+        if !(1..=64).contains(&l.image_scale) {
+            return Err(bad(
+                "live.image_scale",
+                l.image_scale.to_string(),
+                "must be 1..=64 (1: full size)",
+            ));
+        }
+        if !(l.pose_hz.is_finite() && l.pose_hz > 0.0 && l.pose_hz <= 1000.0) {
+            return Err(bad(
+                "live.pose_hz",
+                l.pose_hz.to_string(),
+                "must be > 0 and at most 1000 per second",
+            ));
+        }
+        Ok(Live {
+            enabled: l.enabled,
+            address,
+            image_hz: l.image_hz,
+            image_scale: l.image_scale,
+            pose_hz: l.pose_hz,
+        })
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -252,6 +335,8 @@ pub struct Config {
     pub rsi: Option<Rsi>,
     /// The recording (`[record]`).
     pub record: Record,
+    /// The live view (`[live]`).
+    pub live: Live,
 }
 
 /// The RSI server of the daemon: validated settings and the hand-eye file.
@@ -430,8 +515,10 @@ impl Config {
             queue: r.queue,
             link: None,
         };
+        let live = Live::from_section(&f.live, &bad)?;
         Ok(Config {
             record,
+            live,
             rsi,
             camera_id: camera_id(f.camera.id, &bad)?,
             camera_file: f.camera.camera_file,
@@ -608,6 +695,38 @@ mod tests {
         }
         assert_eq!(example.tcp_client_queue, defaults.tcp_client_queue);
         assert_eq!(example.tcp_max_clients, defaults.tcp_max_clients);
+    }
+
+    #[test]
+    fn the_live_view_is_off_by_default_and_its_keys_are_checked() {
+        let d = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
+        assert!(!d.live.enabled);
+        assert_eq!(d.live.address, "127.0.0.1:8765".parse().unwrap());
+        assert_eq!((d.live.image_hz, d.live.image_scale), (5.0, 4));
+        let example = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
+        assert_eq!(example.live, d.live, "the example documents the defaults");
+        // The example's commented section, switched on, is valid.
+        let on = EXAMPLE.replace("[live]\nenabled = false", "[live]\nenabled = true");
+        assert!(Config::parse(&on, "x").unwrap().live.enabled);
+        let cases = [
+            ("address = \"localhost:8765\"", "live.address"),
+            ("image_hz = 0.0", "live.image_hz"),
+            ("image_hz = -2.0", "live.image_hz"),
+            ("image_hz = 1000.0", "live.image_hz"),
+            ("image_scale = 0", "live.image_scale"),
+            ("image_scale = 65", "live.image_scale"),
+            ("pose_hz = 0.0", "live.pose_hz"),
+            ("max_clients = 4", "max_clients"),
+            ("enabled = \"yes\"", "enabled"),
+        ];
+        for (line, want) in cases {
+            let text = format!("[source]\nkind = \"synthetic\"\n[live]\n{line}\n");
+            let e = Config::parse(&text, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(want),
+                "{line}: {e:?} lacks {want:?}"
+            );
+        }
     }
 
     #[test]
