@@ -362,9 +362,11 @@ impl Config {
             let line = e
                 .span()
                 .map(|s| {
+                    let at = s.start.min(text.len());
                     format!(
-                        "line {}: ",
-                        text[..s.start.min(text.len())].matches('\n').count() + 1
+                        "line {}: {}",
+                        text[..at].matches('\n').count() + 1,
+                        key_at(text, at).map_or(String::new(), |k| format!("`{k}`: "))
                     )
                 })
                 .unwrap_or_default();
@@ -546,6 +548,27 @@ impl Config {
     }
 }
 
+/// The dotted key whose value starts at byte `at` of a TOML text (`key =
+/// value` on that line, under the last `[section]` header), so that a
+/// mistyped value's error names its key.
+fn key_at(text: &str, at: usize) -> Option<String> {
+    let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
+    let (key, _) = text[start..].split_once('=')?;
+    let key = key.trim();
+    if key.is_empty() || key.starts_with('#') || key.starts_with('[') || key.contains('\n') {
+        return None;
+    }
+    let section = text[..start].lines().rev().find_map(|l| {
+        let l = l.trim();
+        (l.starts_with('[') && !l.starts_with("[["))
+            .then(|| l.trim_matches(|c| c == '[' || c == ']'))
+    });
+    Some(match section {
+        Some(s) => format!("{}.{key}", s.trim()),
+        None => key.to_string(),
+    })
+}
+
 /// Validates `[camera] id`: 1–64 characters of `A–Z a–z 0–9 _ -` (it is
 /// used in key expressions, metric labels and file names).
 fn camera_id(
@@ -706,7 +729,10 @@ mod tests {
         let example = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
         assert_eq!(example.live, d.live, "the example documents the defaults");
         // The example's commented section, switched on, is valid.
-        let on = EXAMPLE.replace("[live]\nenabled = false", "[live]\nenabled = true");
+        let on = EXAMPLE.replace(
+            "enabled = false\naddress = \"127.0.0.1:8765\"",
+            "enabled = true\naddress = \"127.0.0.1:8765\"",
+        );
         assert!(Config::parse(&on, "x").unwrap().live.enabled);
         let cases = [
             ("address = \"localhost:8765\"", "live.address"),
@@ -717,7 +743,8 @@ mod tests {
             ("image_scale = 65", "live.image_scale"),
             ("pose_hz = 0.0", "live.pose_hz"),
             ("max_clients = 4", "max_clients"),
-            ("enabled = \"yes\"", "enabled"),
+            ("enabled = \"yes\"", "live.enabled"),
+            ("image_scale = \"big\"", "live.image_scale"),
         ];
         for (line, want) in cases {
             let text = format!("[source]\nkind = \"synthetic\"\n[live]\n{line}\n");

@@ -240,8 +240,12 @@ impl Pipeline {
         // the source and a sink of the results.
         let (source, live_addr) = match (&edge, config.live.enabled) {
             (Some(edge), true) => {
-                let live =
-                    crate::sink::live::LiveLink::start(&config.live, edge.handle(), &camera, &field)?;
+                let live = crate::sink::live::LiveLink::start(
+                    &config.live,
+                    edge.handle(),
+                    &camera,
+                    &field,
+                )?;
                 sinks.sinks.push(Box::new(live.sink(sinks.rsi.clone())));
                 (live.tap(source), Some(live.local_addr()))
             }

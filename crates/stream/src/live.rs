@@ -23,11 +23,11 @@ use crate::edge::EdgeHandle;
 use crate::StreamError;
 use crossbeam_queue::ArrayQueue;
 use foxglove::schemas::{
-    line_primitive, points_annotation, CircleAnnotation, Color, FrameTransform, FrameTransforms,
-    ImageAnnotations, LinePrimitive, Point2, Point3, Pose, PoseInFrame, Quaternion, RawImage,
-    SceneEntity, SceneUpdate, SpherePrimitive, TextAnnotation, TextPrimitive, Timestamp, Vector3,
+    line_primitive, CircleAnnotation, Color, FrameTransform, FrameTransforms, ImageAnnotations,
+    LinePrimitive, Point2, Point3, Pose, PoseInFrame, Quaternion, RawImage, SceneEntity,
+    SceneUpdate, SpherePrimitive, TextAnnotation, TextPrimitive, Timestamp, Vector3,
 };
-use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle};
+use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServerHandle};
 use serde::Serialize;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -95,7 +95,8 @@ const STATUS_SCHEMA: &str = r#"{
 
 /// A generic JSON Schema for the pose line (its own schema is in the
 /// stream documentation).
-const MESSAGE_SCHEMA: &str = r#"{"title": "photopose pose message (docs/streams.md)", "type": "object"}"#;
+const MESSAGE_SCHEMA: &str =
+    r#"{"title": "photopose pose message (docs/streams.md)", "type": "object"}"#;
 
 /// Where the live view listens and how it draws.
 #[derive(Debug, Clone, PartialEq)]
@@ -430,7 +431,8 @@ impl LiveServer {
         // A context of its own: these channels go to the live view only,
         // never to a recording.
         let ctx = Context::new();
-        let channels = Channels::new(&ctx).map_err(|e| failed("cannot open the live view on")(&e))?;
+        let channels =
+            Channels::new(&ctx).map_err(|e| failed("cannot open the live view on")(&e))?;
         let host = match addr {
             SocketAddr::V4(a) => a.ip().to_string(),
             SocketAddr::V6(a) => format!("[{}]", a.ip()),
@@ -787,7 +789,12 @@ pub fn camera_entity(pose: &Pose, camera: &CameraShape, time_ns: u64) -> SceneEn
     let c = camera.c_mm.max(1e-6);
     let hw = 0.5 * f64::from(camera.width_px) * camera.pixel_mm / c * d;
     let hh = 0.5 * f64::from(camera.height_px) * camera.pixel_mm / c * d;
-    let corners = [p(-hw, hh, -d), p(hw, hh, -d), p(hw, -hh, -d), p(-hw, -hh, -d)];
+    let corners = [
+        p(-hw, hh, -d),
+        p(hw, hh, -d),
+        p(hw, -hh, -d),
+        p(-hw, -hh, -d),
+    ];
     let mut points = Vec::with_capacity(16);
     for k in 0..4 {
         points.push(p(0.0, 0.0, 0.0));

@@ -140,11 +140,7 @@ impl LiveLink {
     /// Stops the server (its clients are closed); logs what was sent and
     /// dropped. A second call does nothing.
     pub fn close(&self) {
-        let server = self
-            .server
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take();
+        let server = self.server.lock().unwrap_or_else(|e| e.into_inner()).take();
         if let Some(server) = server {
             let s = self.sender.stats();
             tracing::info!(
@@ -274,7 +270,11 @@ impl FrameSource for LiveTap {
     }
 
     fn describe(&self) -> String {
-        format!("{} (live view at ws://{})", self.inner.describe(), self.link.addr)
+        format!(
+            "{} (live view at ws://{})",
+            self.inner.describe(),
+            self.link.addr
+        )
     }
 
     fn stats(&self) -> photopose_acquire::SourceStats {
@@ -420,7 +420,11 @@ mod tests {
         for _ in 0..3 {
             assert_eq!(downscale_box(&image, 4, &mut sums, &mut out), (325, 257));
         }
-        assert_eq!((sums.as_ptr(), out.as_ptr()), (p_sums, p_out), "no reallocation");
+        assert_eq!(
+            (sums.as_ptr(), out.as_ptr()),
+            (p_sums, p_out),
+            "no reallocation"
+        );
     }
 
     #[test]
