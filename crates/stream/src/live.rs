@@ -460,6 +460,7 @@ impl LiveServer {
         let local = SocketAddr::new(addr.ip(), handle.port());
         let stop = edge.stop_token();
         let publisher = Publisher {
+            _context: ctx,
             shared: shared.clone(),
             channels,
             scale: options.image_scale.max(1),
@@ -514,6 +515,9 @@ impl Drop for LiveServer {
 
 /// The edge task: turns hand-overs into messages.
 struct Publisher {
+    /// The channels' context: the server holds it only weakly, so it
+    /// lives as long as the task.
+    _context: Arc<Context>,
     shared: Arc<Shared>,
     channels: Channels,
     scale: u32,
