@@ -140,7 +140,8 @@ fn a_foxglove_client_receives_image_and_pose_while_the_pipeline_runs() {
             {"id": 3, "channelId": id("/status")},
         ]
     });
-    ws.send(Message::Text(subscribe.to_string().into())).unwrap();
+    ws.send(Message::Text(subscribe.to_string().into()))
+        .unwrap();
 
     // Binary message data: op 1, subscription id (u32), time (u64), payload.
     let (mut image, mut pose, mut status) = (None, None, None);
@@ -174,7 +175,10 @@ fn a_foxglove_client_receives_image_and_pose_while_the_pipeline_runs() {
     assert_eq!((image.encoding.as_str(), image.step), ("mono8", 325));
     assert_eq!(image.data.len(), 325 * 257);
     assert_eq!(image.frame_id, "camera");
-    assert!(image.data.iter().any(|&v| v > 128), "the targets are bright");
+    assert!(
+        image.data.iter().any(|&v| v > 128),
+        "the targets are bright"
+    );
     let pose = pose.unwrap();
     assert_eq!(pose.frame_id, "field");
     let p = pose.pose.unwrap().position.unwrap();

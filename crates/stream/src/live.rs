@@ -592,7 +592,7 @@ impl Publisher {
                 &PoseInFrame {
                     timestamp: Some(timestamp(t)),
                     frame_id: FIELD_FRAME.into(),
-                    pose: Some(pose.clone()),
+                    pose: Some(pose),
                 },
                 t,
             );
@@ -764,7 +764,7 @@ pub fn camera_entity(pose: &Pose, camera: &CameraShape, time_ns: u64) -> SceneEn
     let axis = 0.05;
     let axes = LinePrimitive {
         r#type: line_primitive::Type::LineList as i32,
-        pose: Some(pose.clone()),
+        pose: Some(*pose),
         thickness: 3.0,
         scale_invariant: true,
         points: vec![
@@ -808,7 +808,7 @@ pub fn camera_entity(pose: &Pose, camera: &CameraShape, time_ns: u64) -> SceneEn
     }
     let frustum = LinePrimitive {
         r#type: line_primitive::Type::LineList as i32,
-        pose: Some(pose.clone()),
+        pose: Some(*pose),
         thickness: 1.5,
         scale_invariant: true,
         points,
