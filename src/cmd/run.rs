@@ -265,6 +265,12 @@ fn start(
         serving = %served,
         "photopose running"
     );
+    if let Some(a) = pipeline.live_addr() {
+        tracing::info!(
+            address = %format!("ws://{a}"),
+            "live view: in the Foxglove app, Open connection → Foxglove WebSocket → this address"
+        );
+    }
     Ok((pipeline, config))
 }
 

@@ -85,6 +85,88 @@ struct File {
     record: RecordSection,
     #[serde(default)]
     tracking: crate::track::TrackingSection,
+    live: LiveSection,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct LiveSection {
+    enabled: bool,
+    address: String,
+    image_hz: f64,
+    image_scale: u32,
+    pose_hz: f64,
+}
+
+impl Default for LiveSection {
+    fn default() -> Self {
+        LiveSection {
+            enabled: false,
+            address: "127.0.0.1:8765".into(),
+            image_hz: 5.0,
+            image_scale: 4,
+            pose_hz: 20.0,
+        }
+    }
+}
+
+/// The live view in Foxglove (`[live]`, docs/live-view.md): a Foxglove
+/// WebSocket server on the edge runtime.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Live {
+    /// Whether the daemon serves it (off by default).
+    pub enabled: bool,
+    /// Where it listens (`ws://ADDRESS`).
+    pub address: SocketAddr,
+    /// Frames per second sent to the view (throttled on the grabber).
+    pub image_hz: f64,
+    /// Downscale factor of the frames (box filter; 1: full size).
+    pub image_scale: u32,
+    /// Poses (and status) per second sent to the view.
+    pub pose_hz: f64,
+}
+
+impl Live {
+    fn from_section(
+        l: &LiveSection,
+        bad: &dyn Fn(&'static str, String, &'static str) -> ConfigError,
+    ) -> Result<Live, ConfigError> {
+        let address = l.address.parse::<SocketAddr>().map_err(|_| {
+            bad(
+                "live.address",
+                l.address.clone(),
+                "must be an IP:port to listen on",
+            )
+        })?;
+        if !(l.image_hz.is_finite() && l.image_hz > 0.0 && l.image_hz <= 60.0) {
+            return Err(bad(
+                "live.image_hz",
+                l.image_hz.to_string(),
+                "must be > 0 and at most 60 frames per second",
+            ));
+        }
+        if !(1..=64).contains(&l.image_scale) {
+            return Err(bad(
+                "live.image_scale",
+                l.image_scale.to_string(),
+                "must be 1..=64 (1: full size)",
+            ));
+        }
+        if !(l.pose_hz.is_finite() && l.pose_hz > 0.0 && l.pose_hz <= 1000.0) {
+            return Err(bad(
+                "live.pose_hz",
+                l.pose_hz.to_string(),
+                "must be > 0 and at most 1000 per second",
+            ));
+        }
+        Ok(Live {
+            enabled: l.enabled,
+            address,
+            image_hz: l.image_hz,
+            image_scale: l.image_scale,
+            pose_hz: l.pose_hz,
+        })
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -269,6 +351,8 @@ pub struct Config {
     pub rsi: Option<Rsi>,
     /// The recording (`[record]`).
     pub record: Record,
+    /// The live view (`[live]`).
+    pub live: Live,
 }
 
 /// The RSI server of the daemon: validated settings and the hand-eye file.
@@ -294,9 +378,11 @@ impl Config {
             let line = e
                 .span()
                 .map(|s| {
+                    let at = s.start.min(text.len());
                     format!(
-                        "line {}: ",
-                        text[..s.start.min(text.len())].matches('\n').count() + 1
+                        "line {}: {}",
+                        text[..at].matches('\n').count() + 1,
+                        key_at(text, at).map_or(String::new(), |k| format!("`{k}`: "))
                     )
                 })
                 .unwrap_or_default();
@@ -441,8 +527,10 @@ impl Config {
             queue: r.queue,
             link: None,
         };
+        let live = Live::from_section(&f.live, &bad)?;
         Ok(Config {
             record,
+            live,
             rsi,
             camera_id: camera_id(f.camera.id, &bad)?,
             camera_file: f.camera.camera_file,
@@ -499,6 +587,27 @@ pub fn resolve(origin: &str, key: &'static str, text: &str) -> Result<SocketAddr
         .or(found.first())
         .copied()
         .ok_or_else(|| err("the name resolves to no address".into()))
+}
+
+/// The dotted key whose value starts at byte `at` of a TOML text (`key =
+/// value` on that line, under the last `[section]` header), so that a
+/// mistyped value's error names its key.
+fn key_at(text: &str, at: usize) -> Option<String> {
+    let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
+    let (key, _) = text[start..].split_once('=')?;
+    let key = key.trim();
+    if key.is_empty() || key.starts_with('#') || key.starts_with('[') || key.contains('\n') {
+        return None;
+    }
+    let section = text[..start].lines().rev().find_map(|l| {
+        let l = l.trim();
+        (l.starts_with('[') && !l.starts_with("[["))
+            .then(|| l.trim_matches(|c| c == '[' || c == ']'))
+    });
+    Some(match section {
+        Some(s) => format!("{}.{key}", s.trim()),
+        None => key.to_string(),
+    })
 }
 
 /// Validates `[camera] id`: 1–64 characters of `A–Z a–z 0–9 _ -` (it is
@@ -751,6 +860,54 @@ mod tests {
         }
         assert_eq!(example.tcp_client_queue, defaults.tcp_client_queue);
         assert_eq!(example.tcp_max_clients, defaults.tcp_max_clients);
+    }
+
+    #[test]
+    fn the_live_view_is_off_by_default_and_its_keys_are_checked() {
+        let d = Config::parse("[source]\nkind = \"synthetic\"\n", "x").unwrap();
+        assert!(!d.live.enabled);
+        assert_eq!(d.live.address, "127.0.0.1:8765".parse().unwrap());
+        assert_eq!((d.live.image_hz, d.live.image_scale), (5.0, 4));
+        let example = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
+        assert!(!example.live.enabled, "the example leaves it off");
+        // The example's commented section, switched on, is valid and
+        // documents the defaults.
+        let mut on = false;
+        let mut text = String::new();
+        for line in EXAMPLE.lines() {
+            on = (on || line.starts_with("# [live]")) && !line.trim().is_empty();
+            text.push_str(if on { &line[2..] } else { line });
+            text.push('\n');
+        }
+        let live = Config::parse(&text, "live example").unwrap().live;
+        assert!(live.enabled);
+        assert_eq!(
+            Live {
+                enabled: false,
+                ..live
+            },
+            d.live
+        );
+        let cases = [
+            ("address = \"localhost:8765\"", "live.address"),
+            ("image_hz = 0.0", "live.image_hz"),
+            ("image_hz = -2.0", "live.image_hz"),
+            ("image_hz = 1000.0", "live.image_hz"),
+            ("image_scale = 0", "live.image_scale"),
+            ("image_scale = 65", "live.image_scale"),
+            ("pose_hz = 0.0", "live.pose_hz"),
+            ("max_clients = 4", "max_clients"),
+            ("enabled = \"yes\"", "live.enabled"),
+            ("image_scale = \"big\"", "live.image_scale"),
+        ];
+        for (line, want) in cases {
+            let text = format!("[source]\nkind = \"synthetic\"\n[live]\n{line}\n");
+            let e = Config::parse(&text, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(want),
+                "{line}: {e:?} lacks {want:?}"
+            );
+        }
     }
 
     #[test]

@@ -139,6 +139,8 @@ pub struct Pipeline {
     watchdog: Option<Watchdog>,
     /// The tokio runtime of the TCP stream and the metrics endpoint.
     edge: Option<Edge>,
+    /// The live view's address, when it runs.
+    live_addr: Option<SocketAddr>,
 }
 
 /// Worker threads of the edge runtime: the network edges are light.
@@ -199,7 +201,10 @@ impl Pipeline {
         let (out_tx, out_rx) = bounded::<Outcome>(slots * 2 + config.workers);
         // The network edges (TCP stream, metrics) run on one tokio runtime
         // of their own; the pipeline's threads never await.
-        let edge = if config.tcp_listen.is_some() || config.metrics_listen.is_some() {
+        let edge = if config.tcp_listen.is_some()
+            || config.metrics_listen.is_some()
+            || config.live.enabled
+        {
             Some(Edge::start(EDGE_THREADS)?)
         } else {
             None
@@ -230,7 +235,22 @@ impl Pipeline {
             None => (None, None),
         };
         let rsi_addr = rsi.as_ref().map(|s| s.local_addr());
-        let sinks = crate::sink::build(config, rsi_link, edge.as_ref().map(|e| e.handle()))?;
+        let mut sinks = crate::sink::build(config, rsi_link, edge.as_ref().map(|e| e.handle()))?;
+        // The live view (Foxglove WebSocket, on the edge): a frame tap on
+        // the source and a sink of the results.
+        let (source, live_addr) = match (&edge, config.live.enabled) {
+            (Some(edge), true) => {
+                let live = crate::sink::live::LiveLink::start(
+                    &config.live,
+                    edge.handle(),
+                    &camera,
+                    &field,
+                )?;
+                sinks.sinks.push(Box::new(live.sink(sinks.rsi.clone())));
+                (live.tap(source), Some(live.local_addr()))
+            }
+            _ => (source, None),
+        };
         let tcp_addr = sinks.tcp_addr;
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
@@ -351,7 +371,13 @@ impl Pipeline {
             metrics_addr,
             watchdog: Some(watchdog),
             edge,
+            live_addr,
         })
+    }
+
+    /// The live view's address (`ws://ADDR`), if it runs.
+    pub fn live_addr(&self) -> Option<SocketAddr> {
+        self.live_addr
     }
 
     /// The TCP stream's address, if one is configured.

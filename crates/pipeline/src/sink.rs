@@ -8,6 +8,7 @@
 //! Adding an output: one module under `sink/` implementing [`PoseSink`]
 //! from its own configuration, and one line in [`build`].
 
+pub mod live;
 pub mod record;
 pub mod rsi;
 pub mod tcp;

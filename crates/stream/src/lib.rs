@@ -4,8 +4,8 @@
 //! ([`message`]); sent as one UDP datagram to each configured destination
 //! ([`udp`]) and as a JSON line to every client of a TCP server ([`tcp`]).
 //! The TCP server, like every network edge that serves people and other
-//! programs (also the metrics endpoint, [`http`]), runs on the one tokio
-//! runtime of [`edge`]; the pipeline's threads hand lines to it without
+//! programs (also the metrics endpoint, [`http`], and the Foxglove live
+//! view, [`live`]), runs on the one tokio runtime of [`edge`]; the pipeline's threads hand lines to it without
 //! waiting. A slow TCP client has a bounded queue and is dropped with a log
 //! when it overflows; nothing here ever blocks the caller. Once warm,
 //! publishing a pose allocates nothing (encoding goes into reused buffers).
@@ -14,6 +14,7 @@
 
 pub mod edge;
 pub mod http;
+pub mod live;
 pub mod message;
 pub mod read;
 pub mod tcp;
@@ -21,6 +22,7 @@ pub mod udp;
 
 pub use edge::{Edge, EdgeHandle};
 pub use http::{HttpLimits, HttpStats, TextEndpoint};
+pub use live::{LiveOptions, LiveSender, LiveServer};
 pub use message::{PoseMessage, PoseStatus};
 pub use read::PoseLine;
 pub use tcp::{TcpLimits, TcpServer, TcpStats};
