@@ -32,6 +32,12 @@
 //! The window and the hull's scratch space are allocated once, in
 //! [`ClockMap::new`]; [`ClockMap::update`] never allocates.
 
+/// The time `bytes` take on a 1 Gbit/s link, ns (8 ns a byte): the default
+/// transfer of a frame (1300×1030 Mono8: 10.7 ms).
+pub fn bytes_at_gigabit_ns(bytes: usize) -> u64 {
+    (bytes as u64).saturating_mul(8)
+}
+
 /// The settings of a [`ClockMap`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClockMapConfig {

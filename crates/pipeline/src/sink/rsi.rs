@@ -1,7 +1,8 @@
 //! The RSI sink: every measured pose into the RSI server's lock-free
-//! latest-measurement slot, stamped on the server's clock with the frame's
-//! hand-over instant. The RSI thread reads the slot each controller cycle
-//! and never waits on vision.
+//! latest-measurement slot, stamped on the server's clock (`CLOCK_MONOTONIC`
+//! seconds) with the frame's mid-exposure instant when the source knows it,
+//! else its hand-over instant. The RSI thread reads the slot each
+//! controller cycle and never waits on vision.
 
 use super::{Outgoing, PoseSink};
 use photopose_rsi::server::RsiClock;
@@ -42,6 +43,16 @@ impl RsiSink {
     }
 }
 
+/// The instant a pose belongs to on the law's clock: the middle of the
+/// exposure when the source stamped it, the hand-over otherwise.
+pub fn measurement_time_s(clock: &RsiClock, times: &crate::result::FrameTimes) -> f64 {
+    if times.exposure_mono_ns != 0 {
+        RsiClock::mono_s(times.exposure_mono_ns)
+    } else {
+        clock.at(times.handover)
+    }
+}
+
 impl PoseSink for RsiSink {
     fn name(&self) -> &'static str {
         "rsi"
@@ -52,7 +63,7 @@ impl PoseSink for RsiSink {
             if let Some(report) = &result.pose {
                 self.publisher.publish(&Measurement::from_report(
                     report,
-                    self.clock.at(result.times.handover),
+                    measurement_time_s(&self.clock, &result.times),
                     result.seq,
                 ));
             }
