@@ -567,11 +567,19 @@ impl CorrectionLaw {
         if t > newest.time_s + self.cfg.cycle_s {
             return Err(StaleReason::AheadOfHistory);
         }
-        // The newest cycle sampled at or before t (k), and the one after it.
-        let mut k = 0;
-        while k < self.filled && self.past(k).is_some_and(|p| p.time_s > t) {
-            k += 1;
+        // The newest cycle sampled at or before t (k), and the one after it:
+        // a binary search (the samples are in time order; the history may
+        // hold tens of thousands of cycles, the RSI thread has 4 ms).
+        let (mut lo, mut hi) = (0, self.filled);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.past(mid).is_some_and(|p| p.time_s > t) {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
         }
+        let k = lo;
         let earlier = match self.past(k) {
             Some(p) => p,
             // Less than a cycle before the oldest (a frame exposed just
