@@ -6,6 +6,9 @@
 //! - [`source`]: the [`FrameSource`] seam and its error;
 //! - [`gige`]: the GigE Vision source over aravis, reconnecting with back-off;
 //! - [`grabber`]: the grabber thread that runs a source into a ring;
+//! - [`clock_map`]: the camera-clock → host-clock estimate (pure: pairs
+//!   passed in);
+//! - [`mono`]: the host's monotonic clock in ns, the daemon's time base;
 //! - [`fake`]: an in-process GigE Vision fake camera serving given images
 //!   (test support).
 //!
@@ -15,6 +18,7 @@
 //! and only with its `gige` feature (on by default): without it the crate
 //! builds with no system library, and the GigE source is not there.
 
+pub mod clock_map;
 #[cfg(feature = "gige")]
 pub mod fake;
 #[cfg(feature = "gige")]
@@ -23,9 +27,11 @@ mod ffi;
 #[cfg(feature = "gige")]
 pub mod gige;
 pub mod grabber;
+pub mod mono;
 pub mod ring;
 pub mod source;
 
+pub use clock_map::{ClockMap, ClockMapConfig, Mapped};
 #[cfg(feature = "gige")]
 pub use gige::{list_cameras, CameraInfo, FeatureValue, GigeConfig, GigeSource, PixelDepth, Roi};
 pub use grabber::{

@@ -107,6 +107,7 @@ fn gige_source_against_fake_cameras() {
     init_tracing();
     streams_without_loss();
     streams_mono16();
+    stamps_exposure_instants();
     waits_for_an_absent_camera();
     survives_losing_the_camera();
     serves_given_images_in_process();
@@ -232,6 +233,81 @@ fn streams_mono16() {
     let stats = source.stats();
     eprintln!("mono16: {stats:?}");
     assert_eq!(stats.missing, 0);
+}
+
+/// Every frame of the fake camera (its timestamps on its own clock) gets a
+/// mid-exposure instant on the host's monotonic clock: increasing, before
+/// its reception, behind it by about the modelled delay (half the 2 ms
+/// exposure plus the 512×512 payload at 1 Gbit/s, 2.1 ms) within 20 ms, and
+/// spaced like the receptions (the mapping tracks the host clock) within
+/// 5 ms over the run.
+fn stamps_exposure_instants() {
+    let _fake = FakeProcess::start();
+    let config = GigeConfig {
+        camera: Some(FAKE_ID.into()),
+        frame_rate: Some(25.0),
+        exposure_us: Some(2000.0),
+        roi: Some(Roi {
+            x: 0,
+            y: 0,
+            width: 512,
+            height: 512,
+        }),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-times", config).unwrap();
+    let mut slot = Slot::new(Image::new_mono8(512, 512));
+    source.start().unwrap();
+    let mut metas = Vec::new();
+    let t0 = Instant::now();
+    while metas.len() < 60 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "{:?}",
+            source.stats()
+        );
+        match source.next_frame(&mut slot, Duration::from_millis(200)) {
+            Ok(()) => metas.push(slot.meta),
+            Err(e) => assert!(!e.is_fatal(), "{e}"),
+        }
+    }
+    source.stop();
+    let model_ns = 1_000_000 + 512 * 512 * 8;
+    for (k, m) in metas.iter().enumerate() {
+        assert!(
+            m.camera_time_ns != 0 && m.host_mono_ns != 0,
+            "frame {k}: {m:?}"
+        );
+        assert!(
+            m.exposure_mono_ns != 0 && m.exposure_sigma_ns != 0,
+            "frame {k}: {m:?}"
+        );
+        assert!(m.exposure_mono_ns < m.host_mono_ns, "frame {k}: {m:?}");
+        assert!(m.exposure_utc_ns().is_some());
+        let behind = m.host_mono_ns - m.exposure_mono_ns;
+        assert!(
+            behind >= model_ns && behind - model_ns < 20_000_000,
+            "frame {k}: exposure {behind} ns before reception"
+        );
+        let exposure = m.exposure_ns;
+        assert!(
+            (1_000_000..=3_000_000).contains(&exposure),
+            "exposure {exposure} ns"
+        );
+    }
+    assert!(
+        metas
+            .windows(2)
+            .all(|w| w[1].exposure_mono_ns > w[0].exposure_mono_ns),
+        "mapped exposure instants increase"
+    );
+    let (a, b) = (metas[10], metas[metas.len() - 1]);
+    let mapped = (b.exposure_mono_ns - a.exposure_mono_ns) as f64;
+    let received = (b.host_mono_ns - a.host_mono_ns) as f64;
+    assert!(
+        (mapped - received).abs() < 5e6,
+        "mapped {mapped} ns vs received {received} ns"
+    );
 }
 
 fn slot_ptr(slot: &Slot) -> usize {

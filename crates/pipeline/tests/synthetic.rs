@@ -229,3 +229,47 @@ fn tracked_frames_give_the_whole_frame_poses() {
         }
     }
 }
+
+/// The synthetic source stamps frame `k`'s exposure middle exactly at its
+/// start plus `k / rate` on the monotonic clock, and hands it over after
+/// half the exposure and the transfer (defaults: 2 ms, the 1300×1030
+/// frame's bytes at 1 Gbit/s), as a GigE camera would deliver it.
+#[test]
+fn frames_carry_their_exposure_and_arrive_after_the_transfer() {
+    use photopose_acquire::{FrameSource, Slot};
+    use photopose_frame::Image;
+    let cfg = config("127.0.0.1:9", "block", 8, 25.0);
+    let Source::Synthetic(syn) = cfg.source.clone() else {
+        panic!("synthetic source expected")
+    };
+    assert_eq!(syn.exposure_ms, 2.0);
+    assert_eq!(syn.transfer_ms, None);
+    let delivery = syn.delivery_ns(1300 * 1030);
+    assert_eq!(delivery, 1_000_000 + 1300 * 1030 * 8);
+    let camera = photopose_formats::default_camera();
+    let mut source = SyntheticSource::new(camera, &default_plate(), syn).unwrap();
+    let mut slot = Slot::new(Image::new_mono8(1300, 1030));
+    source.start().unwrap();
+    let mut metas = Vec::new();
+    while metas.len() < 8 {
+        match source.next_frame(&mut slot, Duration::from_secs(5)) {
+            Ok(()) => metas.push(slot.meta),
+            Err(e) => assert!(!e.is_fatal(), "{e}"),
+        }
+    }
+    let first = metas[0].exposure_mono_ns;
+    for (k, m) in metas.iter().enumerate() {
+        // Exact: the start plus k frame periods of 40 ms.
+        assert_eq!(m.exposure_mono_ns - first, k as u64 * 40_000_000, "{m:?}");
+        assert_eq!(m.exposure_ns, 2_000_000);
+        assert_eq!(m.exposure_sigma_ns, 1);
+        // Handed over no earlier than exposure + delivery (the renderer and
+        // a loaded machine only make it later).
+        assert!(
+            m.host_mono_ns >= m.exposure_mono_ns + delivery,
+            "frame {k}: {} ns after the exposure",
+            m.host_mono_ns - m.exposure_mono_ns
+        );
+        assert!(m.exposure_utc_ns().is_some_and(|u| u < m.host_time_ns));
+    }
+}

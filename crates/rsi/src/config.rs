@@ -136,6 +136,13 @@ pub struct RsiConfig {
     /// opens a new session only after the current one has not advanced for
     /// this long (RSI restarted on the controller).
     pub session_idle_ms: f64,
+    /// How long before a `<Rob>` datagram arrives the controller sampled
+    /// its `RIst`/`RSol` (at the start of its cycle), ms: each cycle is
+    /// placed on the host clock at its arrival minus this.
+    pub controller_latency_ms: f64,
+    /// Feed-forward of the error's rate over the measurement's age (off
+    /// by default; see docs/rsi.md).
+    pub feed_forward: bool,
     /// SCHED_FIFO priority (1–99) of the RSI thread; failing to get it is a
     /// warning.
     pub realtime_priority: Option<u8>,
@@ -175,6 +182,8 @@ impl Default for RsiConfig {
             max_std_deg: law.max_std_deg,
             cycle_ms: 4.0,
             session_idle_ms: 100.0,
+            controller_latency_ms: law.controller_latency_s * 1e3,
+            feed_forward: law.feed_forward,
             realtime_priority: None,
             cpu: None,
             hand_eye: None,
@@ -474,6 +483,15 @@ impl RsiConfig {
             3_600_000.0,
             "must be at most one hour",
         )?;
+        if !(self.controller_latency_ms.is_finite()
+            && (0.0..=1000.0).contains(&self.controller_latency_ms))
+        {
+            return Err(bad(
+                "controller_latency_ms",
+                self.controller_latency_ms.to_string(),
+                "must be in [0, 1000] ms",
+            ));
+        }
         if self.min_targets < 4 {
             return Err(bad(
                 "min_targets",
@@ -507,6 +525,9 @@ impl RsiConfig {
                 measure_only: self.measure_only,
                 rsol_includes_correction: self.rsol_includes_correction,
                 decimals: self.decimals as u32,
+                cycle_s: cycle_ms * 1e-3,
+                controller_latency_s: self.controller_latency_ms * 1e-3,
+                feed_forward: self.feed_forward,
             },
             cycle: Duration::from_secs_f64(cycle_ms * 1e-3),
             session_idle: Duration::from_secs_f64(session_idle_ms * 1e-3),
@@ -718,6 +739,11 @@ mod tests {
             ("max_std_deg", |c| c.max_std_deg = f64::NAN),
             ("session_idle_ms", |c| c.session_idle_ms = 5.0),
             ("session_idle_ms", |c| c.session_idle_ms = f64::NAN),
+            ("controller_latency_ms", |c| c.controller_latency_ms = -1.0),
+            ("controller_latency_ms", |c| {
+                c.controller_latency_ms = f64::NAN
+            }),
+            ("controller_latency_ms", |c| c.controller_latency_ms = 1e4),
             ("sentype", |c| c.sentype = Some("Im\"Free".into())),
             ("sentype", |c| c.sentype = Some("1st".into())),
             ("correction_element", |c| {

@@ -1,7 +1,28 @@
 //! The correction law: from the latest camera pose (in the plate frame) and
 //! the controller's commanded TCP pose to the Cartesian correction sent in
 //! this RSI cycle. Pure: the time of the cycle and of the measurement are
-//! passed in (seconds on one monotonic clock chosen by the caller).
+//! passed in, seconds on one monotonic clock (the daemon uses
+//! `CLOCK_MONOTONIC`, see `crate::server::RsiClock`).
+//!
+//! # Time
+//! Every cycle goes into a history (sized from `max_age` and the cycle):
+//! the instant the controller sampled its `RIst`/`RSol` on the host clock
+//! (the datagram's arrival minus the configured controller latency), the
+//! IPOC (the controller's own clock), `RSol` and the total correction in
+//! effect during that cycle. A measurement is compared with the programmed
+//! pose *at its exposure instant*: interpolated between the two cycles
+//! that bracket it (translation linearly, rotation by slerp), or carried
+//! on from the last two cycles when it lies less than one cycle after the
+//! newest. The total correction is taken from the earlier of the two: the
+//! controller applies a correction as a step at the start of a cycle and
+//! holds it until the next, so the correction acting on the robot at any
+//! instant between two samples is the earlier cycle's. A measurement
+//! exposed less than a cycle before the oldest cycle kept (just before the
+//! session's first datagram) takes the oldest cycle's pose; one exposed
+//! earlier is stale ([`StaleReason::BeforeHistory`]); one exposed more
+//! than a cycle after the newest is not used yet
+//! ([`StaleReason::AheadOfHistory`]: a clock or latency setting is wrong,
+//! or the controller paused).
 //!
 //! Per cycle:
 //! 1. the measured TCP is `Z · T_plate←camera · X⁻¹` ([`HandEye`]);
@@ -34,7 +55,7 @@
 //! `Rz(A)·Ry(B)·Rx(C)` of the correction rotation).
 
 use crate::codec::Pose6;
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use photopose_geometry::pose;
 use photopose_geometry::rotation::{kuka_abc_deg_from_matrix, matrix_from_kuka_abc_deg};
 use photopose_geometry::ResectionReport;
@@ -93,6 +114,17 @@ pub struct LawConfig {
     pub rsol_includes_correction: bool,
     /// Decimals printed in the reply (the grid of the total), 4–6.
     pub decimals: u32,
+    /// The controller's cycle, s: the history covers `max_age_s` in
+    /// cycles of this length, and a measurement may lie up to one cycle
+    /// after the newest.
+    pub cycle_s: f64,
+    /// How long before a datagram's arrival the controller sampled its
+    /// `RIst`/`RSol` (the start of its cycle), s.
+    pub controller_latency_s: f64,
+    /// Feed-forward of the error's rate: the error is predicted from the
+    /// exposure instant to this cycle's sample instant from the rate of
+    /// the last two measurements (off by default; see `docs/rsi.md`).
+    pub feed_forward: bool,
 }
 
 impl Default for LawConfig {
@@ -112,6 +144,9 @@ impl Default for LawConfig {
             measure_only: false,
             rsol_includes_correction: false,
             decimals: 4,
+            cycle_s: 0.004,
+            controller_latency_s: 0.001,
+            feed_forward: false,
         }
     }
 }
@@ -249,8 +284,16 @@ pub enum StaleReason {
     /// The latest measurement's std exceeds the configured threshold.
     TooUncertain,
     /// The datagram carried no `RSol` (KR C2's first datagram, or `RSol`
-    /// missing from the SEND list).
+    /// missing from the SEND list), or a cycle around the exposure did not.
     NoCommand,
+    /// The measurement was exposed before the oldest cycle in the history
+    /// (the controller session started after it, or it is older than the
+    /// history holds).
+    BeforeHistory,
+    /// The measurement was exposed more than a cycle after the newest
+    /// cycle: a clock or latency setting is wrong, or the controller
+    /// paused; looked at again next cycle.
+    AheadOfHistory,
 }
 
 /// The state of the law in a cycle (also the pose stream's status flag).
@@ -280,11 +323,14 @@ impl LawStatus {
             LawStatus::Stale(StaleReason::TooFewTargets) => "stale_too_few_targets",
             LawStatus::Stale(StaleReason::TooUncertain) => "stale_too_uncertain",
             LawStatus::Stale(StaleReason::NoCommand) => "stale_no_command",
+            LawStatus::Stale(StaleReason::BeforeHistory) => "stale_before_history",
+            LawStatus::Stale(StaleReason::AheadOfHistory) => "stale_ahead_of_history",
         }
     }
 
     /// A small integer code (0 tracking, 1 measure only, 2..=6 stale
-    /// reasons, 7 frozen invalid), for an atomic status flag.
+    /// reasons, 7 frozen invalid, 8 and 9 the history's stale reasons), for
+    /// an atomic status flag.
     pub fn code(&self) -> u8 {
         match self {
             LawStatus::Tracking => 0,
@@ -295,6 +341,8 @@ impl LawStatus {
             LawStatus::Stale(StaleReason::TooUncertain) => 5,
             LawStatus::Stale(StaleReason::NoCommand) => 6,
             LawStatus::FrozenInvalid => 7,
+            LawStatus::Stale(StaleReason::BeforeHistory) => 8,
+            LawStatus::Stale(StaleReason::AheadOfHistory) => 9,
         }
     }
 
@@ -309,6 +357,8 @@ impl LawStatus {
             5 => LawStatus::Stale(StaleReason::TooUncertain),
             6 => LawStatus::Stale(StaleReason::NoCommand),
             7 => LawStatus::FrozenInvalid,
+            8 => LawStatus::Stale(StaleReason::BeforeHistory),
+            9 => LawStatus::Stale(StaleReason::AheadOfHistory),
             _ => return None,
         })
     }
@@ -330,18 +380,51 @@ pub struct CycleOutput {
     pub slew_limited: bool,
     /// The total clamp cut the target this cycle.
     pub clamped: bool,
+    /// The programmed pose the measurement of this cycle was compared with
+    /// (new measurements only): interpolated at its exposure instant.
+    pub commanded: Option<Pose6>,
+    /// The IPOCs of the two cycles it was interpolated between.
+    pub commanded_ipoc: Option<(u64, u64)>,
 }
 
+/// One controller cycle as the history keeps it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Past {
+    /// When the controller sampled `RIst`/`RSol`, s on the law's clock
+    /// (arrival minus the controller latency).
+    pub time_s: f64,
+    /// The controller's IPOC (its own clock; 0 when not given).
+    pub ipoc: u64,
+    /// The commanded pose, if the datagram carried it.
+    pub rsol: Option<Pose6>,
+    /// The total correction in effect during this cycle (sent before it).
+    pub total: Pose6,
+}
+
+/// The least history kept, cycles.
+pub const HISTORY_MIN: usize = 64;
+/// The most history kept, cycles (about 4.4 min at 4 ms): a `max_age`
+/// beyond it is bounded by the history ([`StaleReason::BeforeHistory`]).
+pub const HISTORY_MAX: usize = 1 << 16;
+
+/// Cycles of history that cover `max_age_s` (plus a margin of a quarter and
+/// eight cycles) at `cycle_s`, within [`HISTORY_MIN`]..=[`HISTORY_MAX`].
+pub fn history_len(cfg: &LawConfig) -> usize {
+    let n = (cfg.max_age_s * 1.25 / cfg.cycle_s).ceil() + 8.0;
+    if n.is_finite() && n > 0.0 {
+        (n.min(HISTORY_MAX as f64) as usize).max(HISTORY_MIN)
+    } else {
+        HISTORY_MIN
+    }
+}
+
+/// What the history says about an exposure instant.
 #[derive(Debug, Clone, Copy)]
-struct Past {
-    time_s: f64,
-    rsol: Option<Pose6>,
+struct Then {
+    programmed: Isometry3<f64>,
     total: Pose6,
+    ipocs: (u64, u64),
 }
-
-/// Cycles of history kept to look up the commanded pose and the correction
-/// in effect when a frame was exposed (2 s at 4 ms).
-pub const HISTORY: usize = 512;
 
 /// The correction law's state. Allocates its history once, at creation.
 #[derive(Debug, Clone)]
@@ -361,6 +444,9 @@ pub struct CorrectionLaw {
     history: Vec<Past>,
     head: usize,
     filled: usize,
+    /// The last used measurement's exposure and uncorrected error (error
+    /// plus the total then), for the feed-forward's rate.
+    last_error: Option<(f64, Pose6)>,
 }
 
 fn step_limits(cfg: &LawConfig) -> Pose6 {
@@ -400,13 +486,15 @@ impl CorrectionLaw {
             history: vec![
                 Past {
                     time_s: f64::NEG_INFINITY,
+                    ipoc: 0,
                     rsol: None,
                     total: [0.0; 6],
                 };
-                HISTORY
+                history_len(&cfg)
             ],
             head: 0,
             filled: 0,
+            last_error: None,
         }
     }
 
@@ -428,6 +516,20 @@ impl CorrectionLaw {
         self.last_seq = None;
         self.head = 0;
         self.filled = 0;
+        self.last_error = None;
+    }
+
+    /// Cycles the history holds at most.
+    pub fn history_capacity(&self) -> usize {
+        self.history.len()
+    }
+
+    /// The `k`-th newest cycle of the history (0 = this cycle's).
+    pub fn past(&self, k: usize) -> Option<Past> {
+        (k < self.filled).then(|| {
+            let n = self.history.len();
+            self.history[(self.head + n - 1 - k) % n]
+        })
     }
 
     /// What a frozen cycle sends: the held total (absolute) or zero
@@ -452,18 +554,76 @@ impl CorrectionLaw {
             .all(|(v, l)| v.is_finite() && v.abs() <= (l as f64 + 1e-6) / self.scale)
     }
 
-    /// The past cycle at or just before `t` (or the oldest kept).
-    fn at(&self, t: f64) -> Option<Past> {
-        let mut best = None;
-        for k in 0..self.filled {
-            let i = (self.head + HISTORY - 1 - k) % HISTORY;
-            let p = self.history[i];
-            best = Some(p);
-            if p.time_s <= t {
-                break;
+    /// The programmed pose at `t` (interpolated between the cycles that
+    /// bracket it, carried on from the last two up to a cycle after the
+    /// newest) and the total correction in effect then.
+    fn at(&self, t: f64) -> Result<Then, StaleReason> {
+        let Some(newest) = self.past(0) else {
+            return Err(StaleReason::NoCommand);
+        };
+        if t.is_nan() {
+            return Err(StaleReason::TooOld);
+        }
+        if t > newest.time_s + self.cfg.cycle_s {
+            return Err(StaleReason::AheadOfHistory);
+        }
+        // The newest cycle sampled at or before t (k), and the one after it:
+        // a binary search (the samples are in time order; the history may
+        // hold tens of thousands of cycles, the RSI thread has 4 ms).
+        let (mut lo, mut hi) = (0, self.filled);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.past(mid).is_some_and(|p| p.time_s > t) {
+                lo = mid + 1;
+            } else {
+                hi = mid;
             }
         }
-        best
+        let k = lo;
+        let earlier = match self.past(k) {
+            Some(p) => p,
+            // Less than a cycle before the oldest (a frame exposed just
+            // before the session's first datagram): the oldest cycle's.
+            None => match self.past(self.filled - 1) {
+                Some(oldest) if t >= oldest.time_s - self.cfg.cycle_s => {
+                    let Some(r) = oldest.rsol else {
+                        return Err(StaleReason::NoCommand);
+                    };
+                    return Ok(Then {
+                        programmed: self.programmed(&r, &oldest.total),
+                        total: oldest.total,
+                        ipocs: (oldest.ipoc, oldest.ipoc),
+                    });
+                }
+                _ => return Err(StaleReason::BeforeHistory),
+            },
+        };
+        let (a, b) = if k == 0 {
+            // After the newest (less than a cycle): carried on from the
+            // last two cycles, or held with only one.
+            match self.past(1) {
+                Some(p) if p.rsol.is_some() && p.time_s < newest.time_s => (p, newest),
+                _ => (newest, newest),
+            }
+        } else {
+            (earlier, self.past(k - 1).unwrap_or(newest))
+        };
+        let (Some(ra), Some(rb)) = (a.rsol, b.rsol) else {
+            return Err(StaleReason::NoCommand);
+        };
+        let pa = self.programmed(&ra, &a.total);
+        let pb = self.programmed(&rb, &b.total);
+        let span = b.time_s - a.time_s;
+        let f = if span > 0.0 {
+            (t - a.time_s) / span
+        } else {
+            0.0
+        };
+        Ok(Then {
+            programmed: interpolate(&pa, &pb, f),
+            total: earlier.total,
+            ipocs: (a.ipoc, b.ipoc),
+        })
     }
 
     fn stale_reason(&self, now_s: f64, m: Option<&Measurement>) -> Option<StaleReason> {
@@ -487,14 +647,31 @@ impl CorrectionLaw {
         None
     }
 
-    /// One RSI cycle at `now_s` with the datagram's `RSol` and the latest
-    /// published measurement.
+    /// One RSI cycle whose datagram arrived at `now_s`, without an IPOC
+    /// (tests and tools): [`CorrectionLaw::cycle_at`] with IPOC 0.
     pub fn cycle(
         &mut self,
         now_s: f64,
         rsol: Option<Pose6>,
         latest: Option<&Measurement>,
     ) -> CycleOutput {
+        self.cycle_at(now_s, 0, rsol, latest)
+    }
+
+    /// One RSI cycle: the datagram with `ipoc` and `rsol` arrived at
+    /// `arrival_s` (the controller sampled it `controller_latency_s`
+    /// before), with the latest published measurement.
+    pub fn cycle_at(
+        &mut self,
+        arrival_s: f64,
+        ipoc: u64,
+        rsol: Option<Pose6>,
+        latest: Option<&Measurement>,
+    ) -> CycleOutput {
+        let now_s = arrival_s;
+        // This cycle joins the history first: a frame may have been
+        // exposed after the previous sample.
+        self.record(arrival_s - self.cfg.controller_latency_s, ipoc, rsol);
         let mut out = CycleOutput {
             send: [0.0; 6],
             total: self.total(),
@@ -502,21 +679,22 @@ impl CorrectionLaw {
             error: None,
             slew_limited: false,
             clamped: false,
+            commanded: None,
+            commanded_ipoc: None,
         };
         if self.cfg.measure_only {
             out.status = LawStatus::MeasureOnly;
-            if let (Some(m), Some(r)) = (latest, rsol) {
+            if let (Some(m), Some(_)) = (latest, rsol) {
                 if self.last_seq != Some(m.seq) {
-                    self.last_seq = Some(m.seq);
-                    let measured = self.hand_eye.tcp_in_base(&m.plate_from_camera);
-                    out.error = Some(pose_error(
-                        &self.programmed(&r, &[0.0; 6]),
-                        &measured,
-                        self.cfg.frame,
-                    ));
+                    if let Ok(then) = self.at(m.time_s) {
+                        self.last_seq = Some(m.seq);
+                        let measured = self.hand_eye.tcp_in_base(&m.plate_from_camera);
+                        out.commanded = Some(isometry_to_pose(&then.programmed));
+                        out.commanded_ipoc = Some(then.ipocs);
+                        out.error = Some(pose_error(&then.programmed, &measured, self.cfg.frame));
+                    }
                 }
             }
-            self.record(now_s, rsol);
             return out;
         }
         let stale = if rsol.is_none() {
@@ -524,32 +702,34 @@ impl CorrectionLaw {
         } else {
             self.stale_reason(now_s, latest)
         };
-        let (Some(m), Some(rsol_now), None) = (latest, rsol, stale) else {
+        let (Some(m), Some(_), None) = (latest, rsol, stale) else {
             out.status = match stale {
                 Some(reason) => LawStatus::Stale(reason),
                 None => LawStatus::FrozenInvalid,
             };
-            return self.freeze(now_s, rsol, out);
+            return self.freeze(out);
         };
         if self.last_seq != Some(m.seq) {
-            let past = self.at(m.time_s);
-            let (rsol_then, total_then) = match past {
-                Some(Past {
-                    rsol: Some(r),
-                    total,
-                    ..
-                }) => (r, total),
-                _ => (rsol_now, self.total()),
+            let then = match self.at(m.time_s) {
+                Ok(then) => then,
+                Err(reason) => {
+                    out.status = LawStatus::Stale(reason);
+                    return self.freeze(out);
+                }
             };
+            let total_then = then.total;
             let measured = self.hand_eye.tcp_in_base(&m.plate_from_camera);
-            let commanded = self.programmed(&rsol_then, &total_then);
-            let e = pose_error(&commanded, &measured, self.cfg.frame);
+            let e = pose_error(&then.programmed, &measured, self.cfg.frame);
             out.error = Some(e);
+            out.commanded = Some(isometry_to_pose(&then.programmed));
+            out.commanded_ipoc = Some(then.ipocs);
+            let uncorrected: Pose6 = std::array::from_fn(|i| e[i] + total_then[i]);
+            let lead = self.feed_forward_lead(m.time_s, &uncorrected, arrival_s);
             let lim = clamp_limits(&self.cfg);
             let mut target = [0.0; 6];
             let mut clamped = false;
             for i in 0..6 {
-                let t = total_then[i] + self.cfg.gain * e[i];
+                let t = total_then[i] + self.cfg.gain * (e[i] + lead[i]);
                 let c = t.clamp(-lim[i], lim[i]);
                 clamped |= c != t;
                 target[i] = c;
@@ -560,10 +740,11 @@ impl CorrectionLaw {
                 // Not committed: the next cycle looks at it again (and
                 // stays frozen while it is the latest measurement).
                 out.status = LawStatus::FrozenInvalid;
-                return self.freeze(now_s, rsol, out);
+                return self.freeze(out);
             }
             out.clamped = clamped;
             self.last_seq = Some(m.seq);
+            self.last_error = Some((m.time_s, uncorrected));
             self.target = target;
         }
         // One step towards the target on the grid: the rounding remainder
@@ -573,7 +754,7 @@ impl CorrectionLaw {
             let want = (self.target[i] * self.scale).round();
             if !want.is_finite() {
                 out.status = LawStatus::FrozenInvalid;
-                return self.freeze(now_s, rsol, out);
+                return self.freeze(out);
             }
             let want = want.clamp(-1e15, 1e15) as i64;
             let want = want.clamp(-self.clamp_units[i], self.clamp_units[i]);
@@ -595,23 +776,39 @@ impl CorrectionLaw {
         });
         if !inside || !self.admissible(&send) {
             out.status = LawStatus::FrozenInvalid;
-            return self.freeze(now_s, rsol, out);
+            return self.freeze(out);
         }
         self.units = units;
         out.total = total;
         out.send = send;
-        self.record(now_s, rsol);
         out
     }
 
+    /// The feed-forward term: the change of the uncorrected error from the
+    /// exposure at `t` to this cycle's sample instant, at the rate between
+    /// the last used measurement and this one (zeros when off, on the first
+    /// measurement, or when the two are not in time order within
+    /// `max_age_s`).
+    fn feed_forward_lead(&self, t: f64, uncorrected: &Pose6, arrival_s: f64) -> Pose6 {
+        let Some((t0, u0)) = self.last_error.filter(|_| self.cfg.feed_forward) else {
+            return [0.0; 6];
+        };
+        let dt = t - t0;
+        let ahead = arrival_s - self.cfg.controller_latency_s - t;
+        if !(dt > 0.0 && dt <= self.cfg.max_age_s && ahead.is_finite()) {
+            return [0.0; 6];
+        }
+        let ahead = ahead.clamp(0.0, self.cfg.max_age_s);
+        std::array::from_fn(|i| (uncorrected[i] - u0[i]) / dt * ahead)
+    }
+
     /// A frozen cycle: the target is the total, the reply holds.
-    fn freeze(&mut self, now_s: f64, rsol: Option<Pose6>, mut out: CycleOutput) -> CycleOutput {
+    fn freeze(&mut self, mut out: CycleOutput) -> CycleOutput {
         self.target = self.total();
         out.send = self.hold();
         out.total = self.total();
         out.clamped = false;
         out.slew_limited = false;
-        self.record(now_s, rsol);
         out
     }
 
@@ -625,15 +822,29 @@ impl CorrectionLaw {
         }
     }
 
-    fn record(&mut self, now_s: f64, rsol: Option<Pose6>) {
+    /// A cycle into the history, with the total in effect during it (the
+    /// one sent before it).
+    fn record(&mut self, time_s: f64, ipoc: u64, rsol: Option<Pose6>) {
+        let n = self.history.len();
         self.history[self.head] = Past {
-            time_s: now_s,
+            time_s,
+            ipoc,
             rsol,
             total: self.total(),
         };
-        self.head = (self.head + 1) % HISTORY;
-        self.filled = (self.filled + 1).min(HISTORY);
+        self.head = (self.head + 1) % n;
+        self.filled = (self.filled + 1).min(n);
     }
+}
+
+/// The pose a fraction `f` of the way from `a` to `b`: translation linear,
+/// rotation along the shortest arc at constant rate (slerp); `f` outside
+/// 0..=1 carries the motion on (or back) at the same rates.
+pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, f: f64) -> Isometry3<f64> {
+    let t = a.translation.vector + (b.translation.vector - a.translation.vector) * f;
+    let delta = a.rotation.inverse() * b.rotation;
+    let r = a.rotation * UnitQuaternion::from_scaled_axis(delta.scaled_axis() * f);
+    Isometry3::from_parts(Translation3::from(t), r)
 }
 
 /// The largest translation (mm) and angle (degrees) component of a

@@ -289,7 +289,7 @@ impl Collect for Stats {
             g(&self.ipoc_step_last) as f64,
         )?;
         let code = self.status.load(Ordering::Relaxed);
-        let mut states = [("waiting_for_controller", 0.0); 9];
+        let mut states = [("waiting_for_controller", 0.0); 11];
         for (k, s) in states.iter_mut().enumerate().skip(1) {
             let st = crate::law::LawStatus::from_code(k as u8 - 1);
             *s = (

@@ -42,11 +42,16 @@ pub enum ServerError {
     Thread(io::Error),
 }
 
-/// The one clock the server, the vision side and tests share: seconds
-/// since an epoch, from a monotonic [`Instant`].
+/// The one clock the server, the vision side and tests share: the host's
+/// `CLOCK_MONOTONIC` in seconds — the clock the sources stamp frames on
+/// (`FrameMeta::exposure_mono_ns`), so an exposure instant and a
+/// controller cycle compare directly. `Instant`s (which read the same
+/// clock on Linux but cannot be turned into numbers) are placed on it
+/// through the pair of readings taken when the clock is made.
 #[derive(Debug, Clone, Copy)]
 pub struct RsiClock {
     epoch: Instant,
+    epoch_ns: u64,
 }
 
 impl Default for RsiClock {
@@ -56,21 +61,36 @@ impl Default for RsiClock {
 }
 
 impl RsiClock {
-    /// A clock whose epoch is now.
+    /// The clock, with its `Instant` ↔ `CLOCK_MONOTONIC` pair read now.
     pub fn new() -> RsiClock {
+        let epoch = Instant::now();
         RsiClock {
-            epoch: Instant::now(),
+            epoch,
+            epoch_ns: photopose_acquire::mono::instant_ns(epoch),
         }
     }
 
-    /// Seconds since the epoch.
+    /// Now, s on `CLOCK_MONOTONIC`.
     pub fn now_s(&self) -> f64 {
-        self.at(Instant::now())
+        Self::mono_s(photopose_acquire::mono::now_ns())
     }
 
-    /// Seconds since the epoch of an instant.
+    /// An instant, s on `CLOCK_MONOTONIC`.
     pub fn at(&self, t: Instant) -> f64 {
-        t.saturating_duration_since(self.epoch).as_secs_f64()
+        let ns = if t >= self.epoch {
+            self.epoch_ns
+                .saturating_add((t - self.epoch).as_nanos() as u64)
+        } else {
+            self.epoch_ns
+                .saturating_sub((self.epoch - t).as_nanos() as u64)
+        };
+        Self::mono_s(ns)
+    }
+
+    /// A `CLOCK_MONOTONIC` instant in ns (a frame's exposure), in s: the
+    /// one conversion of the law's time base.
+    pub fn mono_s(ns: u64) -> f64 {
+        ns as f64 * 1e-9
     }
 }
 
@@ -530,7 +550,9 @@ impl Worker {
         }
         let now = self.clock.at(t_rx);
         let before = self.law.total();
-        let mut out = self.law.cycle(now, frame.rsol, self.latest.as_ref());
+        let mut out = self
+            .law
+            .cycle_at(now, frame.ipoc.value(), frame.rsol, self.latest.as_ref());
         // The last check before the numbers are written: finite and inside
         // the clamp / slew limit, else the held value.
         if !self.law.admissible(&out.send) {

@@ -295,9 +295,20 @@ fn the_session_restarts_from_a_new_port_after_silence_with_zero_correction() {
     // after a reply, far inside the 50 ms idle time.)
     new.send_to(rob(7, &nominal).as_bytes(), to).unwrap();
     assert!(silent(&new, Duration::from_millis(20)));
-    // After the idle time the new port takes over, from zero correction.
+    // After the idle time the new port takes over, from zero correction:
+    // the frame exposed before the new session cannot be compared with
+    // its commanded poses (stale), a new one tracks from zero.
     std::thread::sleep(Duration::from_millis(120));
     let (y, _) = korr_units(&cycle_on(&new, to, 11, &nominal, |_| {}));
+    assert_eq!(y[0], 0, "{y:?}");
+    publish(
+        &mut p,
+        &he,
+        &moved(&nominal, &[3.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+        &clock,
+        2,
+    );
+    let (y, _) = korr_units(&cycle_on(&new, to, 13, &nominal, |_| {}));
     assert_eq!(y[0], -500, "{y:?}");
     // Now the old port is the foreign one.
     old.send_to(rob(200, &nominal).as_bytes(), to).unwrap();

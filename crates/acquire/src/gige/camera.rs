@@ -23,6 +23,11 @@ pub(super) struct Opened {
     pub(super) control_lost: Arc<AtomicBool>,
     pub(super) id: String,
     pub(super) took: Duration,
+    /// The exposure time the camera reports (`ExposureTime`), ns; 0 when
+    /// it cannot be read.
+    pub(super) exposure_ns: u64,
+    /// Bytes per frame on the wire (the payload).
+    pub(super) payload: usize,
 }
 
 pub(super) enum OpenError {
@@ -135,6 +140,12 @@ pub(super) fn open(
         .set_acquisition_mode(AcquisitionMode::Continuous)
         .map_err(setting("acquisition mode"))?;
     let payload = camera.payload().map_err(setting("payload"))? as usize;
+    // What the camera really uses (it may round the asked value); the
+    // exposure instant is its middle.
+    let exposure_ns = match camera.exposure_time() {
+        Ok(us) if us.is_finite() && us > 0.0 => (us * 1e3).round() as u64,
+        _ => 0,
+    };
 
     let stream = camera.create_stream().map_err(setting("stream"))?;
     if let Some(gv) = stream.downcast_ref::<aravis::GvStream>() {
@@ -156,6 +167,8 @@ pub(super) fn open(
         control_lost,
         id,
         took: t0.elapsed(),
+        exposure_ns,
+        payload,
     })
 }
 

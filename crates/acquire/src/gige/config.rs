@@ -88,6 +88,14 @@ pub struct GigeConfig {
     /// each opening after the settings above; each must exist in the
     /// camera's node map and take its value, or the opening fails naming it.
     pub features: Vec<(String, FeatureValue)>,
+    /// The transfer of one frame from the end of its exposure to its
+    /// arrival at the host, at the least (`None`: the payload's bits at
+    /// 1 Gbit/s, about 11 ms for 1300×1030 Mono8).
+    pub transfer: Option<Duration>,
+    /// For frames without a camera timestamp: the fixed latency from the
+    /// middle of the exposure to the reception (`None`: the exposure
+    /// instant is not known).
+    pub fixed_latency: Option<Duration>,
 }
 
 impl Default for GigeConfig {
@@ -106,6 +114,8 @@ impl Default for GigeConfig {
             backoff_initial: Duration::from_millis(100),
             backoff_max: Duration::from_secs(5),
             features: Vec::new(),
+            transfer: None,
+            fixed_latency: None,
         }
     }
 }

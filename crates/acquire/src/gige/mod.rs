@@ -26,6 +26,21 @@
 //! `GigeSource` in the process are serialised by one lock (off the frame
 //! path).
 //!
+//! # Time
+//! Each frame is stamped on the host's monotonic clock ([`crate::mono`]):
+//! `host_mono_ns` is its arrival (aravis' reception stamp, moved onto the
+//! monotonic clock; the pop when aravis gives none), and
+//! `exposure_mono_ns` the middle of its exposure, from the camera's
+//! timestamp through a [`ClockMap`] (the lower envelope of camera time
+//! against arrival; reset at every opening) — assuming, as GigE Vision
+//! cameras commonly do, that the timestamp is latched at the *start* of
+//! the exposure, so the earliest arrival is the stamp plus the exposure
+//! time plus the transfer ([`GigeConfig::transfer`], by default the
+//! payload at 1 Gbit/s), and the middle is half an exposure after the
+//! stamp. `exposure_ns` is the camera's `ExposureTime` as read at opening,
+//! `exposure_sigma_ns` the mapping's uncertainty. A camera that sends no
+//! timestamps gets its exposure from [`GigeConfig::fixed_latency`], or none.
+//!
 //! # Missing frames
 //! Gaps in the camera's frame (block) ids between delivered frames are
 //! counted in [`SourceStats::missing`](crate::source::SourceStats) and
@@ -41,6 +56,7 @@ pub use camera::{list_cameras, CameraInfo};
 pub use config::{FeatureValue, GigeConfig, PixelDepth, Roi};
 pub use copy::id_gap;
 
+use crate::clock_map::{ClockMap, ClockMapConfig};
 use crate::ring::Slot;
 use crate::source::{Clock, FrameSource, SourceCounters, SourceError, SourceStats, SystemClock};
 use aravis::prelude::*;
@@ -86,6 +102,7 @@ pub struct GigeSource {
     next_seq: u64,
     failures_logged: bool,
     resized_logged: bool,
+    clock_map: ClockMap,
 }
 
 impl std::fmt::Debug for GigeSource {
@@ -156,6 +173,7 @@ impl GigeSource {
             next_seq: 0,
             failures_logged: false,
             resized_logged: false,
+            clock_map: ClockMap::new(ClockMapConfig::default()),
         })
     }
 
@@ -210,6 +228,8 @@ impl GigeSource {
                     took_ms = opened.took.as_millis() as u64, "camera opened, streaming");
                 self.counters.opens.inc();
                 self.counters.connected.store(true, Ordering::Relaxed);
+                // A reopened camera may have restarted its clock.
+                self.clock_map.reset();
                 self.backoff = self.config.backoff_initial;
                 self.failures_logged = false;
                 self.link = Link::Streaming(Box::new(Live {
@@ -266,11 +286,17 @@ impl GigeSource {
         };
         let frame_id = buffer.frame_id();
         let camera_time_ns = buffer.timestamp();
-        let host_time_ns = match buffer.system_timestamp() {
-            0 => self.clock.now_ns(),
-            t => t,
+        let (utc_now, mono_now) = (self.clock.now_ns(), crate::mono::now_ns());
+        let (host_time_ns, host_mono_ns) = match buffer.system_timestamp() {
+            // aravis stamped the reception (UTC): the same instant on the
+            // monotonic clock, never after now, at most a second back.
+            t if t != 0 && t <= utc_now && utc_now - t < 1_000_000_000 => {
+                (t, mono_now - (utc_now - t))
+            }
+            _ => (utc_now, mono_now),
         };
         live.opened.stream.push_buffer(buffer);
+        let (exposure_ns, payload) = (live.opened.exposure_ns, live.opened.payload);
         match copied {
             Ok(resized) => {
                 if resized && !self.resized_logged {
@@ -290,6 +316,12 @@ impl GigeSource {
                 slot.meta.camera_frame_id = frame_id;
                 slot.meta.camera_time_ns = camera_time_ns;
                 slot.meta.host_time_ns = host_time_ns;
+                slot.meta.host_mono_ns = host_mono_ns;
+                slot.meta.exposure_ns = exposure_ns;
+                let (mid, sigma) =
+                    self.exposure_instant(camera_time_ns, host_mono_ns, exposure_ns, payload);
+                slot.meta.exposure_mono_ns = mid;
+                slot.meta.exposure_sigma_ns = sigma;
                 self.next_seq += 1;
                 self.counters.frames.inc();
                 Ok(())
@@ -305,6 +337,37 @@ impl GigeSource {
         }
     }
 }
+impl GigeSource {
+    /// The middle of a frame's exposure on the host's monotonic clock and
+    /// its uncertainty (see the module docs), `(0, 0)` when not known.
+    fn exposure_instant(
+        &mut self,
+        camera_ns: u64,
+        arrival_ns: u64,
+        exposure_ns: u64,
+        payload: usize,
+    ) -> (u64, u64) {
+        if camera_ns == 0 {
+            return match self.config.fixed_latency {
+                Some(l) => (
+                    arrival_ns.saturating_sub(l.as_nanos() as u64),
+                    (l.as_nanos() as u64) / 10,
+                ),
+                None => (0, 0),
+            };
+        }
+        let m = self.clock_map.update(camera_ns, arrival_ns);
+        let transfer = self.config.transfer.map_or_else(
+            || crate::clock_map::bytes_at_gigabit_ns(payload),
+            |t| t.as_nanos() as u64,
+        );
+        let stamp = m
+            .floor_ns
+            .saturating_sub(exposure_ns.saturating_add(transfer));
+        (stamp.saturating_add(exposure_ns / 2), m.sigma_ns)
+    }
+}
+
 impl FrameSource for GigeSource {
     fn start(&mut self) -> Result<(), SourceError> {
         if matches!(self.link, Link::Idle) {

@@ -26,6 +26,7 @@ pub(crate) struct GigeSection {
     lost_after_ms: Option<f64>,
     backoff_initial_ms: Option<f64>,
     backoff_max_ms: Option<f64>,
+    transfer_ms: Option<f64>,
     #[serde(default)]
     features: Features,
 }
@@ -169,6 +170,21 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
             600_000.0,
         )?,
         backoff_max: ms("source.gige.backoff_max_ms", backoff_max_ms, 600_000.0)?,
+        transfer: match g.transfer_ms {
+            None => None,
+            Some(t) if t.is_finite() && (0.0..=10_000.0).contains(&t) => {
+                Some(std::time::Duration::from_secs_f64(t / 1000.0))
+            }
+            Some(t) => {
+                return Err(bad(
+                    "source.gige.transfer_ms",
+                    t.to_string(),
+                    "must be in [0, 10000] ms",
+                ))
+            }
+        },
+        // Set from `[source] latency_ms` by the seam.
+        fixed_latency: None,
         features: features(g.features, bad)?,
     };
     if config.backoff_max < config.backoff_initial {

@@ -51,6 +51,9 @@ pub(crate) enum SourceKind {
 pub(crate) struct SourceSection {
     #[serde(default)]
     kind: SourceKind,
+    /// Fixed latency from the middle of the exposure to the reception, ms,
+    /// for frames without an exposure time of their own.
+    latency_ms: Option<f64>,
     synthetic: Option<synthetic::SyntheticSection>,
     replay: Option<replay::ReplaySection>,
     #[cfg(feature = "gige")]
@@ -72,6 +75,7 @@ impl Default for SourceSection {
     fn default() -> Self {
         SourceSection {
             kind: SourceKind::Synthetic,
+            latency_ms: None,
             synthetic: None,
             replay: None,
             gige: None,
@@ -101,14 +105,33 @@ impl Source {
         section: SourceSection,
         bad: Bad<'_>,
     ) -> Result<Source, ConfigError> {
+        let latency = match section.latency_ms {
+            None => None,
+            Some(l) if l.is_finite() && (0.0..=10_000.0).contains(&l) => {
+                Some(Duration::from_secs_f64(l / 1000.0))
+            }
+            Some(l) => {
+                return Err(bad(
+                    "source.latency_ms",
+                    l.to_string(),
+                    "must be in [0, 10000] ms",
+                ))
+            }
+        };
         Ok(match section.kind {
             SourceKind::Synthetic => {
                 Source::Synthetic(synthetic::validate(section.synthetic, bad)?)
             }
-            SourceKind::Replay => Source::Replay(replay::validate(section.replay.as_ref(), bad)?),
+            SourceKind::Replay => {
+                let mut r = replay::validate(section.replay.as_ref(), bad)?;
+                r.fixed_latency = latency;
+                Source::Replay(r)
+            }
             #[cfg(feature = "gige")]
             SourceKind::Gige => {
-                Source::Gige(gige::validate(section.gige.unwrap_or_default(), bad)?)
+                let mut g = gige::validate(section.gige.unwrap_or_default(), bad)?;
+                g.fixed_latency = latency;
+                Source::Gige(g)
             }
             #[cfg(not(feature = "gige"))]
             SourceKind::Gige => {

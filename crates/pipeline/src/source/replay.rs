@@ -4,6 +4,13 @@
 //! the pipeline takes them. It owns its section: keys, defaults and checks.
 //! Host times come from the recording (shifted per pass), so a replay is
 //! the same run every time.
+//!
+//! Time on this host: a replayed frame is received when it is handed over
+//! (`host_mono_ns`); its exposure instant is that minus the latency of the
+//! camera it was recorded from — `[source] latency_ms` when set, else the
+//! synthetic model of a GigE camera (half of a 2 ms exposure plus the
+//! frame's bytes at 1 Gbit/s). Recordings do not carry the exposure
+//! instants of their frames yet.
 
 use super::{wait_until, Bad};
 use crate::config::ConfigError;
@@ -70,7 +77,14 @@ pub struct Replay {
     pub passes: u64,
     /// Largest recording read, bytes (the replay holds it in memory).
     pub max_bytes: u64,
+    /// From the middle of the exposure to the hand-over (`[source]
+    /// latency_ms`); `None`: the model of a GigE camera (see the module
+    /// docs).
+    pub fixed_latency: Option<Duration>,
 }
+
+/// The exposure time the replay assumes when no latency is configured, ns.
+pub const MODEL_EXPOSURE_NS: u64 = 2_000_000;
 
 /// Validates `[source.replay]` (`path` is required).
 pub(crate) fn validate(
@@ -115,6 +129,7 @@ pub(crate) fn validate(
         speed,
         passes: r.passes,
         max_bytes: r.max_bytes,
+        fixed_latency: None,
     })
 }
 
@@ -130,6 +145,7 @@ pub struct ReplaySource {
     span: (u64, u64),
     next: usize,
     start: Option<(Instant, u64)>,
+    fixed_latency: Option<Duration>,
 }
 
 /// Why a replay cannot start.
@@ -190,6 +206,7 @@ impl ReplaySource {
             span,
             next: 0,
             start: None,
+            fixed_latency: config.fixed_latency,
         })
     }
 
@@ -243,6 +260,26 @@ impl FrameSource for ReplaySource {
         // The recorded reception time, shifted like the camera time: the
         // replay's clock is the recording's.
         slot.meta.host_time_ns = meta.host_time_ns + time_offset;
+        let now = photopose_acquire::mono::now_ns();
+        let (latency, exposure) = match self.fixed_latency {
+            Some(l) => (l.as_nanos() as u64, 0),
+            None => {
+                let per_pixel = match slot.image.pixels() {
+                    photopose_frame::Pixels::Mono8(_) => 1,
+                    _ => 2,
+                };
+                let bytes = slot.image.width() as usize * slot.image.height() as usize * per_pixel;
+                (
+                    MODEL_EXPOSURE_NS / 2
+                        + photopose_acquire::clock_map::bytes_at_gigabit_ns(bytes),
+                    MODEL_EXPOSURE_NS,
+                )
+            }
+        };
+        slot.meta.host_mono_ns = now;
+        slot.meta.exposure_mono_ns = now.saturating_sub(latency);
+        slot.meta.exposure_sigma_ns = 0;
+        slot.meta.exposure_ns = exposure;
         Ok(())
     }
 
