@@ -215,12 +215,23 @@ impl Pipeline {
                 };
                 let (publisher, reader) = photopose_rsi::latest_slot();
                 let clock = photopose_rsi::server::RsiClock::new();
-                let server = photopose_rsi::server::RsiServer::spawn(
-                    r.settings.clone(),
-                    hand_eye,
-                    reader,
-                    clock,
-                )?;
+                // The recording's tap, when it records the RSI cycles.
+                let tap = config.record.link.as_ref().and_then(|l| l.rsi_tap());
+                let server = match tap {
+                    Some(tap) => photopose_rsi::server::RsiServer::spawn_tapped(
+                        r.settings.clone(),
+                        hand_eye,
+                        reader,
+                        clock,
+                        tap,
+                    )?,
+                    None => photopose_rsi::server::RsiServer::spawn(
+                        r.settings.clone(),
+                        hand_eye,
+                        reader,
+                        clock,
+                    )?,
+                };
                 let stats = Arc::clone(server.stats());
                 (
                     Some(server),
