@@ -1,9 +1,11 @@
 //! `photopose calibrate camera`: detects the targets of 10–30 images of the
 //! test field, runs the self-calibrating bundle adjustment of
 //! `photopose-calibrate` and writes the camera file, the report (text on
-//! stdout, JSON on request) and the residual plots.
+//! stdout, JSON on request) and the residual plots. Images may come from
+//! recordings (`.mcap`, every frame or `--frames`).
 
-use crate::cmd::{batch::load_frame, defaults};
+use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_calibrate::{
@@ -23,9 +25,14 @@ pub struct Args {
     /// principal distance; default: the built-in camera.
     #[arg(long)]
     pub initial: Option<PathBuf>,
-    /// Images of the test field (PGM or PNG, the camera's size).
+    /// Images of the test field (PGM or PNG, the camera's size) or
+    /// recordings (MCAP: every frame, or those of --frames).
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
+    /// Frames of the recordings by sequence number: N, A-B, or a comma
+    /// list (default: every frame).
+    #[arg(long)]
+    pub frames: Option<FrameSelection>,
     /// The calibrated camera file to write (TOML).
     #[arg(long)]
     pub out: PathBuf,
@@ -65,16 +72,18 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let started = std::time::Instant::now();
     let mut inputs = Vec::with_capacity(args.images.len());
     let mut unreadable = Vec::new();
-    for path in &args.images {
-        let name = path.display().to_string();
-        let image = match load_frame(path, &initial) {
+    let mut n_images = 0;
+    for_each_frame(&args.images, &initial, args.frames.as_ref(), |name, image| -> Result<()> {
+        n_images += 1;
+        let name = name.to_string();
+        let image = match image {
             Ok(i) => i,
             Err(e) => {
                 unreadable.push(Skipped {
                     image: name,
                     reason: e,
                 });
-                continue;
+                return Ok(());
             }
         };
         let det = detector
@@ -86,7 +95,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
                 reason: format!("test field not found: the frame is {:?}", det.status)
                     .to_lowercase(),
             });
-            continue;
+            return Ok(());
         }
         let blobs = det
             .targets
@@ -99,7 +108,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
             })
             .collect();
         inputs.push(ImageDetections { name, blobs });
-    }
+        Ok(())
+    })?;
     let detected = std::time::Instant::now();
     let mut options = CalibrationOptions::default();
     options.bundle.fixed = fixed;
@@ -116,7 +126,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     };
     tracing::info!(
         "detection of {} images {:.3} s, adjustment {:.3} s",
-        args.images.len(),
+        n_images,
         (detected - started).as_secs_f64(),
         detected.elapsed().as_secs_f64()
     );

@@ -12,6 +12,7 @@ pub mod demo;
 pub mod detect;
 pub mod export;
 pub mod field;
+pub mod input;
 pub mod pose_arg;
 pub mod record;
 pub mod render;

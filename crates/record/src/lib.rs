@@ -9,10 +9,14 @@
 //! | `/camera/image` | `foxglove.RawImage` (protobuf) | every recorded frame, `mono8` or `mono16` (little-endian) |
 //! | `/pose` | `foxglove.PoseInFrame` (protobuf) | the camera pose of each frame with a pose, frame `field` |
 //! | `/pose/message` | `photopose.PoseMessage` (json, JSON Schema) | the full pose message, one per result |
+//! | `/camera/frame_times` | `photopose.FrameTimes` (json, JSON Schema) | each frame's full sequence number and times (reception, mid-exposure, its σ, exposure time), just before its image |
+//! | `/camera/targets` | `foxglove.ImageAnnotations` (protobuf) | each recorded frame's identified targets with their ids ([`TargetMark`]) |
+//! | `/rsi/cycle` | `photopose.RsiCycle` (json, JSON Schema) | every answered RSI controller cycle ([`RsiCycle`]) |
 //!
-//! A message's `log_time` is the host time (ns since the Unix epoch),
+//! A frame message's `log_time` is the host time (ns since the Unix epoch),
 //! `publish_time` the camera time and `sequence` the low 32 bits of the
-//! frame's sequence number. The image channel's metadata holds the
+//! frame's sequence number; the JSON Schemas of our own JSON messages are
+//! kept in the repository's `docs/schema/` and stored in every file. The image channel's metadata holds the
 //! camera's saturation level (`max_value`). Attachments carry the camera,
 //! field and configuration files; a metadata record `photopose` the
 //! version, the host and the start time. Chunks are compressed (zstd by
@@ -24,6 +28,7 @@
 //! verified, and every frame is checked against its size. A file that fails
 //! any of these is refused at [`Recording::open`] with its name; the whole
 //! recording is then held in memory (the replay copies frames out of it).
+//! [`pose_messages`] reads only the pose messages (for `circle-test`).
 //! Recordings of the first format (topic `/camera/frames`, encoding
 //! `photopose.frame.v1`: a 35-byte little-endian header `seq`,
 //! `camera_time_ns`, `host_time_ns`, `width`, `height`, bytes per pixel,
