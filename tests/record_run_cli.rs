@@ -168,7 +168,7 @@ fn a_daemon_recording_is_standard_mcap_and_replays_the_same_twice() {
     let bytes = std::fs::read(&recording).unwrap();
     let mut per_topic = BTreeMap::<String, (String, String, usize)>::new();
     let mut validators = BTreeMap::<u16, jsonschema::Validator>::new();
-    let (mut images, mut poses, mut ids, mut ipocs) = (0, 0, Vec::new(), Vec::new());
+    let (mut images, mut pose_count, mut ids, mut ipocs) = (0, 0, Vec::new(), Vec::new());
     let mut exposure_times = 0;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
@@ -209,7 +209,7 @@ fn a_daemon_recording_is_standard_mcap_and_replays_the_same_twice() {
                     }
                     "foxglove.PoseInFrame" => {
                         assert_eq!(field("frame_id"), Value::String("field".into()));
-                        poses += 1;
+                        pose_count += 1;
                     }
                     "foxglove.ImageAnnotations" => {
                         let Value::List(texts) = field("texts") else {
@@ -259,7 +259,7 @@ fn a_daemon_recording_is_standard_mcap_and_replays_the_same_twice() {
         per_topic["/camera/image"],
         ("foxglove.RawImage".into(), "protobuf".into(), 50)
     );
-    assert_eq!((images, poses, exposure_times), (50, 50, 50));
+    assert_eq!((images, pose_count, exposure_times), (50, 50, 50));
     assert_eq!(
         per_topic["/pose"],
         ("foxglove.PoseInFrame".into(), "protobuf".into(), 50)
