@@ -96,7 +96,10 @@ fn record_with_rsi(config: &Path, recording: &Path, rsi_port: u16) -> String {
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let logs = std::thread::spawn(move || {
         let mut all = String::new();
-        for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
             if line.contains("RSI server listening") {
                 let _ = tx.send(line.clone());
             }

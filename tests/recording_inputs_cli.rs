@@ -33,13 +33,23 @@ fn detect_resect_and_calibrate_read_recordings() {
         .arg(&rec)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let name = rec.display().to_string();
 
     // Every frame, named by its sequence number.
     let all = lines(&["detect"], &[&rec]);
-    let names: Vec<String> = all.iter().map(|l| l["image"].as_str().unwrap().to_string()).collect();
-    assert_eq!(names, (0..4).map(|k| format!("{name}#{k}")).collect::<Vec<_>>());
+    let names: Vec<String> = all
+        .iter()
+        .map(|l| l["image"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        names,
+        (0..4).map(|k| format!("{name}#{k}")).collect::<Vec<_>>()
+    );
     for l in &all {
         assert_eq!(l["ok"], true, "{l}");
         assert!(l["n_identified"].as_u64().unwrap() > 30, "{l}");
@@ -64,7 +74,11 @@ fn detect_resect_and_calibrate_read_recordings() {
         .args(["--format", "png"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let first = png.join("frame-000000.png");
     assert!(std::fs::read(&first).unwrap().starts_with(b"\x89PNG"));
     let from_png = lines(&["detect"], &[&first]);

@@ -73,43 +73,48 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mut inputs = Vec::with_capacity(args.images.len());
     let mut unreadable = Vec::new();
     let mut n_images = 0;
-    for_each_frame(&args.images, &initial, args.frames.as_ref(), |name, image| -> Result<()> {
-        n_images += 1;
-        let name = name.to_string();
-        let image = match image {
-            Ok(i) => i,
-            Err(e) => {
+    for_each_frame(
+        &args.images,
+        &initial,
+        args.frames.as_ref(),
+        |name, image| -> Result<()> {
+            n_images += 1;
+            let name = name.to_string();
+            let image = match image {
+                Ok(i) => i,
+                Err(e) => {
+                    unreadable.push(Skipped {
+                        image: name,
+                        reason: e,
+                    });
+                    return Ok(());
+                }
+            };
+            let det = detector
+                .detect(image.view())
+                .with_context(|| format!("detecting in {name}"))?;
+            if det.status != FrameStatus::Normal {
                 unreadable.push(Skipped {
                     image: name,
-                    reason: e,
+                    reason: format!("test field not found: the frame is {:?}", det.status)
+                        .to_lowercase(),
                 });
                 return Ok(());
             }
-        };
-        let det = detector
-            .detect(image.view())
-            .with_context(|| format!("detecting in {name}"))?;
-        if det.status != FrameStatus::Normal {
-            unreadable.push(Skipped {
-                image: name,
-                reason: format!("test field not found: the frame is {:?}", det.status)
-                    .to_lowercase(),
-            });
-            return Ok(());
-        }
-        let blobs = det
-            .targets
-            .iter()
-            .map(|d| Blob {
-                col: d.col,
-                row: d.row,
-                kind: d.kind,
-                id: d.id,
-            })
-            .collect();
-        inputs.push(ImageDetections { name, blobs });
-        Ok(())
-    })?;
+            let blobs = det
+                .targets
+                .iter()
+                .map(|d| Blob {
+                    col: d.col,
+                    row: d.row,
+                    kind: d.kind,
+                    id: d.id,
+                })
+                .collect();
+            inputs.push(ImageDetections { name, blobs });
+            Ok(())
+        },
+    )?;
     let detected = std::time::Instant::now();
     let mut options = CalibrationOptions::default();
     options.bundle.fixed = fixed;

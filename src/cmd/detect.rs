@@ -5,8 +5,8 @@
 //! `--frames` selects, is one image (`FILE#SEQ`).
 
 use crate::cmd::batch::{exit_status, ErrorLine};
-use crate::cmd::input::{for_each_frame, FrameSelection};
 use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::TargetKind;

@@ -2,8 +2,8 @@
 //! files (`id,col,row`), one JSON object per input per line, in input order.
 
 use crate::cmd::batch::{exit_status, ErrorLine};
-use crate::cmd::input::{for_each_frame, FrameSelection};
 use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::Field;
@@ -137,7 +137,9 @@ pub fn observations_for(
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
     if args.observations.is_empty() && args.images.is_empty() {
-        anyhow::bail!("no input: give images (PGM, PNG), recordings (MCAP) or --observations FILE...");
+        anyhow::bail!(
+            "no input: give images (PGM, PNG), recordings (MCAP) or --observations FILE..."
+        );
     }
     // A camera or field that cannot be used fails every input, each on its
     // own line, so that a batch reader sees why.

@@ -396,6 +396,8 @@ impl Config {
             None
         };
         let r = &f.record;
+        const FRAMES_RULE: &str =
+            "must be \"all\", \"none\", \"on_change\" or N (every Nth frame, 1..=1000000)";
         let frames = match &r.frames {
             RecordFramesToml::Word(w) if w == "all" => RecordFrames::All,
             RecordFramesToml::Word(w) if w == "none" => RecordFrames::None,
@@ -403,19 +405,9 @@ impl Config {
             RecordFramesToml::Every(n) if (1..=1_000_000).contains(n) => {
                 RecordFrames::Every(*n as u32)
             }
-            RecordFramesToml::Word(w) => {
-                return Err(bad(
-                    "record.frames",
-                    w.clone(),
-                    "must be \"all\", \"none\", \"on_change\" or N (every Nth frame, 1..=1000000)",
-                ))
-            }
+            RecordFramesToml::Word(w) => return Err(bad("record.frames", w.clone(), FRAMES_RULE)),
             RecordFramesToml::Every(n) => {
-                return Err(bad(
-                    "record.frames",
-                    n.to_string(),
-                    "must be \"all\", \"none\", \"on_change\" or N (every Nth frame, 1..=1000000)",
-                ))
+                return Err(bad("record.frames", n.to_string(), FRAMES_RULE))
             }
         };
         let Some(compression) = photopose_record::Compression::from_name(&r.compression) else {

@@ -9,9 +9,9 @@
 //! to its pool when the result is dropped, so no frame allocates once the
 //! pool is warm.
 
+use crossbeam_queue::ArrayQueue;
 use photopose_geometry::ResectionReport;
 use photopose_locate::PoseStatus as LocateStatus;
-use crossbeam_queue::ArrayQueue;
 use photopose_telemetry::Counter;
 use std::sync::Arc;
 use std::time::Instant;

@@ -272,9 +272,11 @@ impl Pipeline {
         );
         // `[record] frames = "on_change"`: the workers record a frame whose
         // status differs from the one before.
-        let on_change = config.record.link.clone().filter(|_| {
-            config.record.frames == crate::config::RecordFrames::OnChange
-        });
+        let on_change = config
+            .record
+            .link
+            .clone()
+            .filter(|_| config.record.frames == crate::config::RecordFrames::OnChange);
         // Workers: take frames from the ring, hand each result to the output
         // stage; dropping the frame handle returns its slot to the ring.
         for k in 0..config.workers {

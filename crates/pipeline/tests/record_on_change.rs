@@ -86,7 +86,10 @@ compression = "lz4"
         Pipeline::start_supervised(&cfg, camera, field, source, Supervision::none()).unwrap();
     let t0 = Instant::now();
     while !pipeline.finished() {
-        assert!(t0.elapsed() < Duration::from_secs(120), "the pipeline did not finish");
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the pipeline did not finish"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     pipeline.join();

@@ -398,7 +398,9 @@ impl Recorder {
         };
         self.write_frame_times(&meta)?;
         let message = RawImage {
-            timestamp: Some(timestamp(meta.exposure_utc_ns().unwrap_or(meta.host_time_ns))),
+            timestamp: Some(timestamp(
+                meta.exposure_utc_ns().unwrap_or(meta.host_time_ns),
+            )),
             frame_id: "camera".into(),
             width,
             height,

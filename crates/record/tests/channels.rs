@@ -116,7 +116,10 @@ fn targets_and_rsi_cycles_have_channels_of_their_own() {
             annotations.push(foxglove::messages::ImageAnnotations::decode(&m.data[..]).unwrap());
         }
         if m.channel.topic == RSI_TOPIC {
-            assert_eq!((schema.name.as_str(), schema.encoding.as_str()), ("photopose.RsiCycle", "jsonschema"));
+            assert_eq!(
+                (schema.name.as_str(), schema.encoding.as_str()),
+                ("photopose.RsiCycle", "jsonschema")
+            );
             assert_eq!(m.log_time, cycle.arrival_utc_ns);
             cycles.push(serde_json::from_slice::<serde_json::Value>(&m.data).unwrap());
         }
@@ -127,8 +130,14 @@ fn targets_and_rsi_cycles_have_channels_of_their_own() {
     assert_eq!(texts, ["c3", "117"]);
     // One points group for the coded targets, one for the uncoded.
     assert_eq!(a.points.len(), 2);
-    assert_eq!((a.points[0].points[0].x, a.points[0].points[0].y), (10.5, 4.25));
-    assert_eq!((a.points[1].points[0].x, a.points[1].points[0].y), (20.0, 12.0));
+    assert_eq!(
+        (a.points[0].points[0].x, a.points[0].points[0].y),
+        (10.5, 4.25)
+    );
+    assert_eq!(
+        (a.points[1].points[0].x, a.points[1].points[0].y),
+        (20.0, 12.0)
+    );
     assert_ne!(a.points[0].fill_color, a.points[1].fill_color);
     assert_eq!(cycles.len(), 1);
     assert_eq!(cycles[0]["ipoc"], 123_456);

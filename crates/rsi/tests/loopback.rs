@@ -360,6 +360,8 @@ fn a_tapped_server_hands_over_every_answered_cycle() {
         assert_eq!(c.sent, [0.0; 6]);
         assert!(c.arrival_utc_ns >= before_utc && c.arrival_mono_ns >= before_mono);
     }
-    assert!(cycles.windows(2).all(|w| w[0].arrival_mono_ns <= w[1].arrival_mono_ns));
+    assert!(cycles
+        .windows(2)
+        .all(|w| w[0].arrival_mono_ns <= w[1].arrival_mono_ns));
     assert_eq!((tap.pushed(), tap.dropped()), (3, 0));
 }

@@ -24,11 +24,9 @@ use crate::result::ResultStatus;
 use crate::run::PipelineError;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use photopose_acquire::{FrameSource, Slot, SourceError};
-use photopose_frame::Pixels;
 use photopose_frame::FrameMeta;
-use photopose_record::{
-    PoseRecord, RecordError, RecordOptions, Recorder, RsiCycle, TargetMark,
-};
+use photopose_frame::Pixels;
+use photopose_record::{PoseRecord, RecordError, RecordOptions, Recorder, RsiCycle, TargetMark};
 use photopose_rsi::tap::{CycleRecord, CycleTap};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
@@ -474,9 +472,7 @@ impl Writer {
                 self.drain_rsi(rec);
             }
             let item = match items.recv_timeout(RSI_POLL) {
-                Ok(Item::Finish) | Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {
-                    break
-                }
+                Ok(Item::Finish) | Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
                 Ok(item) => item,
                 Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
             };
