@@ -310,3 +310,46 @@ fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_g() {
     let g = v["camera"]["g_um"].as_f64().unwrap();
     assert!((g - cell.error.radial_f_mm() * 1e3).abs() < 30.0, "{g}");
 }
+
+#[test]
+fn a_recording_s_pose_messages_are_read_as_the_stream_is() {
+    let dir = scratch("circle-test-recording");
+    let cell = Cell::default();
+    let poses = dir.join("poses.jsonl");
+    write_stream(&cell, &poses);
+    // The same lines as the recording's `/pose/message` channel.
+    let recording = dir.join("poses.mcap");
+    let mut rec = photopose_record::Recorder::create(&recording).unwrap();
+    let text = std::fs::read_to_string(&poses).unwrap();
+    for (k, line) in text.lines().enumerate() {
+        rec.write_pose(&photopose_record::PoseRecord {
+            seq: k as u64,
+            camera_time_ns: 0,
+            host_time_ns: k as u64,
+            pose: None,
+            json: line.as_bytes(),
+        })
+        .unwrap();
+    }
+    rec.finish().unwrap();
+    let report = |input: &std::path::Path, out: &str| -> Value {
+        let out = bin()
+            .arg("circle-test")
+            .arg(input)
+            .arg("--out-dir")
+            .arg(dir.join(out))
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["inputs"][0]["path"] = Value::Null;
+        v
+    };
+    assert_eq!(report(&recording, "rec"), report(&poses, "lines"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

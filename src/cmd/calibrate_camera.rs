@@ -3,9 +3,11 @@
 //! `photopose-calibrate` and writes the camera file (with its
 //! `[calibration]` section), the report (text on stdout, JSON on request)
 //! and the residual plots, all carrying the provenance (tool, date, input
-//! files with their SHA-256).
+//! files with their SHA-256). Images may come from recordings (`.mcap`,
+//! every frame or `--frames`).
 
-use crate::cmd::{batch::load_frame, defaults};
+use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_calibrate::{
@@ -28,9 +30,14 @@ pub struct Args {
     /// principal distance; default: the built-in camera.
     #[arg(long)]
     pub initial: Option<PathBuf>,
-    /// Images of the test field (PGM or PNG, the camera's size).
+    /// Images of the test field (PGM or PNG, the camera's size) or
+    /// recordings (MCAP: every frame, or those of --frames).
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
+    /// Frames of the recordings by sequence number: N, A-B, or a comma
+    /// list (default: every frame).
+    #[arg(long)]
+    pub frames: Option<FrameSelection>,
     /// The calibrated camera file to write (TOML).
     #[arg(long)]
     pub out: PathBuf,
@@ -117,46 +124,61 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             hashes.push(hash_file(p, kind)?);
         }
     }
-    let bar = crate::cmd::progress::bar(Some(args.images.len() as u64), "images detected");
     for path in &args.images {
-        bar.inc(1);
-        let name = path.display().to_string();
-        if let Ok(h) = hash_file(path, FileKind::Image) {
+        let kind = if path.extension().is_some_and(|e| e == "mcap") {
+            FileKind::Recording
+        } else {
+            FileKind::Image
+        };
+        if let Ok(h) = hash_file(path, kind) {
             hashes.push(h);
         }
-        let image = match load_frame(path, &initial) {
-            Ok(i) => i,
-            Err(e) => {
+    }
+    let bar = crate::cmd::progress::bar(None, "images detected");
+    let mut n_images = 0;
+    for_each_frame(
+        &args.images,
+        &initial,
+        args.frames.as_ref(),
+        |name, image| -> Result<()> {
+            n_images += 1;
+            bar.inc(1);
+            let name = name.to_string();
+            let image = match image {
+                Ok(i) => i,
+                Err(e) => {
+                    unreadable.push(Skipped {
+                        image: name,
+                        reason: e,
+                    });
+                    return Ok(());
+                }
+            };
+            let det = detector
+                .detect(image.view())
+                .with_context(|| format!("detecting in {name}"))?;
+            if det.status != FrameStatus::Normal {
                 unreadable.push(Skipped {
                     image: name,
-                    reason: e,
+                    reason: format!("test field not found: the frame is {:?}", det.status)
+                        .to_lowercase(),
                 });
-                continue;
+                return Ok(());
             }
-        };
-        let det = detector
-            .detect(image.view())
-            .with_context(|| format!("detecting in {name}"))?;
-        if det.status != FrameStatus::Normal {
-            unreadable.push(Skipped {
-                image: name,
-                reason: format!("test field not found: the frame is {:?}", det.status)
-                    .to_lowercase(),
-            });
-            continue;
-        }
-        let blobs = det
-            .targets
-            .iter()
-            .map(|d| Blob {
-                col: d.col,
-                row: d.row,
-                kind: d.kind,
-                id: d.id,
-            })
-            .collect();
-        inputs.push(ImageDetections { name, blobs });
-    }
+            let blobs = det
+                .targets
+                .iter()
+                .map(|d| Blob {
+                    col: d.col,
+                    row: d.row,
+                    kind: d.kind,
+                    id: d.id,
+                })
+                .collect();
+            inputs.push(ImageDetections { name, blobs });
+            Ok(())
+        },
+    )?;
     bar.finish_and_clear();
     let detected = std::time::Instant::now();
     let adjusting = crate::cmd::progress::status();
@@ -178,7 +200,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
     };
     tracing::info!(
         "detection of {} images {:.3} s, adjustment {:.3} s",
-        args.images.len(),
+        n_images,
         (detected - started).as_secs_f64(),
         detected.elapsed().as_secs_f64()
     );

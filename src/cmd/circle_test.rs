@@ -26,7 +26,8 @@ use std::process::ExitCode;
 #[derive(Parser, Debug)]
 pub struct Args {
     /// Pose files: JSON lines of the daemon's pose stream (docs/streams.md)
-    /// or of `photopose resect`; several files are joined in order.
+    /// or of `photopose resect`, or recordings (MCAP: the pose messages of
+    /// `/pose/message`); several files are joined in order.
     #[arg(required = true)]
     pub poses: Vec<PathBuf>,
     /// Hand-eye file (TOML, `[camera_in_tcp] xyzabc = [x, y, z, a, b, c]`,
@@ -309,20 +310,40 @@ pub fn write_outputs(dir: &Path, out: &Outputs) -> Result<Vec<PathBuf>> {
 /// Appends the camera poses of one file; lines without a pose are counted.
 pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSummary> {
     let name = path.display().to_string();
-    let text = photopose_formats::read_text(path, photopose_formats::FileKind::Poses)?;
+    // A recording's pose messages are its lines, `FILE#N` the N-th.
+    let file_sha256;
+    let (lines, mark) = if crate::cmd::input::is_recording(path) {
+        let bytes = photopose_formats::read_bytes(path, photopose_formats::FileKind::Recording)?;
+        file_sha256 = sha256_hex(&bytes);
+        drop(bytes);
+        let messages = photopose_record::pose_messages(path)?;
+        let lines = messages
+            .iter()
+            .enumerate()
+            .map(|(k, m)| {
+                String::from_utf8(m.clone())
+                    .with_context(|| format!("{name}#{}: a pose message that is not UTF-8", k + 1))
+            })
+            .collect::<Result<Vec<String>>>()?;
+        (lines, '#')
+    } else {
+        let text = photopose_formats::read_text(path, photopose_formats::FileKind::Poses)?;
+        file_sha256 = sha256_hex(text.as_bytes());
+        (text.lines().map(str::to_string).collect(), ':')
+    };
     let mut summary = InputSummary {
         path: name.clone(),
         lines: 0,
         used: 0,
         skipped: BTreeMap::new(),
-        sha256: Some(sha256_hex(text.as_bytes())),
+        sha256: Some(file_sha256),
     };
-    for (k, line) in text.lines().enumerate() {
+    for (k, line) in lines.iter().enumerate() {
         let line = line.trim();
         if line.is_empty() {
             continue;
         }
-        let at = format!("{name}:{}", k + 1);
+        let at = format!("{name}{mark}{}", k + 1);
         summary.lines += 1;
         let l = photopose_stream::PoseLine::parse(line)
             .with_context(|| format!("{at}: not a JSON pose line"))?;

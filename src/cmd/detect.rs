@@ -1,9 +1,12 @@
 //! `photopose detect IMAGE...`: every target of each image, identified where
 //! it can be (coded targets by their rings, uncoded ones by projection with
-//! the first pose), one JSON object per image per line, in input order.
+//! the first pose), one JSON object per image per line, in input order. An
+//! input may be a recording (`.mcap`): each of its frames, or those
+//! `--frames` selects, is one image (`FILE#SEQ`).
 
-use crate::cmd::batch::{exit_status, load_frame, ErrorLine};
+use crate::cmd::batch::{exit_status, ErrorLine};
 use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::TargetKind;
@@ -22,9 +25,14 @@ pub struct Args {
     /// Test field (CSV); default: the built-in plate.
     #[arg(long)]
     pub field: Option<PathBuf>,
-    /// Images (PGM or PNG, 8 or 16 bit, the camera's size).
+    /// Images (PGM or PNG, 8 or 16 bit, the camera's size) or recordings
+    /// (MCAP: every frame, or those of --frames).
     #[arg(required = true)]
     pub images: Vec<PathBuf>,
+    /// Frames of the recordings by sequence number: N, A-B, or a comma
+    /// list (default: every frame).
+    #[arg(long)]
+    pub frames: Option<FrameSelection>,
 }
 
 /// One target of the output (keys `id`, `kind`, `col`, `row` are fixed).
@@ -75,27 +83,30 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut failed = 0;
-    for path in &args.images {
-        let name = path.display().to_string();
-        let line = match detect_one(&mut locator, &camera, path, &name) {
-            Ok(l) => serde_json::to_string(&l)?,
-            Err(error) => {
-                failed += 1;
-                serde_json::to_string(&ErrorLine::new(&name, error))?
-            }
-        };
-        writeln!(out, "{line}")?;
-    }
+    for_each_frame(
+        &args.images,
+        &camera,
+        args.frames.as_ref(),
+        |name, image| -> Result<()> {
+            let line = match image.and_then(|i| detect_one(&mut locator, &i, name)) {
+                Ok(l) => serde_json::to_string(&l)?,
+                Err(error) => {
+                    failed += 1;
+                    serde_json::to_string(&ErrorLine::new(name, error))?
+                }
+            };
+            writeln!(out, "{line}")?;
+            Ok(())
+        },
+    )?;
     Ok(exit_status(failed))
 }
 
 fn detect_one<'a>(
     locator: &mut Locator,
-    camera: &photopose_geometry::Camera,
-    path: &std::path::Path,
+    image: &photopose_frame::Image,
     name: &'a str,
 ) -> Result<ImageLine<'a>, String> {
-    let image = load_frame(path, camera)?;
     let loc = locator
         .locate(image.view())
         .map_err(|e| format!("{name}: {e}"))?;

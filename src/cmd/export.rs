@@ -1,6 +1,6 @@
-//! `photopose export RECORDING --out DIR`: the frames of a recording as
-//! PGM files (`frame-SEQ.pgm`, 8 or 16 bits as recorded), for tools that
-//! do not read MCAP.
+//! `photopose export RECORDING --out DIR [--format pgm|png]`: the frames
+//! of a recording as PGM or PNG files (`frame-SEQ.pgm`, 8 or 16 bits as
+//! recorded), for tools that do not read MCAP.
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -16,6 +16,9 @@ pub struct Args {
     /// The directory to write the frames into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
+    /// The image format: pgm or png (8 or 16 bits as recorded).
+    #[arg(long, default_value = "pgm", value_parser = ["pgm", "png"])]
+    pub format: String,
 }
 
 /// Runs the command.
@@ -26,9 +29,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mut bytes = Vec::new();
     for index in 0..recording.len() {
         let (meta, image) = recording.frame(index)?;
-        let path = args.out.join(format!("frame-{:06}.pgm", meta.seq));
+        let path = args
+            .out
+            .join(format!("frame-{:06}.{}", meta.seq, args.format));
         bytes.clear();
-        photopose_formats::image::encode_pgm(&image, &path.display().to_string(), &mut bytes)?;
+        let name = path.display().to_string();
+        if args.format == "png" {
+            photopose_formats::image::encode_png(&image, &name, &mut bytes)?;
+        } else {
+            photopose_formats::image::encode_pgm(&image, &name, &mut bytes)?;
+        }
         std::fs::write(&path, &bytes)
             .with_context(|| format!("cannot write {}", path.display()))?;
     }

@@ -14,6 +14,7 @@ pub mod detect;
 pub mod export;
 pub mod field;
 pub mod generate;
+pub mod input;
 pub mod pose_arg;
 pub mod progress;
 pub mod record;

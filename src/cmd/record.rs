@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use photopose_pipeline::config::Source;
 use photopose_pipeline::{Slot, SourceError};
-use photopose_record::{FrameMeta, Recorder};
+use photopose_record::Recorder;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -55,12 +55,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     while !stop.load(Ordering::Acquire) && args.frames.is_none_or(|max| n < max) {
         match source.next_frame(&mut slot, Duration::from_millis(200)) {
             Ok(()) => {
-                let meta = FrameMeta {
-                    seq: slot.meta.seq,
-                    camera_time_ns: slot.meta.camera_time_ns,
-                    host_time_ns: slot.meta.host_time_ns,
-                };
-                recorder.write(meta, &slot.image)?;
+                recorder.write(slot.meta, &slot.image)?;
                 n += 1;
                 bar.inc(1);
             }

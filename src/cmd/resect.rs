@@ -1,8 +1,9 @@
 //! `photopose resect`: exterior orientation with precision from observation
 //! files (`id,col,row`), one JSON object per input per line, in input order.
 
-use crate::cmd::batch::{exit_status, load_frame, ErrorLine};
+use crate::cmd::batch::{exit_status, ErrorLine};
 use crate::cmd::defaults;
+use crate::cmd::input::{for_each_frame, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::Field;
@@ -25,9 +26,14 @@ pub struct Args {
     /// Observation files, CSV `id,col,row` in pixels.
     #[arg(long, num_args = 1..)]
     pub observations: Vec<PathBuf>,
-    /// Images (PGM or PNG, 8 or 16 bit): targets are detected and
-    /// identified, then the camera resected.
+    /// Images (PGM or PNG, 8 or 16 bit) or recordings (MCAP, every frame
+    /// or those of --frames): targets are detected and identified, then
+    /// the camera resected.
     pub images: Vec<PathBuf>,
+    /// Frames of the recordings among the images, by sequence number: N,
+    /// A-B, or a comma list (default: every frame).
+    #[arg(long)]
+    pub frames: Option<FrameSelection>,
     /// Inlier gate of the hypothesise-and-verify stage, pixels.
     #[arg(long, default_value_t = ResectionOptions::default().ransac_threshold_px)]
     pub gate_px: f64,
@@ -131,7 +137,9 @@ pub fn observations_for(
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
     if args.observations.is_empty() && args.images.is_empty() {
-        anyhow::bail!("no input: give images (PGM, PNG) or --observations FILE...");
+        anyhow::bail!(
+            "no input: give images (PGM, PNG), recordings (MCAP) or --observations FILE..."
+        );
     }
     // A camera or field that cannot be used fails every input, each on its
     // own line, so that a batch reader sees why.
@@ -175,42 +183,45 @@ pub fn run(args: Args) -> Result<ExitCode> {
         };
         writeln!(out, "{line}")?;
     }
-    for path in &args.images {
-        let name = path.display().to_string();
-        let locator = match &mut locator {
-            Some(l) => l,
-            None => locator.insert(Locator::new(
-                camera,
-                field.clone(),
-                LocateOptions {
-                    resection: options,
-                    ..LocateOptions::default()
-                },
-            )?),
-        };
-        let result = locate_image(locator, &camera, path);
-        let line = match result {
-            Ok((report, rejected)) => {
-                serde_json::to_string(&PoseLine::new(&name, &report, &rejected))?
-            }
-            Err(error) => {
-                failed += 1;
-                serde_json::to_string(&ErrorLine::new(&name, error))?
-            }
-        };
-        writeln!(out, "{line}")?;
-    }
+    for_each_frame(
+        &args.images,
+        &camera,
+        args.frames.as_ref(),
+        |name, image| -> Result<()> {
+            let locator = match &mut locator {
+                Some(l) => l,
+                None => locator.insert(Locator::new(
+                    camera,
+                    field.clone(),
+                    LocateOptions {
+                        resection: options,
+                        ..LocateOptions::default()
+                    },
+                )?),
+            };
+            let result = image.and_then(|i| locate_image(locator, &i, name));
+            let line = match result {
+                Ok((report, rejected)) => {
+                    serde_json::to_string(&PoseLine::new(name, &report, &rejected))?
+                }
+                Err(error) => {
+                    failed += 1;
+                    serde_json::to_string(&ErrorLine::new(name, error))?
+                }
+            };
+            writeln!(out, "{line}")?;
+            Ok(())
+        },
+    )?;
     Ok(exit_status(failed))
 }
 
-/// Detects, identifies and resects one image file.
+/// Detects, identifies and resects one image (`name` for errors).
 fn locate_image(
     locator: &mut Locator,
-    camera: &Camera,
-    path: &std::path::Path,
+    image: &photopose_frame::Image,
+    name: &str,
 ) -> Result<(ResectionReport, Vec<u64>), String> {
-    let name = path.display().to_string();
-    let image = load_frame(path, camera)?;
     let loc = locator
         .locate(image.view())
         .map_err(|e| format!("{name}: {e}"))?;

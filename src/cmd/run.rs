@@ -425,12 +425,16 @@ fn record_summary(config: &Config) -> std::io::Result<()> {
     let n = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
     let (frames, bytes, pixels) = (n(&s.frames), n(&s.bytes), n(&s.pixel_bytes));
     outln!(
-        "recording {}: {} frames ({} dropped), {} poses ({} dropped), {} files, {} bytes; {:.0} bytes per frame, compression ratio {:.2}",
+        "recording {}: {} frames ({} dropped), {} poses ({} dropped), {} annotations ({} dropped), {} RSI cycles ({} dropped), {} files, {} bytes; {:.0} bytes per frame, compression ratio {:.2}",
         link.path().display(),
         frames,
         n(&s.frames_dropped),
         n(&s.poses),
         n(&s.poses_dropped),
+        n(&s.annotations),
+        n(&s.annotations_dropped),
+        n(&s.rsi_cycles),
+        n(&s.rsi_dropped),
         n(&s.files),
         bytes,
         bytes as f64 / frames.max(1) as f64,

@@ -179,6 +179,8 @@ struct RecordSection {
     rotate_mb: u64,
     rotate_minutes: u64,
     queue: usize,
+    rsi: bool,
+    annotations: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -198,6 +200,8 @@ impl Default for RecordSection {
             rotate_mb: 0,
             rotate_minutes: 0,
             queue: 8,
+            rsi: true,
+            annotations: true,
         }
     }
 }
@@ -211,6 +215,9 @@ pub enum RecordFrames {
     Every(u32),
     /// No frame (poses only).
     None,
+    /// The first frame and every frame whose status (ok, too few targets,
+    /// error) differs from the frame processed before it.
+    OnChange,
 }
 
 /// The recording of the running daemon (`[record]`, `run --record FILE`).
@@ -230,6 +237,11 @@ pub struct Record {
     pub rotate_after: Option<std::time::Duration>,
     /// Frames that can wait for the writer (preallocated buffers).
     pub queue: usize,
+    /// Whether the RSI server's cycles are recorded (when it runs).
+    pub rsi: bool,
+    /// Whether each recorded frame's identified targets are recorded as
+    /// image annotations.
+    pub annotations: bool,
     /// The running recording (its writer thread and the frame tap), set
     /// by whoever starts it before the pipeline (the binary); the sink
     /// otherwise starts one of its own, poses only.
@@ -481,25 +493,18 @@ impl Config {
             None
         };
         let r = &f.record;
+        const FRAMES_RULE: &str =
+            "must be \"all\", \"none\", \"on_change\" or N (every Nth frame, 1..=1000000)";
         let frames = match &r.frames {
             RecordFramesToml::Word(w) if w == "all" => RecordFrames::All,
             RecordFramesToml::Word(w) if w == "none" => RecordFrames::None,
+            RecordFramesToml::Word(w) if w == "on_change" => RecordFrames::OnChange,
             RecordFramesToml::Every(n) if (1..=1_000_000).contains(n) => {
                 RecordFrames::Every(*n as u32)
             }
-            RecordFramesToml::Word(w) => {
-                return Err(bad(
-                    "record.frames",
-                    w.clone(),
-                    "must be \"all\", \"none\" or N (every Nth frame, 1..=1000000)",
-                ))
-            }
+            RecordFramesToml::Word(w) => return Err(bad("record.frames", w.clone(), FRAMES_RULE)),
             RecordFramesToml::Every(n) => {
-                return Err(bad(
-                    "record.frames",
-                    n.to_string(),
-                    "must be \"all\", \"none\" or N (every Nth frame, 1..=1000000)",
-                ))
+                return Err(bad("record.frames", n.to_string(), FRAMES_RULE))
             }
         };
         let Some(compression) = photopose_record::Compression::from_name(&r.compression) else {
@@ -525,6 +530,8 @@ impl Config {
             rotate_after: (r.rotate_minutes > 0)
                 .then(|| std::time::Duration::from_secs(r.rotate_minutes.saturating_mul(60))),
             queue: r.queue,
+            rsi: r.rsi,
+            annotations: r.annotations,
             link: None,
         };
         let live = Live::from_section(&f.live, &bad)?;

@@ -33,6 +33,9 @@ pub struct Counters {
     pub poses_failed: Counter,
     /// Stale messages sent while no frame came.
     pub stale: Counter,
+    /// Results that carry no targets because the pool of target lists had
+    /// none free.
+    pub results_without_targets: Arc<Counter>,
     /// Pose latency: frame hand-over → message sent.
     pub latency: Histogram,
     /// σ0 of the last pose, px.
@@ -72,6 +75,7 @@ impl Default for Counters {
             poses_ok: Counter::new(),
             poses_failed: Counter::new(),
             stale: Counter::new(),
+            results_without_targets: Arc::default(),
             latency: Histogram::default(),
             sigma0_px: Gauge::new(f64::NAN),
             targets: Gauge::new(0.0),
@@ -187,6 +191,11 @@ impl Collect for Counters {
                 "photopose_poses_stale_total",
                 "Stale messages sent while no frame came.",
                 &self.stale,
+            ),
+            (
+                "photopose_results_without_targets_total",
+                "Results sent without their targets: no target list was free.",
+                &self.results_without_targets,
             ),
         ] {
             out.counter(name, help, c.get())?;

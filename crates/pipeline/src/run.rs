@@ -4,7 +4,7 @@
 use crate::config::{Config, Overflow};
 use crate::health::{Heartbeat, Threads, Watchdog};
 use crate::notify::Notifier;
-use crate::result::{CameraId, PoseResult, ResultStatus};
+use crate::result::{CameraId, PoseResult, ResultStatus, TargetPool};
 use crate::sink::{Outgoing, Sinks};
 use crate::source::host_time_ns;
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
@@ -220,12 +220,23 @@ impl Pipeline {
                 };
                 let (publisher, reader) = photopose_rsi::latest_slot();
                 let clock = photopose_rsi::server::RsiClock::new();
-                let server = photopose_rsi::server::RsiServer::spawn(
-                    r.settings.clone(),
-                    hand_eye,
-                    reader,
-                    clock,
-                )?;
+                // The recording's tap, when it records the RSI cycles.
+                let tap = config.record.link.as_ref().and_then(|l| l.rsi_tap());
+                let server = match tap {
+                    Some(tap) => photopose_rsi::server::RsiServer::spawn_tapped(
+                        r.settings.clone(),
+                        hand_eye,
+                        reader,
+                        clock,
+                        tap,
+                    )?,
+                    None => photopose_rsi::server::RsiServer::spawn(
+                        r.settings.clone(),
+                        hand_eye,
+                        reader,
+                        clock,
+                    )?,
+                };
                 let stats = Arc::clone(server.stats());
                 (
                     Some(server),
@@ -271,6 +282,21 @@ impl Pipeline {
         let metrics_addr = metrics.as_ref().map(|m| m.local_addr());
         let mut threads = Vec::new();
         let camera_id: CameraId = Arc::from(config.camera_id.as_str());
+        // Target lists for the results in flight: in the channel to the
+        // output, in its re-ordering window, one in each worker's hands
+        // and the one being sent.
+        let targets = TargetPool::counted(
+            2 * (slots * 2 + config.workers) + config.workers + 2,
+            field.len(),
+            Arc::clone(&counters.results_without_targets),
+        );
+        // `[record] frames = "on_change"`: the workers record a frame whose
+        // status differs from the one before.
+        let on_change = config
+            .record
+            .link
+            .clone()
+            .filter(|_| config.record.frames == crate::config::RecordFrames::OnChange);
         // Workers: take frames from the ring, hand each result to the output
         // stage; dropping the frame handle returns its slot to the ring.
         let track_slot = crate::track::TrackSlot::default();
@@ -280,6 +306,7 @@ impl Pipeline {
             let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();
             let camera_id = camera_id.clone();
+            let (targets, on_change) = (targets.clone(), on_change.clone());
             let name = format!("detect-{k}");
             let beat = Arc::new(Heartbeat::default());
             watched.watch_heartbeat(name.clone(), &beat);
@@ -296,7 +323,10 @@ impl Pipeline {
                     hold_wedged(stop, "detect-0");
                     return;
                 }
-                let result = locate(&mut locator, &tracker, &counters, &camera_id, &frame);
+                let result = locate(&mut locator, &tracker, &counters, &camera_id, &frame, &targets);
+                if let Some(link) = &on_change {
+                    link.frame_on_change(&frame, result.status);
+                }
                 counters.frames_processed.inc();
                 let outcome = Outcome::Message {
                     order: frame.order,
@@ -469,13 +499,14 @@ fn observe(published: Published, counters: &Counters, out_tx: &Sender<Outcome>) 
 }
 
 /// Locates one frame (tracked from the latest pose when it may be) into
-/// its result.
+/// its result, with its identified targets in a list from `targets`.
 fn locate(
     locator: &mut Locator,
     tracker: &crate::track::Tracker,
     counters: &Counters,
     camera: &CameraId,
     frame: &Slot,
+    targets: &TargetPool,
 ) -> PoseResult {
     let located = tracker
         .locate(locator, frame.meta.seq, frame.image.view())
@@ -483,12 +514,16 @@ fn locate(
     if let Some((crate::track::Mode::Tracked, _, _)) = located {
         counters.frames_tracked.inc();
     }
-    PoseResult::from_location(
+    let result = PoseResult::from_location(
         camera,
         &frame.meta,
         frame.received,
         located.map(|(_, status, pose)| (status, pose)),
-    )
+    );
+    match located {
+        Some(_) => result.with_targets(targets.take(), locator.identified()),
+        None => result,
+    }
 }
 
 /// The `STATUS=` text the watchdog sends each tick: pose rate since the

@@ -164,6 +164,7 @@ fn a_replay_refuses_a_large_or_corrupt_recording_naming_the_file() {
             seq: k as u64,
             camera_time_ns: k as u64 * 10_000_000,
             host_time_ns: 0,
+            ..FrameMeta::default()
         };
         rec.write(meta, &img).unwrap();
     }

@@ -1,6 +1,7 @@
 //! With the recording on, the frame path still allocates nothing once
 //! warm: the tap copies each frame into a buffer of the preallocated pool
-//! and the sink each pose line into a pooled buffer. Only the writer thread
+//! and the sink each pose line (and the frame's targets, from the result's
+//! pooled list) into a pooled buffer. Only the writer thread
 //! (`record`: protobuf encoding, MCAP chunks, compression) allocates, so
 //! this test's allocator counts every thread but that one.
 
@@ -87,6 +88,8 @@ compression = "lz4"
     let stats = link.stats();
     let frames = stats.frames.load(Ordering::Relaxed);
     assert!(frames > 0, "frames were recorded");
+    // The targets went with the poses of the recorded frames.
+    assert!(stats.annotations.load(Ordering::Relaxed) > 0);
     assert_eq!(
         allocated, 0,
         "allocations on the frame path while recording"

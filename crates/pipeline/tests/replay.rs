@@ -6,7 +6,7 @@ use photopose_field::design::default_plate;
 use photopose_pipeline::config::Source;
 use photopose_pipeline::source::{FrameSource, ReplaySource, Slot, SourceError, SyntheticSource};
 use photopose_pipeline::{Config, Pipeline};
-use photopose_record::{FrameMeta, Recorder};
+use photopose_record::Recorder;
 use std::net::UdpSocket;
 use std::time::Duration;
 
@@ -69,12 +69,7 @@ fn two_replays_give_identical_poses() {
             Err(SourceError::Ended) => break,
             Err(e) => panic!("synthetic source: {e}"),
         }
-        let meta = FrameMeta {
-            seq: frame.meta.seq,
-            camera_time_ns: frame.meta.camera_time_ns,
-            host_time_ns: frame.meta.host_time_ns,
-        };
-        rec.write(meta, &frame.image).unwrap();
+        rec.write(frame.meta, &frame.image).unwrap();
     }
     rec.finish().unwrap();
     let a = replay_once(&path, 12);

@@ -9,10 +9,14 @@
 //! | `/camera/image` | `foxglove.RawImage` (protobuf) | every recorded frame, `mono8` or `mono16` (little-endian) |
 //! | `/pose` | `foxglove.PoseInFrame` (protobuf) | the camera pose of each frame with a pose, frame `field` |
 //! | `/pose/message` | `photopose.PoseMessage` (json, JSON Schema) | the full pose message, one per result |
+//! | `/camera/frame_times` | `photopose.FrameTimes` (json, JSON Schema) | each frame's full sequence number and times (reception, mid-exposure, its σ, exposure time), just before its image |
+//! | `/camera/targets` | `foxglove.ImageAnnotations` (protobuf) | each recorded frame's identified targets with their ids ([`TargetMark`]) |
+//! | `/rsi/cycle` | `photopose.RsiCycle` (json, JSON Schema) | every answered RSI controller cycle ([`RsiCycle`]) |
 //!
-//! A message's `log_time` is the host time (ns since the Unix epoch),
+//! A frame message's `log_time` is the host time (ns since the Unix epoch),
 //! `publish_time` the camera time and `sequence` the low 32 bits of the
-//! frame's sequence number. The image channel's metadata holds the
+//! frame's sequence number; the JSON Schemas of our own JSON messages are
+//! kept in the repository's `docs/schema/` and stored in every file. The image channel's metadata holds the
 //! camera's saturation level (`max_value`). Attachments carry the camera,
 //! field and configuration files; a metadata record `photopose` the
 //! version, the host and the start time. Chunks are compressed (zstd by
@@ -24,6 +28,7 @@
 //! verified, and every frame is checked against its size. A file that fails
 //! any of these is refused at [`Recording::open`] with its name; the whole
 //! recording is then held in memory (the replay copies frames out of it).
+//! [`pose_messages`] reads only the pose messages (for `circle-test`).
 //! Recordings of the first format (topic `/camera/frames`, encoding
 //! `photopose.frame.v1`: a 35-byte little-endian header `seq`,
 //! `camera_time_ns`, `host_time_ns`, `width`, `height`, bytes per pixel,
@@ -31,7 +36,10 @@
 
 pub mod writer;
 
-pub use writer::{Attachment, Compression, PoseRecord, RecordOptions, Recorder};
+pub use photopose_frame::FrameMeta;
+pub use writer::{
+    Attachment, Compression, PoseRecord, RecordOptions, Recorder, RsiCycle, TargetMark,
+};
 
 use photopose_formats::file::{read_bytes_limited, FileError, FileKind};
 use photopose_frame::{Image, Pixels};
@@ -48,8 +56,22 @@ pub const IMAGE_TOPIC: &str = "/camera/image";
 pub const POSE_TOPIC: &str = "/pose";
 /// The topic of the full pose messages (JSON).
 pub const MESSAGE_TOPIC: &str = "/pose/message";
+/// The topic of each frame's identity and times (JSON,
+/// `photopose.FrameTimes`).
+pub const FRAME_TIMES_TOPIC: &str = "/camera/frame_times";
+/// The topic of each recorded frame's identified targets
+/// (`foxglove.ImageAnnotations`).
+pub const ANNOTATIONS_TOPIC: &str = "/camera/targets";
+/// The topic of the RSI server's controller cycles (JSON,
+/// `photopose.RsiCycle`).
+pub const RSI_TOPIC: &str = "/rsi/cycle";
 /// The schema name of the frames.
 pub const IMAGE_SCHEMA: &str = "foxglove.RawImage";
+/// The JSON Schema of the RSI cycles (`docs/schema/rsi-cycle.schema.json`).
+pub const RSI_SCHEMA: &str = include_str!("../../../docs/schema/rsi-cycle.schema.json");
+/// The JSON Schema of the frame times
+/// (`docs/schema/frame-times.schema.json`).
+pub const FRAME_TIMES_SCHEMA: &str = include_str!("../../../docs/schema/frame-times.schema.json");
 const HEADER: usize = 35;
 
 /// A recording that cannot be written or read, with the file and why.
@@ -103,21 +125,11 @@ pub enum RecordError {
     },
 }
 
-/// The metadata of a recorded frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FrameMeta {
-    /// Sequence number.
-    pub seq: u64,
-    /// Camera timestamp, ns.
-    pub camera_time_ns: u64,
-    /// Host time at reception, ns since the Unix epoch.
-    pub host_time_ns: u64,
-}
-
 /// A recording read into memory: the frames' byte ranges in file order.
 pub struct Recording {
     path: String,
     frames: Vec<Vec<u8>>,
+    metas: Vec<FrameMeta>,
 }
 
 impl std::fmt::Debug for Recording {
@@ -139,41 +151,41 @@ impl Recording {
     /// Reads and checks a recording of at most `max_bytes`.
     pub fn open_limited(path: &Path, max_bytes: u64) -> Result<Self, RecordError> {
         let name = path.display().to_string();
-        let bytes = read_bytes_limited(path, FileKind::Recording, max_bytes)?;
-        let mcap_err = |e: mcap::McapError| match e {
-            mcap::McapError::BadChunkCrc { saved, calculated } => RecordError::Corrupt {
-                path: name.clone(),
-                what: format!("a chunk's CRC is {calculated:08x}, the file stores {saved:08x}"),
-            },
-            e => RecordError::Mcap {
-                path: name.clone(),
-                message: e.to_string(),
-            },
-        };
-        let stream = mcap::MessageStream::new_with_options(
-            &bytes,
-            mcap::read::Options::ValidateChunkCrcs.into(),
-        )
-        .map_err(mcap_err)?;
         let mut frames = Vec::new();
-        for message in stream {
-            let m = message.map_err(mcap_err)?;
+        let mut metas = Vec::new();
+        // The frame times written just before each image.
+        let mut times: Option<FrameMeta> = None;
+        for_each_message(path, max_bytes, |m| {
             let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
+            if m.channel.topic == FRAME_TIMES_TOPIC {
+                times = frame_times(&m.data);
+                return Ok(());
+            }
             if schema == Some(IMAGE_SCHEMA) {
                 let frame = frame_from_raw_image(&m).map_err(|what| RecordError::Frame {
                     path: name.clone(),
                     index: frames.len(),
                     what,
                 })?;
+                let meta = match times.take() {
+                    Some(t) if t.seq as u32 == m.sequence && t.host_time_ns == m.log_time => t,
+                    _ => FrameMeta {
+                        seq: u64::from(m.sequence),
+                        camera_time_ns: m.publish_time,
+                        host_time_ns: m.log_time,
+                        ..FrameMeta::default()
+                    },
+                };
                 frames.push(frame);
-                continue;
+                metas.push(meta);
+                return Ok(());
             }
             if m.channel.topic != TOPIC {
-                continue;
+                return Ok(());
             }
             if m.channel.message_encoding != ENCODING {
                 return Err(RecordError::Frame {
-                    path: name,
+                    path: name.clone(),
                     index: frames.len(),
                     what: format!(
                         "encoding `{}`, expected `{ENCODING}`",
@@ -186,18 +198,25 @@ impl Recording {
                 index: frames.len(),
                 what,
             })?;
+            let d = &m.data;
+            let u64_at = |o: usize| u64::from_le_bytes(d[o..o + 8].try_into().unwrap_or([0; 8]));
+            metas.push(FrameMeta {
+                seq: u64_at(0),
+                camera_time_ns: u64_at(8),
+                host_time_ns: u64_at(16),
+                ..FrameMeta::default()
+            });
             frames.push(m.data.into_owned());
-        }
-        // Chunk CRCs cover the frames; this covers the rest of the data
-        // section (record headers, message indexes).
-        check_data_section_crc(&bytes).map_err(|what| RecordError::Corrupt {
-            path: name.clone(),
-            what,
+            Ok(())
         })?;
         if frames.is_empty() {
             return Err(RecordError::Empty { path: name });
         }
-        Ok(Recording { path: name, frames })
+        Ok(Recording {
+            path: name,
+            frames,
+            metas,
+        })
     }
 
     /// Number of frames.
@@ -218,17 +237,8 @@ impl Recording {
     /// The metadata and size `(width, height)` of frame `index`.
     pub fn meta(&self, index: usize) -> (FrameMeta, u32, u32) {
         let d = &self.frames[index];
-        let u64_at = |o: usize| u64::from_le_bytes(d[o..o + 8].try_into().unwrap_or([0; 8]));
         let u32_at = |o: usize| u32::from_le_bytes(d[o..o + 4].try_into().unwrap_or([0; 4]));
-        (
-            FrameMeta {
-                seq: u64_at(0),
-                camera_time_ns: u64_at(8),
-                host_time_ns: u64_at(16),
-            },
-            u32_at(24),
-            u32_at(28),
-        )
+        (self.metas[index], u32_at(24), u32_at(28))
     }
 
     /// Frame `index` as a new image of its recorded depth and saturation
@@ -291,6 +301,74 @@ impl Recording {
         }
         Ok(meta)
     }
+}
+
+/// The full pose messages of a recording (the JSON objects on
+/// [`MESSAGE_TOPIC`], in file order), read and checked as
+/// [`Recording::open`] reads a recording; a recording without frames is
+/// fine, one without pose messages gives an empty list.
+pub fn pose_messages(path: &Path) -> Result<Vec<Vec<u8>>, RecordError> {
+    let mut out = Vec::new();
+    for_each_message(path, FileKind::Recording.limit(), |m| {
+        if m.channel.topic == MESSAGE_TOPIC {
+            out.push(m.data.into_owned());
+        }
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Reads the file (a regular file of at most `max_bytes`), verifies the
+/// chunk CRCs and the data section's CRC, and calls `each` with every
+/// message in file order.
+fn for_each_message(
+    path: &Path,
+    max_bytes: u64,
+    mut each: impl FnMut(mcap::Message<'_>) -> Result<(), RecordError>,
+) -> Result<(), RecordError> {
+    let name = path.display().to_string();
+    let bytes = read_bytes_limited(path, FileKind::Recording, max_bytes)?;
+    let mcap_err = |e: mcap::McapError| match e {
+        mcap::McapError::BadChunkCrc { saved, calculated } => RecordError::Corrupt {
+            path: name.clone(),
+            what: format!("a chunk's CRC is {calculated:08x}, the file stores {saved:08x}"),
+        },
+        e => RecordError::Mcap {
+            path: name.clone(),
+            message: e.to_string(),
+        },
+    };
+    let stream = mcap::MessageStream::new_with_options(
+        &bytes,
+        mcap::read::Options::ValidateChunkCrcs.into(),
+    )
+    .map_err(mcap_err)?;
+    for message in stream {
+        each(message.map_err(mcap_err)?)?;
+    }
+    // Chunk CRCs cover the messages; this covers the rest of the data
+    // section (record headers, message indexes).
+    check_data_section_crc(&bytes).map_err(|what| RecordError::Corrupt {
+        path: name.clone(),
+        what,
+    })
+}
+
+/// The frame meta of a `photopose.FrameTimes` message; `None` when it is
+/// not one (the image's own times are used then).
+fn frame_times(data: &[u8]) -> Option<FrameMeta> {
+    let v: serde_json::Value = serde_json::from_slice(data).ok()?;
+    let n = |k: &str| v.get(k).and_then(serde_json::Value::as_u64);
+    Some(FrameMeta {
+        seq: n("seq")?,
+        camera_frame_id: n("camera_frame_id").unwrap_or(0),
+        camera_time_ns: n("camera_time_ns").unwrap_or(0),
+        host_time_ns: n("host_time_ns")?,
+        host_mono_ns: n("host_mono_ns").unwrap_or(0),
+        exposure_mono_ns: n("exposure_mono_ns").unwrap_or(0),
+        exposure_sigma_ns: n("exposure_sigma_ns").unwrap_or(0),
+        exposure_ns: n("exposure_ns").unwrap_or(0),
+    })
 }
 
 /// Checks the CRC of the data section (everything before the Data End

@@ -4,7 +4,13 @@
 //! Foxglove types come from the `foxglove` crate (its published protobuf
 //! descriptors); only the pose message's JSON Schema is ours.
 
-use crate::{FrameMeta, RecordError, IMAGE_TOPIC, MESSAGE_TOPIC, POSE_TOPIC};
+use crate::{
+    FrameMeta, RecordError, ANNOTATIONS_TOPIC, FRAME_TIMES_SCHEMA, FRAME_TIMES_TOPIC, IMAGE_TOPIC,
+    MESSAGE_TOPIC, POSE_TOPIC, RSI_SCHEMA, RSI_TOPIC,
+};
+use foxglove::messages::{
+    points_annotation, Color, ImageAnnotations, Point2, PointsAnnotation, TextAnnotation,
+};
 use foxglove::schemas::{Pose, PoseInFrame, Quaternion, RawImage, Timestamp, Vector3};
 use foxglove::Encode;
 use photopose_frame::{Image, Pixels};
@@ -94,6 +100,55 @@ pub struct PoseRecord<'a> {
     pub json: &'a [u8],
 }
 
+/// One identified target of a frame, drawn as an image annotation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetMark {
+    /// The target's id in the field.
+    pub id: u64,
+    /// Coded (id read from its ring) or uncoded (identified by projection).
+    pub coded: bool,
+    /// The image of its centre, column, pixels (origin at the centre of
+    /// the top-left pixel).
+    pub col_px: f64,
+    /// The image of its centre, row, pixels.
+    pub row_px: f64,
+    /// Used by the final adjustment (not rejected).
+    pub used: bool,
+}
+
+/// One controller cycle of the RSI server, as recorded on [`RSI_TOPIC`]
+/// (JSON; the schema is `docs/schema/rsi-cycle.schema.json`, stored in
+/// the file). Poses are `X, Y, Z` mm and `A, B, C` deg.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RsiCycle {
+    /// The controller's interpolation counter.
+    pub ipoc: u64,
+    /// Arrival of the controller's datagram, ns since the Unix epoch.
+    pub arrival_utc_ns: u64,
+    /// Arrival on the host's `CLOCK_MONOTONIC`, ns.
+    pub arrival_mono_ns: u64,
+    /// `RIst`, the actual TCP pose, when sent.
+    pub rist_xyzabc: Option<[f64; 6]>,
+    /// `RSol`, the commanded TCP pose, when sent.
+    pub rsol_xyzabc: Option<[f64; 6]>,
+    /// The controller's late-reply count, when sent.
+    pub delay: Option<u64>,
+    /// The correction written into the reply.
+    pub correction_sent_xyzabc: [f64; 6],
+    /// The total correction in effect after the cycle.
+    pub correction_total_xyzabc: [f64; 6],
+    /// The error of the measurement used this cycle (correction frame),
+    /// when a new one was used.
+    pub error_xyzabc: Option<[f64; 6]>,
+    /// The correction law's state (`tracking`, `measure_only`,
+    /// `stale_too_old`, …).
+    pub state: &'static str,
+    /// The slew limit cut this cycle's step.
+    pub slew_limited: bool,
+    /// The clamp cut the total correction.
+    pub clamped: bool,
+}
+
 /// The JSON Schema of the pose message (photopose's own message; the
 /// stream's version 1, see `photopose-stream`).
 const POSE_MESSAGE_SCHEMA: &str = r#"{
@@ -154,6 +209,9 @@ pub struct Recorder {
     image: Option<u16>,
     pose: u16,
     message: u16,
+    times: Option<u16>,
+    annotations: Option<u16>,
+    rsi: Option<u16>,
     buf: Vec<u8>,
     frames: u64,
     poses: u64,
@@ -250,6 +308,9 @@ impl Recorder {
             image: None,
             pose,
             message,
+            times: None,
+            annotations: None,
+            rsi: None,
             buf: Vec::new(),
             frames: 0,
             poses: 0,
@@ -335,8 +396,11 @@ impl Recorder {
                 c
             }
         };
+        self.write_frame_times(&meta)?;
         let message = RawImage {
-            timestamp: Some(timestamp(meta.host_time_ns)),
+            timestamp: Some(timestamp(
+                meta.exposure_utc_ns().unwrap_or(meta.host_time_ns),
+            )),
             frame_id: "camera".into(),
             width,
             height,
@@ -367,6 +431,193 @@ impl Recorder {
             .map_err(|e| self.mcap_err(e))?;
         self.frames += 1;
         Ok(())
+    }
+
+    /// A channel made when first used, with its schema.
+    #[allow(clippy::too_many_arguments)]
+    fn lazy_channel(
+        &mut self,
+        which: fn(&mut Recorder) -> &mut Option<u16>,
+        schema_name: &str,
+        schema_encoding: &str,
+        schema: &[u8],
+        topic: &str,
+        message_encoding: &str,
+    ) -> Result<u16, RecordError> {
+        if let Some(c) = *which(self) {
+            return Ok(c);
+        }
+        let id = self
+            .writer
+            .add_schema(schema_name, schema_encoding, schema)
+            .map_err(|e| self.mcap_err(e))?;
+        let c = self
+            .writer
+            .add_channel(id, topic, message_encoding, &BTreeMap::new())
+            .map_err(|e| self.mcap_err(e))?;
+        *which(self) = Some(c);
+        Ok(c)
+    }
+
+    /// The frame's identity and times on [`FRAME_TIMES_TOPIC`] (written
+    /// just before its image, with the same log time).
+    fn write_frame_times(&mut self, meta: &FrameMeta) -> Result<(), RecordError> {
+        let channel = self.lazy_channel(
+            |r| &mut r.times,
+            "photopose.FrameTimes",
+            "jsonschema",
+            FRAME_TIMES_SCHEMA.as_bytes(),
+            FRAME_TIMES_TOPIC,
+            "json",
+        )?;
+        let json = serde_json::json!({
+            "seq": meta.seq,
+            "camera_frame_id": meta.camera_frame_id,
+            "camera_time_ns": meta.camera_time_ns,
+            "host_time_ns": meta.host_time_ns,
+            "host_mono_ns": meta.host_mono_ns,
+            "exposure_mono_ns": meta.exposure_mono_ns,
+            "exposure_sigma_ns": meta.exposure_sigma_ns,
+            "exposure_ns": meta.exposure_ns,
+            "exposure_utc_ns": meta.exposure_utc_ns(),
+        });
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, &json).map_err(|e| RecordError::Mcap {
+            path: self.path.clone(),
+            message: format!("cannot encode the times of frame {}: {e}", meta.seq),
+        })?;
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: meta.seq as u32,
+            log_time: meta.host_time_ns,
+            publish_time: meta.camera_time_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| self.mcap_err(e))
+    }
+
+    /// Appends the identified targets of frame `meta` as one
+    /// `foxglove.ImageAnnotations` on [`ANNOTATIONS_TOPIC`], with the
+    /// frame's times: a point per target (coded green, uncoded orange; a
+    /// target the adjustment rejected red) and its id as text beside it
+    /// (`c` before the id of a coded target).
+    pub fn write_targets(
+        &mut self,
+        meta: &FrameMeta,
+        targets: &[TargetMark],
+    ) -> Result<(), RecordError> {
+        let channel = {
+            let schema = schema_of::<ImageAnnotations>();
+            self.lazy_channel(
+                |r| &mut r.annotations,
+                &schema.name,
+                &schema.encoding,
+                &schema.data,
+                ANNOTATIONS_TOPIC,
+                &ImageAnnotations::get_message_encoding(),
+            )?
+        };
+        let stamp = timestamp(meta.exposure_utc_ns().unwrap_or(meta.host_time_ns));
+        let color = |r: f64, g: f64, b: f64| Color { r, g, b, a: 1.0 };
+        let coded = color(0.1, 0.9, 0.2);
+        let uncoded = color(1.0, 0.6, 0.0);
+        let rejected = color(1.0, 0.1, 0.1);
+        let points = |want_coded: bool, fill: Color| PointsAnnotation {
+            timestamp: Some(stamp),
+            r#type: points_annotation::Type::Points as i32,
+            points: targets
+                .iter()
+                .filter(|t| t.coded == want_coded)
+                .map(|t| Point2 {
+                    x: t.col_px,
+                    y: t.row_px,
+                })
+                .collect(),
+            outline_color: Some(fill),
+            outline_colors: targets
+                .iter()
+                .filter(|t| t.coded == want_coded)
+                .map(|t| if t.used { fill } else { rejected })
+                .collect(),
+            fill_color: Some(fill),
+            thickness: if want_coded { 6.0 } else { 4.0 },
+            metadata: Vec::new(),
+        };
+        let message = ImageAnnotations {
+            timestamp: Some(stamp),
+            circles: Vec::new(),
+            points: vec![points(true, coded), points(false, uncoded)],
+            texts: targets
+                .iter()
+                .map(|t| TextAnnotation {
+                    timestamp: Some(stamp),
+                    position: Some(Point2 {
+                        x: t.col_px + 6.0,
+                        y: t.row_px - 6.0,
+                    }),
+                    text: if t.coded {
+                        format!("c{}", t.id)
+                    } else {
+                        t.id.to_string()
+                    },
+                    font_size: 12.0,
+                    text_color: Some(if t.coded { coded } else { uncoded }),
+                    background_color: Some(Color {
+                        r: 0.0,
+                        g: 0.0,
+                        b: 0.0,
+                        a: 0.5,
+                    }),
+                    metadata: Vec::new(),
+                })
+                .collect(),
+            metadata: Vec::new(),
+        };
+        self.buf.clear();
+        message
+            .encode(&mut self.buf)
+            .map_err(|e| RecordError::Mcap {
+                path: self.path.clone(),
+                message: format!("cannot encode the targets of frame {}: {e}", meta.seq),
+            })?;
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: meta.seq as u32,
+            log_time: meta.host_time_ns,
+            publish_time: meta.camera_time_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| self.mcap_err(e))
+    }
+
+    /// Appends one RSI controller cycle on [`RSI_TOPIC`] (JSON, schema
+    /// `photopose.RsiCycle`); its log time is the datagram's arrival (UTC),
+    /// its sequence the low 32 bits of the IPOC.
+    pub fn write_rsi(&mut self, cycle: &RsiCycle) -> Result<(), RecordError> {
+        let channel = self.lazy_channel(
+            |r| &mut r.rsi,
+            "photopose.RsiCycle",
+            "jsonschema",
+            RSI_SCHEMA.as_bytes(),
+            RSI_TOPIC,
+            "json",
+        )?;
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, cycle).map_err(|e| RecordError::Mcap {
+            path: self.path.clone(),
+            message: format!("cannot encode RSI cycle {}: {e}", cycle.ipoc),
+        })?;
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: cycle.ipoc as u32,
+            log_time: cycle.arrival_utc_ns,
+            publish_time: cycle.arrival_utc_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| self.mcap_err(e))
     }
 
     /// Appends one pose result: the full message always, the

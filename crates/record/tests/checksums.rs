@@ -33,6 +33,7 @@ fn record(path: &Path, frames: u8) {
             seq: k as u64,
             camera_time_ns: k as u64 * 1_000_000,
             host_time_ns: 7,
+            ..FrameMeta::default()
         };
         rec.write(meta, &frame(k)).unwrap();
     }

@@ -26,6 +26,7 @@ fn frames_and_metadata_round_trip() {
             seq: 100 + k,
             camera_time_ns: k * 10_000_000,
             host_time_ns: 1_700_000_000_000_000_000 + k,
+            ..FrameMeta::default()
         };
         rec.write(meta, &image(k as u8 + 1)).unwrap();
     }
@@ -41,6 +42,7 @@ fn frames_and_metadata_round_trip() {
             seq: 200,
             camera_time_ns: 1,
             host_time_ns: 2,
+            ..FrameMeta::default()
         },
         &wide,
     )
@@ -74,6 +76,7 @@ fn damaged_recordings_are_named_errors() {
             seq: 0,
             camera_time_ns: 0,
             host_time_ns: 0,
+            ..FrameMeta::default()
         },
         &image(3),
     )

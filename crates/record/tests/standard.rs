@@ -41,6 +41,7 @@ fn frames_and_poses_are_foxglove_messages_with_attachments_and_metadata() {
                 seq: u64::from(k),
                 camera_time_ns: u64::from(k) * 10,
                 host_time_ns: 1_000 + u64::from(k),
+                ..FrameMeta::default()
             };
             rec.write(meta, &mono16(k)).unwrap();
             rec.write_pose(&PoseRecord {

@@ -8,7 +8,7 @@
 //! Pure modules (no IO, no clocks, no threads): [`xml`], [`codec`],
 //! [`ethernet_config`], [`config`], [`warning`], [`law`], [`session`],
 //! [`kit`] (the controller-side files for a configuration).
-//! Concurrency: [`slot`]. IO: [`server`], [`monitor`] (its counters),
+//! Concurrency: [`slot`], [`tap`]. IO: [`server`], [`monitor`] (its counters),
 //! [`controller`].
 
 pub mod codec;
@@ -21,6 +21,7 @@ pub mod monitor;
 pub mod server;
 pub mod session;
 pub mod slot;
+pub mod tap;
 pub mod warning;
 pub mod xml;
 

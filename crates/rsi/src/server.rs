@@ -14,6 +14,7 @@ use crate::law::{CorrectionLaw, CorrectionMode, HandEye, LawStatus, Measurement}
 use crate::monitor::{Stats, StatsSnapshot};
 use crate::session::{Session, Verdict};
 use crate::slot::SlotReader;
+use crate::tap::{CycleRecord, CycleTap};
 use std::io;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -118,6 +119,22 @@ impl RsiServer {
         Self::spawn_on(socket, settings, hand_eye, slot, clock)
     }
 
+    /// [`RsiServer::spawn`] handing a record of every answered cycle to
+    /// `tap` (never waiting: a full tap drops the record and counts it).
+    pub fn spawn_tapped(
+        settings: RsiSettings,
+        hand_eye: HandEye,
+        slot: SlotReader,
+        clock: RsiClock,
+        tap: Arc<CycleTap>,
+    ) -> Result<RsiServer, ServerError> {
+        let socket = UdpSocket::bind(settings.bind).map_err(|source| ServerError::Socket {
+            addr: settings.bind,
+            source,
+        })?;
+        Self::spawn_inner(socket, settings, hand_eye, slot, clock, Some(tap))
+    }
+
     /// Starts the RSI thread on an already bound socket (`settings.bind` is
     /// then not used; e.g. a socket handed over by the service manager).
     pub fn spawn_on(
@@ -126,6 +143,17 @@ impl RsiServer {
         hand_eye: HandEye,
         slot: SlotReader,
         clock: RsiClock,
+    ) -> Result<RsiServer, ServerError> {
+        Self::spawn_inner(socket, settings, hand_eye, slot, clock, None)
+    }
+
+    fn spawn_inner(
+        socket: UdpSocket,
+        settings: RsiSettings,
+        hand_eye: HandEye,
+        slot: SlotReader,
+        clock: RsiClock,
+        tap: Option<Arc<CycleTap>>,
     ) -> Result<RsiServer, ServerError> {
         let sock_err = |source| ServerError::Socket {
             addr: settings.bind,
@@ -144,6 +172,7 @@ impl RsiServer {
             .spawn(move || {
                 setup_thread(&settings);
                 let mut w = Worker::new(settings, hand_eye, slot, clock, socket, st2);
+                w.tap = tap;
                 w.run(&s2);
             })
             .map_err(ServerError::Thread)?;
@@ -343,6 +372,8 @@ struct Worker {
     last_rx: Option<Instant>,
     last_ipoc: Option<u64>,
     first_step: Option<u64>,
+    /// Where a record of each answered cycle goes, if anywhere.
+    tap: Option<Arc<CycleTap>>,
 }
 
 impl Worker {
@@ -373,6 +404,7 @@ impl Worker {
             last_rx: None,
             last_ipoc: None,
             first_step: None,
+            tap: None,
         }
     }
 
@@ -593,6 +625,25 @@ impl Worker {
             s.interarrival.record_ns((t_rx - prev).as_nanos() as u64);
         }
         self.bookkeeping(frame, &out, &before);
+        if let Some(tap) = &self.tap {
+            // The arrival instant on both host clocks: now, less the time
+            // since the datagram came.
+            let back = t_rx.elapsed().as_nanos() as u64;
+            tap.push(CycleRecord {
+                ipoc: frame.ipoc.value(),
+                arrival_utc_ns: crate::tap::utc_ns().saturating_sub(back),
+                arrival_mono_ns: crate::tap::monotonic_ns().saturating_sub(back),
+                rist: frame.rist,
+                rsol: frame.rsol,
+                delay: frame.delay,
+                sent: out.send,
+                total: out.total,
+                status: out.status,
+                error: out.error,
+                slew_limited: out.slew_limited,
+                clamped: out.clamped,
+            });
+        }
     }
 
     fn bookkeeping(

@@ -326,3 +326,42 @@ fn the_simulated_controller_stops_after_timeout_faults() {
     let st = server.stop();
     assert!(st.replies > 0);
 }
+
+#[test]
+fn a_tapped_server_hands_over_every_answered_cycle() {
+    let s = settings(|_| {});
+    let (_p, reader) = latest_slot();
+    let tap = photopose_rsi::tap::CycleTap::new(16);
+    let before_utc = photopose_rsi::tap::utc_ns();
+    let before_mono = photopose_rsi::tap::monotonic_ns();
+    let server =
+        RsiServer::spawn_tapped(s, hand_eye(), reader, RsiClock::new(), tap.clone()).unwrap();
+    let to = server.local_addr();
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    for (k, ipoc) in [1000u64, 1004, 1008].into_iter().enumerate() {
+        let msg = format!(
+            "<Rob Type=\"KUKA\"><RIst X=\"1\" Y=\"2\" Z=\"3\" A=\"4\" B=\"5\" C=\"{k}\"/>\
+             <RSol X=\"7\" Y=\"8\" Z=\"9\" A=\"10\" B=\"11\" C=\"12\"/><IPOC>{ipoc}</IPOC></Rob>"
+        );
+        exchange(&sock, to, msg.as_bytes());
+    }
+    server.stop();
+    let cycles: Vec<_> = std::iter::from_fn(|| tap.pop()).collect();
+    assert_eq!(
+        cycles.iter().map(|c| c.ipoc).collect::<Vec<_>>(),
+        [1000, 1004, 1008]
+    );
+    for (k, c) in cycles.iter().enumerate() {
+        assert_eq!(c.rist, Some([1.0, 2.0, 3.0, 4.0, 5.0, k as f64]));
+        assert_eq!(c.rsol, Some([7.0, 8.0, 9.0, 10.0, 11.0, 12.0]));
+        // No measurement: frozen, nothing sent.
+        assert_eq!(c.status, LawStatus::Stale(StaleReason::NoMeasurement));
+        assert_eq!(c.sent, [0.0; 6]);
+        assert!(c.arrival_utc_ns >= before_utc && c.arrival_mono_ns >= before_mono);
+    }
+    assert!(cycles
+        .windows(2)
+        .all(|w| w[0].arrival_mono_ns <= w[1].arrival_mono_ns));
+    assert_eq!((tap.pushed(), tap.dropped()), (3, 0));
+}

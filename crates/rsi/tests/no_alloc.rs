@@ -2,7 +2,8 @@
 //! ones), classify it against the controller session, read the slot, run
 //! the correction law with its checks (including a frozen-invalid cycle),
 //! check the values once more, write `<Sen>`, decide whether a drop is
-//! logged, count the cycle and record its latencies — allocates nothing: a
+//! logged, count the cycle and record its latencies, hand the cycle to the
+//! recording's tap — allocates nothing: a
 //! counting global allocator watches (the socket calls around it are system
 //! calls).
 
@@ -11,6 +12,7 @@ use photopose_rsi::law::{pose_to_isometry, LawConfig, LawStatus};
 use photopose_rsi::monitor::Stats;
 use photopose_rsi::server::RateLog;
 use photopose_rsi::session::Session;
+use photopose_rsi::tap::{monotonic_ns, utc_ns, CycleRecord, CycleTap};
 use photopose_rsi::{latest_slot, CorrectionLaw, HandEye, Measurement};
 use photopose_testkit::{allocations, CountingAllocator};
 use std::net::SocketAddr;
@@ -60,6 +62,7 @@ fn a_cycle_allocates_nothing() {
     let mut session = Session::new(0.1);
     let mut log = RateLog::new(Duration::from_secs(10));
     let stats = Stats::new();
+    let tap = CycleTap::new(8);
     let t0 = Instant::now();
     let mut bad = m(0);
     bad.plate_from_camera.translation.vector.x = f64::NAN;
@@ -106,6 +109,25 @@ fn a_cycle_allocates_nothing() {
             stats.replies.inc();
             stats.latency.record_ns(20_000 + k * 37);
             stats.interarrival.record_ns(4_000_000 + k);
+            // The recording's tap: both clocks read, the record handed
+            // over (dropped and counted when full), the reader drains.
+            tap.push(CycleRecord {
+                ipoc: f.ipoc.value(),
+                arrival_utc_ns: utc_ns(),
+                arrival_mono_ns: monotonic_ns(),
+                rist: f.rist,
+                rsol: f.rsol,
+                delay: f.delay,
+                sent: send,
+                total: o.total,
+                status: o.status,
+                error: o.error,
+                slew_limited: o.slew_limited,
+                clamped: o.clamped,
+            });
+            if k.is_multiple_of(3) {
+                let _ = tap.pop();
+            }
         }
     };
     run(0);

@@ -10,16 +10,26 @@
 //! behind) the frame or pose is dropped and counted ([`RecordStats`]); the
 //! writer thread hands the buffers back after writing. Files rotate by size
 //! or by time: `FILE.mcap`, then `FILE-1.mcap`, `FILE-2.mcap` …
+//!
+//! With `frames = "on_change"` the detection workers record a frame whose
+//! status differs from the previous one ([`RecordLink::frame_on_change`]).
+//! The identified targets of every recorded frame go with its pose line
+//! (a pooled list) and become an image annotation; the RSI server's cycles
+//! come through its [`CycleTap`] (bounded, the server never waits), which
+//! the writer thread drains.
 
 use super::{Outgoing, PoseSink};
 use crate::config::{Config, Record, RecordFrames};
+use crate::result::ResultStatus;
 use crate::run::PipelineError;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use photopose_acquire::{FrameSource, Slot, SourceError};
+use photopose_frame::FrameMeta;
 use photopose_frame::Pixels;
-use photopose_record::{FrameMeta, PoseRecord, RecordError, RecordOptions, Recorder};
+use photopose_record::{PoseRecord, RecordError, RecordOptions, Recorder, RsiCycle, TargetMark};
+use photopose_rsi::tap::{CycleRecord, CycleTap};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -29,6 +39,16 @@ use std::time::{Duration, Instant};
 const LINE_BYTES: usize = 4096;
 /// Pose lines that can wait for the writer.
 const POSE_QUEUE: usize = 256;
+/// Room for a frame's targets in a pooled list (a larger field grows a
+/// list once).
+const TARGETS: usize = 512;
+/// RSI cycles that can wait for the writer (4 s at 4 ms).
+const RSI_QUEUE: usize = 1024;
+/// The sequence numbers of the last frames recorded, by `seq % RECENT`:
+/// tells the sink which results' targets to record.
+const RECENT: usize = 1024;
+/// How long the writer waits for an item before it looks at the RSI tap.
+const RSI_POLL: Duration = Duration::from_millis(20);
 
 /// What a recording wrote and dropped.
 #[derive(Debug, Default)]
@@ -47,6 +67,14 @@ pub struct RecordStats {
     pub pixel_bytes: AtomicU64,
     /// Files written (segments).
     pub files: AtomicU64,
+    /// Frames' target annotations written.
+    pub annotations: AtomicU64,
+    /// Target annotations dropped (no free list, or the writer failed).
+    pub annotations_dropped: AtomicU64,
+    /// RSI cycles written.
+    pub rsi_cycles: AtomicU64,
+    /// RSI cycles dropped: the tap was full, or the writer failed.
+    pub rsi_dropped: AtomicU64,
 }
 
 struct FrameItem {
@@ -59,11 +87,11 @@ struct FrameItem {
 }
 
 struct PoseItem {
-    seq: u64,
-    camera_time_ns: u64,
-    host_time_ns: u64,
+    meta: FrameMeta,
     pose: Option<([f64; 3], [f64; 4])>,
     line: Vec<u8>,
+    /// The frame's targets, when its frame was recorded.
+    marks: Option<Vec<TargetMark>>,
 }
 
 enum Item {
@@ -77,6 +105,16 @@ struct Shared {
     queue: Sender<Item>,
     free_frames: Receiver<Vec<u8>>,
     free_lines: Receiver<Vec<u8>>,
+    free_marks: Receiver<Vec<TargetMark>>,
+    /// `seq` of recently recorded frames at `seq % RECENT` (`u64::MAX`:
+    /// none).
+    recent: Box<[AtomicU64]>,
+    /// The status of the frame the workers saw last (`on_change`; 255:
+    /// none yet).
+    last_status: AtomicU8,
+    rsi: Option<Arc<CycleTap>>,
+    /// Whether the targets of recorded frames are recorded.
+    annotations: bool,
     stats: Arc<RecordStats>,
     thread: Mutex<Option<JoinHandle<()>>>,
     closed: Mutex<bool>,
@@ -142,6 +180,14 @@ impl RecordLink {
         let (queue, items) = crossbeam_channel::bounded(frames + POSE_QUEUE);
         let (give_frame, free_frames) = crossbeam_channel::bounded(frames.max(1));
         let (give_line, free_lines) = crossbeam_channel::bounded(POSE_QUEUE);
+        let (give_marks, free_marks) = crossbeam_channel::bounded(POSE_QUEUE);
+        let annotations = record.annotations && record.poses && frames > 0;
+        if annotations {
+            for _ in 0..POSE_QUEUE {
+                let _ = give_marks.try_send(Vec::with_capacity(TARGETS));
+            }
+        }
+        let rsi = record.rsi.then(|| CycleTap::new(RSI_QUEUE));
         for _ in 0..frames {
             let _ = give_frame.try_send(Vec::with_capacity(frame_bytes));
         }
@@ -160,6 +206,9 @@ impl RecordLink {
             stats: stats.clone(),
             give_frame,
             give_line,
+            give_marks,
+            rsi: rsi.clone(),
+            rsi_failed: AtomicU64::new(0),
         };
         let thread = std::thread::Builder::new()
             .name("record".into())
@@ -173,6 +222,11 @@ impl RecordLink {
             queue,
             free_frames,
             free_lines,
+            free_marks,
+            recent: (0..RECENT).map(|_| AtomicU64::new(u64::MAX)).collect(),
+            last_status: AtomicU8::new(u8::MAX),
+            rsi,
+            annotations,
             stats,
             thread: Mutex::new(Some(thread)),
             closed: Mutex::new(false),
@@ -190,11 +244,37 @@ impl RecordLink {
         &self.0.path
     }
 
+    /// The tap the RSI server hands its cycles to, when `[record] rsi` is
+    /// on (the pipeline gives it to the server it starts).
+    pub fn rsi_tap(&self) -> Option<Arc<CycleTap>> {
+        self.0.rsi.clone()
+    }
+
+    /// Whether frame `seq` was recorded (one of the last `RECENT`).
+    fn was_recorded(&self, seq: u64) -> bool {
+        self.0.recent[(seq % RECENT as u64) as usize].load(Ordering::Acquire) == seq
+    }
+
+    /// `frames = "on_change"`, from a detection worker: records the frame
+    /// when its status differs from that of the frame the workers saw
+    /// before (the first frame always). With several workers "before" is
+    /// the order in which they finish.
+    pub fn frame_on_change(&self, slot: &Slot, status: ResultStatus) {
+        let code = match status {
+            ResultStatus::Ok => 0,
+            ResultStatus::TooFewTargets => 1,
+            ResultStatus::Error => 2,
+        };
+        if self.0.last_status.swap(code, Ordering::AcqRel) != code {
+            self.frame(slot);
+        }
+    }
+
     /// Wraps `source`: every recorded frame (all, or every `n`th, as
     /// `record` says) is copied into the writer's queue.
     pub fn tap(&self, source: Box<dyn FrameSource>, record: &Record) -> Box<dyn FrameSource> {
         let every = match record.frames {
-            RecordFrames::None => return source,
+            RecordFrames::None | RecordFrames::OnChange => return source,
             RecordFrames::All => 1,
             RecordFrames::Every(n) => n,
         };
@@ -248,12 +328,9 @@ impl RecordLink {
                 2
             }
         };
+        let seq = slot.meta.seq;
         let item = Item::Frame(FrameItem {
-            meta: FrameMeta {
-                seq: slot.meta.seq,
-                camera_time_ns: slot.meta.camera_time_ns,
-                host_time_ns: slot.meta.host_time_ns,
-            },
+            meta: slot.meta,
             width: image.width(),
             height: image.height(),
             max_value: image.max_value(),
@@ -264,6 +341,8 @@ impl RecordLink {
             self.0.queue.try_send(item)
         {
             stats.frames_dropped.fetch_add(1, Ordering::Relaxed);
+        } else {
+            self.0.recent[(seq % RECENT as u64) as usize].store(seq, Ordering::Release);
         }
     }
 
@@ -279,12 +358,45 @@ impl RecordLink {
         line.clear();
         line.extend_from_slice(out.line);
         let m = out.message;
-        let item = Item::Pose(PoseItem {
+        let t = &result.times;
+        let meta = FrameMeta {
             seq: result.seq,
-            camera_time_ns: result.times.camera_ns,
-            host_time_ns: result.times.handover_utc_ns,
+            camera_time_ns: t.camera_ns,
+            host_time_ns: t.handover_utc_ns,
+            host_mono_ns: t.handover_mono_ns,
+            exposure_mono_ns: t.exposure_mono_ns,
+            exposure_sigma_ns: t.exposure_sigma_ns,
+            ..FrameMeta::default()
+        };
+        let marks = if self.was_recorded(result.seq) {
+            match self.0.free_marks.try_recv() {
+                Ok(mut marks) => {
+                    marks.clear();
+                    marks.extend(result.targets.iter().map(|t| TargetMark {
+                        id: t.id,
+                        coded: t.coded,
+                        col_px: t.col_px,
+                        row_px: t.row_px,
+                        used: t.used,
+                    }));
+                    Some(marks)
+                }
+                Err(_) => {
+                    // Annotations off (no lists) or the writer is behind.
+                    if self.0.annotations {
+                        stats.annotations_dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        let item = Item::Pose(PoseItem {
+            meta,
             pose: m.center.zip(m.quaternion_wxyz),
             line,
+            marks,
         });
         if self.0.queue.try_send(item).is_err() {
             stats.poses_dropped.fetch_add(1, Ordering::Relaxed);
@@ -343,6 +455,10 @@ struct Writer {
     stats: Arc<RecordStats>,
     give_frame: Sender<Vec<u8>>,
     give_line: Sender<Vec<u8>>,
+    give_marks: Sender<Vec<TargetMark>>,
+    rsi: Option<Arc<CycleTap>>,
+    /// RSI cycles the recorder could not write.
+    rsi_failed: AtomicU64,
 }
 
 impl Writer {
@@ -351,10 +467,15 @@ impl Writer {
         let mut opened = Instant::now();
         let mut segment = 0u64;
         let mut done_bytes = 0u64;
-        while let Ok(item) = items.recv() {
-            if let Item::Finish = item {
-                break;
+        loop {
+            if let Some(rec) = current.as_mut() {
+                self.drain_rsi(rec);
             }
+            let item = match items.recv_timeout(RSI_POLL) {
+                Ok(Item::Finish) | Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+                Ok(item) => item,
+                Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
+            };
             let Some(rec) = current.as_mut() else {
                 self.drop_item(item);
                 continue;
@@ -383,9 +504,9 @@ impl Writer {
                 Item::Finish => continue,
                 Item::Pose(p) => {
                     let r = rec.write_pose(&PoseRecord {
-                        seq: p.seq,
-                        camera_time_ns: p.camera_time_ns,
-                        host_time_ns: p.host_time_ns,
+                        seq: p.meta.seq,
+                        camera_time_ns: p.meta.camera_time_ns,
+                        host_time_ns: p.meta.host_time_ns,
                         pose: p.pose,
                         json: &p.line,
                     });
@@ -395,7 +516,28 @@ impl Writer {
                         self.stats.poses_dropped.fetch_add(1, Ordering::Relaxed);
                     }
                     let _ = self.give_line.try_send(p.line);
-                    r
+                    match (r, p.marks) {
+                        (Ok(()), Some(marks)) => {
+                            let r = rec.write_targets(&p.meta, &marks);
+                            let counter = if r.is_ok() {
+                                &self.stats.annotations
+                            } else {
+                                &self.stats.annotations_dropped
+                            };
+                            counter.fetch_add(1, Ordering::Relaxed);
+                            let _ = self.give_marks.try_send(marks);
+                            r
+                        }
+                        (r, marks) => {
+                            if let Some(marks) = marks {
+                                self.stats
+                                    .annotations_dropped
+                                    .fetch_add(1, Ordering::Relaxed);
+                                let _ = self.give_marks.try_send(marks);
+                            }
+                            r
+                        }
+                    }
                 }
             };
             if let Err(e) = written {
@@ -427,7 +569,8 @@ impl Writer {
                 }
             }
         }
-        if let Some(rec) = current {
+        if let Some(mut rec) = current {
+            self.drain_rsi(&mut rec);
             done_bytes += self.finish(rec);
             self.stats.bytes.store(done_bytes, Ordering::Relaxed);
         }
@@ -435,6 +578,24 @@ impl Writer {
         while let Ok(item) = items.try_recv() {
             self.drop_item(item);
         }
+    }
+
+    /// Writes the RSI cycles waiting in the tap; the tap's drops are the
+    /// recording's.
+    fn drain_rsi(&self, rec: &mut Recorder) {
+        let Some(tap) = &self.rsi else {
+            return;
+        };
+        while let Some(c) = tap.pop() {
+            match rec.write_rsi(&rsi_cycle(&c)) {
+                Ok(()) => self.stats.rsi_cycles.fetch_add(1, Ordering::Relaxed),
+                Err(_) => self.rsi_failed.fetch_add(1, Ordering::Relaxed),
+            };
+        }
+        self.stats.rsi_dropped.store(
+            tap.dropped() + self.rsi_failed.load(Ordering::Relaxed),
+            Ordering::Relaxed,
+        );
     }
 
     /// Finishes a file; its size (what was written if it cannot be read).
@@ -459,8 +620,32 @@ impl Writer {
             Item::Pose(p) => {
                 self.stats.poses_dropped.fetch_add(1, Ordering::Relaxed);
                 let _ = self.give_line.try_send(p.line);
+                if let Some(marks) = p.marks {
+                    self.stats
+                        .annotations_dropped
+                        .fetch_add(1, Ordering::Relaxed);
+                    let _ = self.give_marks.try_send(marks);
+                }
             }
         }
+    }
+}
+
+/// A cycle of the RSI server as the recording stores it.
+fn rsi_cycle(c: &CycleRecord) -> RsiCycle {
+    RsiCycle {
+        ipoc: c.ipoc,
+        arrival_utc_ns: c.arrival_utc_ns,
+        arrival_mono_ns: c.arrival_mono_ns,
+        rist_xyzabc: c.rist,
+        rsol_xyzabc: c.rsol,
+        delay: c.delay,
+        correction_sent_xyzabc: c.sent,
+        correction_total_xyzabc: c.total,
+        error_xyzabc: c.error,
+        state: c.status.name(),
+        slew_limited: c.slew_limited,
+        clamped: c.clamped,
     }
 }
 
