@@ -1,6 +1,8 @@
 //! Packaging: the man pages and shell completions generated from the CLI
 //! (`photopose generate`, hidden), as `packaging/deb.sh` makes them for
-//! `cargo deb`; and the package metadata names every file it ships.
+//! `cargo deb`; and the package metadata names every file it ships (the
+//! unit and the `photopose` user's sysusers file come from the
+//! `unit-scripts` folder).
 
 mod common;
 
@@ -75,7 +77,6 @@ fn the_package_ships_binary_unit_config_user_docs_man_pages_and_completions() {
         "etc/photopose/photopose.toml",
         "etc/photopose/camera.toml",
         "etc/photopose/plate.csv",
-        "usr/lib/sysusers.d/photopose.conf",
         "usr/share/doc/photopose/README.md",
         "usr/share/man/man1/",
         "usr/share/bash-completion/completions/photopose",

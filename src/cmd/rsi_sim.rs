@@ -95,9 +95,11 @@ pub fn run(args: Args) -> Result<ExitCode> {
         .with_context(|| format!("cannot start the simulated controller for {server}"))?;
     // Live progress on stderr (a terminal only): cycles done and the
     // correction the controller is applying.
+    // Only when shown: reading the state clones the controller's record
+    // under its lock, which the controller's own cycle then waits for.
     let bar = crate::cmd::progress::bar(Some(args.cycles), "cycles");
     let probe = controller.probe();
-    while !probe.is_finished() {
+    while crate::cmd::progress::shown() && !probe.is_finished() {
         let s = probe.state();
         let t = &s.total;
         bar.set_position(s.cycle);

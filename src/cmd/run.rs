@@ -394,7 +394,10 @@ fn reload(
     running.stop();
     let old = running.join();
     tracing::info!(poses_ok = old.poses_ok.get(), "previous pipeline stopped");
-    record_summary(&current)?;
+    // A reload goes on whatever became of stdout.
+    if let Err(e) = record_summary(&current) {
+        tracing::debug!(error = %e, "recording summary not printed");
+    }
     let started = match start(prepared, wedge, Some(path), true) {
         Ok(started) => {
             tracing::info!(config = %path.display(), "configuration reloaded");
