@@ -54,7 +54,11 @@ fn a_lost_device_is_reported_once_and_reopened() {
     }
     assert_eq!(lost.len(), 1, "one loss reported: {lost:?}");
     assert!(lost[0].contains("GC_ERR_IO"), "{lost:?}");
-    assert_eq!(seqs, vec![0, 1, 2, 3, 4, 5], "seq goes on across the reopening");
+    assert_eq!(
+        seqs,
+        vec![0, 1, 2, 3, 4, 5],
+        "seq goes on across the reopening"
+    );
     let stats = source.stats();
     assert_eq!((stats.losses, stats.opens), (1, 2), "{stats:?}");
     drop(source);
