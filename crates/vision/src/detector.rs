@@ -448,7 +448,9 @@ impl Detector {
                 },
                 id: c.reading.status.id(),
                 code: c.reading.status,
+                saturated: blob.saturated > 0,
             });
+            self.out.n_saturated += (blob.saturated > 0) as usize;
         }
     }
 }
@@ -473,7 +475,7 @@ fn blob_tests<P: Pixel>(
     {
         return Err(RejectReason::Border);
     }
-    if blob.saturated > 0 {
+    if blob.saturated > 0 && !o.measure_saturated {
         return Err(RejectReason::Saturated);
     }
     let (cxx, cyy, cxy) = blob.covariance();
