@@ -308,7 +308,7 @@ impl Detector {
                 continue;
             }
             // 4. Centroid and moments.
-            let m = match centroid(plane, blob, t, o) {
+            let m = match centroid(plane, blob, t, o, max_value) {
                 Ok(m) => m,
                 Err(reason) => {
                     out.reject(blob, reason);
@@ -338,7 +338,21 @@ impl Detector {
                     measure::CODED_MAX_SCALE,
                 );
                 probe(DetectStage::Measure);
-                m2.unwrap_or(m)
+                m2.map_or(m, |mut m2| {
+                    if blob.saturated > 0 {
+                        saturated_centre(
+                            plane,
+                            blob,
+                            t,
+                            max_value,
+                            o.saturated_knee,
+                            measure::CODED_GROW,
+                            measure::CODED_MAX_SCALE,
+                            &mut m2,
+                        );
+                    }
+                    m2
+                })
             } else {
                 m
             };
@@ -497,8 +511,9 @@ fn centroid<P: Pixel>(
     blob: &Blob,
     t: &ThresholdResult,
     o: &DetectorOptions,
+    max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    let m = measure::measure(
+    let mut m = measure::measure(
         plane,
         blob,
         t.threshold,
@@ -507,10 +522,61 @@ fn centroid<P: Pixel>(
         measure::MAX_SCALE,
     )
     .ok_or(RejectReason::NoSignal)?;
+    if blob.saturated > 0 {
+        saturated_centre(
+            plane,
+            blob,
+            t,
+            max_value,
+            o.saturated_knee,
+            measure::GROW,
+            measure::MAX_SCALE,
+            &mut m,
+        );
+    }
     if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
         return Err(RejectReason::Shape);
     }
     Ok(m)
+}
+
+/// The centre of a blob at least half of whose pixels are saturated: the
+/// centroid with the grey values rolled off smoothly below the saturation
+/// level ([`measure::Knee`], from `knee` of the way between background and
+/// saturation), replacing the centre of `m` (its moments and signal stay
+/// those of the clipped profile). Blobs with fewer clipped pixels keep the
+/// plain centroid: there the roll-off would throw away more signal than
+/// the kink costs (see the detector's over-exposure test).
+#[allow(clippy::too_many_arguments)]
+fn saturated_centre<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    max_value: u32,
+    knee: f64,
+    grow: f64,
+    max_scale: f64,
+    m: &mut Measurement,
+) {
+    if 2 * blob.saturated < blob.area || knee >= 1.0 {
+        return;
+    }
+    let knee = measure::Knee {
+        knee: (m.background + knee * (max_value as f64 - m.background)) as u32,
+        top: max_value,
+    };
+    if let Some(k) = measure::measure_weighted(
+        plane,
+        blob,
+        t.threshold,
+        t.background,
+        grow,
+        max_scale,
+        knee,
+    ) {
+        m.col = k.col;
+        m.row = k.row;
+    }
 }
 
 /// What stage 5 found around a dot.

@@ -115,13 +115,20 @@ pub struct DetectorOptions {
     pub dark_tolerance: f64,
     /// Measure blobs with saturated (clipped) pixels as targets, flagged
     /// [`Detection::saturated`]; `false` rejects them
-    /// ([`RejectReason::Saturated`]). Their clipped plateau counts with the
-    /// weight of the saturation level, as a uniform plateau: the weighted
-    /// centroid of a clipped symmetric dot stays on its centre (the bias,
-    /// measured on dots from 1× to 4× full scale in 8 and 16 bits, is in
-    /// the detector's tests), but the plateau carries no position
-    /// information, so the centre is less precise.
+    /// ([`RejectReason::Saturated`]). The weighted centroid of a clipped
+    /// symmetric dot stays on its centre, but the plateau carries no
+    /// position information and the kink where the profile meets the
+    /// saturation level moves the centroid with the dot's sub-pixel phase;
+    /// see [`DetectorOptions::saturated_knee`].
     pub measure_saturated: bool,
+    /// For blobs at least half of whose pixels are saturated, the centroid
+    /// weights roll off smoothly from this share of the way between
+    /// background and saturation up to the saturation level
+    /// ([`measure::Knee`]); 1 keeps the clipped plateau weighted uniformly.
+    /// Measured on dots at 1×, 1.5×, 2×, 4× full scale (8 and 16 bit): no
+    /// bias either way (< 0.002 px), phase error RMS at 2× 0.026 px with the
+    /// uniform plateau, 0.014 px with the roll-off from 0.3.
+    pub saturated_knee: f64,
 }
 
 impl Default for DetectorOptions {
@@ -143,6 +150,7 @@ impl Default for DetectorOptions {
             sample_margin: 0.1,
             dark_tolerance: 0.3,
             measure_saturated: true,
+            saturated_knee: 0.3,
         }
     }
 }
