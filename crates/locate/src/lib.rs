@@ -26,7 +26,7 @@ use photopose_geometry::{
     ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{
-    DetectStage, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
+    DetectStage, Detection, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
 };
 use thiserror::Error;
 
@@ -61,6 +61,12 @@ pub struct LocateOptions {
     /// (the centre of the imaged ellipse is not the image of the circle's
     /// centre), with the first pose.
     pub eccentricity: bool,
+    /// Standard deviation of a saturated (over-exposed) target's image
+    /// coordinates as a multiple of an unsaturated one's: its observation
+    /// gets the weight `1 / factor²` in both resections. A clipped dot's
+    /// centre is unbiased but less precise (the detector's over-exposure
+    /// test: RMS 0.009 px unclipped, up to 0.019 px clipped).
+    pub saturated_sigma_factor: f64,
 }
 
 impl Default for LocateOptions {
@@ -73,6 +79,7 @@ impl Default for LocateOptions {
             min_coded: 4,
             edge_margin_px: 2.0,
             eccentricity: true,
+            saturated_sigma_factor: 2.0,
         }
     }
 }
@@ -130,6 +137,9 @@ pub struct Identified {
     pub detection: usize,
     /// Used in the final pose (not rejected by the adjustment).
     pub used: bool,
+    /// The dot is over-exposed (saturated pixels): its observation is
+    /// weighted down ([`LocateOptions::saturated_sigma_factor`]).
+    pub saturated: bool,
 }
 
 /// The result of [`Locator::locate`].
@@ -147,6 +157,9 @@ pub struct Location<'a> {
     pub detections: &'a Detections,
     /// Ids rejected by the final adjustment.
     pub rejected_ids: &'a [u64],
+    /// Identified targets that are over-exposed (weighted down in the
+    /// adjustment): when it is not zero, over-exposure costs precision.
+    pub n_saturated: usize,
 }
 
 /// The per-frame pipeline with all its buffers.
@@ -270,6 +283,7 @@ impl Locator {
             targets: &self.identified,
             detections: self.detector.detections(),
             rejected_ids: &self.rejected,
+            n_saturated: self.identified.iter().filter(|t| t.saturated).count(),
         })
     }
 
@@ -306,13 +320,14 @@ impl Locator {
                 blob_row: d.row,
                 detection: k,
                 used: true,
+                saturated: d.saturated,
             });
-            self.obs.push(Observation::from_pixel(
+            self.obs.push(observation(
                 &self.camera,
                 id,
                 t.position,
-                d.col,
-                d.row,
+                d,
+                self.options.saturated_sigma_factor,
             ));
         }
         let coded = self.obs.len();
@@ -457,16 +472,33 @@ impl Locator {
                 blob_row: d.row,
                 detection: k as usize,
                 used: true,
+                saturated: d.saturated,
             });
-            self.obs.push(Observation::from_pixel(
+            self.obs.push(observation(
                 &self.camera,
                 t.id,
                 t.position,
-                d.col,
-                d.row,
+                d,
+                self.options.saturated_sigma_factor,
             ));
         }
     }
+}
+
+/// The observation of a detection: its centre corrected with `camera`,
+/// weighted down by `1 / saturated_factor²` when the dot is over-exposed.
+fn observation(
+    camera: &Camera,
+    id: u64,
+    object: Vector3<f64>,
+    d: &Detection,
+    saturated_factor: f64,
+) -> Observation {
+    let mut o = Observation::from_pixel(camera, id, object, d.col, d.row);
+    if d.saturated && saturated_factor.is_finite() && saturated_factor > 0.0 {
+        o.weight = Matrix2::identity() / (saturated_factor * saturated_factor);
+    }
+    o
 }
 
 /// The eccentricity of a circular target facing `+Z` (centre `position`,
