@@ -54,6 +54,8 @@ struct TargetLine {
     /// The canonical 12-bit value read from the ring (certain readings
     /// only).
     code_value: Option<u16>,
+    /// The dot is over-exposed (saturated pixels): measured, weighted down.
+    saturated: bool,
 }
 
 #[derive(Serialize)]
@@ -65,6 +67,8 @@ struct ImageLine<'a> {
     targets: Vec<TargetLine>,
     n_targets: usize,
     n_identified: usize,
+    /// Targets with saturated pixels: over-exposure costs precision.
+    n_saturated: usize,
 }
 
 /// Runs the command.
@@ -124,6 +128,7 @@ fn detect_one<'a>(
             used: ident.is_some_and(|t| t.used),
             code: d.code.name(),
             code_value: d.code.value(),
+            saturated: d.saturated,
         });
     }
     Ok(ImageLine {
@@ -132,6 +137,7 @@ fn detect_one<'a>(
         status,
         n_targets: targets.len(),
         n_identified: targets.iter().filter(|t| t.id.is_some()).count(),
+        n_saturated: loc.detections.n_saturated,
         targets,
     })
 }

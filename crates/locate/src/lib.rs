@@ -526,3 +526,56 @@ pub fn eccentricity(
     let offset = ellipse_centre - centre;
     (offset.x.is_finite() && offset.y.is_finite()).then_some(offset)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photopose_vision::{CodeStatus, TargetKind};
+
+    fn detection(saturated: bool) -> Detection {
+        Detection {
+            col: 650.0,
+            row: 515.0,
+            semi_major: 5.0,
+            semi_minor: 5.0,
+            angle: 0.0,
+            area: 80,
+            peak: 255,
+            signal: 1.0e4,
+            background: 13.0,
+            kind: TargetKind::Uncoded,
+            id: None,
+            code: CodeStatus::NoRing,
+            saturated,
+        }
+    }
+
+    #[test]
+    fn saturated_observations_are_weighted_down() {
+        let camera = photopose_geometry::Camera::new(
+            photopose_geometry::Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            photopose_geometry::Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            photopose_geometry::Distortion::default(),
+        )
+        .unwrap();
+        let p = Vector3::new(1.0, 2.0, 0.0);
+        let plain = observation(&camera, 7, p, &detection(false), 2.0);
+        let clipped = observation(&camera, 7, p, &detection(true), 2.0);
+        assert_eq!(plain.weight, Matrix2::identity());
+        assert_eq!(clipped.weight, Matrix2::identity() * 0.25);
+        assert_eq!(plain.image, clipped.image);
+        // A factor that is no factor leaves the weight alone.
+        for f in [0.0, -1.0, f64::NAN] {
+            let o = observation(&camera, 7, p, &detection(true), f);
+            assert_eq!(o.weight, Matrix2::identity());
+        }
+    }
+}
