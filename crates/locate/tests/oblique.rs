@@ -66,18 +66,12 @@ fn sweep(options: DetectorOptions, beam_deg: f64) -> Tally {
         }
         for tr in truth.iter().filter(|g| g.visible) {
             f.visible += 1;
-            f.found += loc
-                .detections
-                .targets
-                .iter()
-                .any(|d| (d.col - tr.col).hypot(d.row - tr.row) < 1.0) as usize;
+            f.found +=
+                loc.detections
+                    .targets
+                    .iter()
+                    .any(|d| (d.col - tr.col).hypot(d.row - tr.row) < 1.0) as usize;
             f.identified += loc.targets.iter().any(|x| x.id == tr.id) as usize;
-            if std::env::var_os("DIAG").is_some() && !loc.detections.targets.iter().any(|d| (d.col - tr.col).hypot(d.row - tr.row) < 1.0) {
-                let mut pk = 0;
-                for dr in -2i64..=2 { for dc in -2i64..=2 { pk = pk.max(image.get((tr.col.round() as i64 + dc) as u32, (tr.row.round() as i64 + dr) as u32)); } }
-                let rej = loc.detections.rejected.iter().find(|r| (r.col - tr.col).hypot(r.row - tr.row) < 3.0);
-                eprintln!("    missed {:?} {} r {:.1} px peak {pk} margin {:.0}: {:?}", tr.kind, tr.id, tr.radius_px, tr.margin_px, rej.map(|r| (r.reason, r.area, r.peak)));
-            }
         }
         eprintln!(
             "  frame {k} (azimuth {az}°): {f:?}, threshold {} (Otsu {}, floor {})",
@@ -99,17 +93,32 @@ fn rate(n: usize, of: usize) -> f64 {
 
 #[test]
 fn close_oblique_views_under_a_falling_ring_light() {
-    let base = DetectorOptions::for_field(&default_plate());
-    for beam in [std::env::var("BEAM").ok().and_then(|v| v.parse().ok()).unwrap_or(20.0)] {
-        let before = sweep(base, beam);
+    let after = DetectorOptions::for_field(&default_plate());
+    let before = DetectorOptions {
+        local_threshold: 0.0,
+        ..after
+    };
+    let beam = 20.0;
+    let mut figures = Vec::new();
+    for (what, options) in [("global threshold", before), ("local threshold", after)] {
+        let t = sweep(options, beam);
         eprintln!(
-            "beam {beam}°: found {}/{} ({:.4}), identified {} ({:.4}), wrong ids {}",
-            before.found,
-            before.visible,
-            rate(before.found, before.visible),
-            before.identified,
-            rate(before.identified, before.visible),
-            before.wrong_ids
+            "{what}: found {}/{} ({:.4}), identified {} ({:.4}), wrong ids {}",
+            t.found,
+            t.visible,
+            rate(t.found, t.visible),
+            t.identified,
+            rate(t.identified, t.visible),
+            t.wrong_ids
         );
+        figures.push(t);
     }
+    let (b, a) = (figures[0], figures[1]);
+    assert_eq!(b.wrong_ids + a.wrong_ids, 0, "wrong ids");
+    assert!(
+        rate(b.found, b.visible) < 0.9,
+        "the frames have dim targets: {b:?}"
+    );
+    assert!(rate(a.found, a.visible) >= 0.98, "found {a:?}");
+    assert!(rate(a.identified, a.visible) >= 0.98, "identified {a:?}");
 }

@@ -13,7 +13,9 @@ use crate::code::{self, CodeParams, Gap, Reading, RingFrame, RingTables};
 use crate::label::{Blob, LabelOutcome, Labeller};
 use crate::measure::{self, Measurement};
 use crate::pixel::{Pixel, Plane};
-use crate::threshold::{self, FrameStatus, Threshold, ThresholdParams, ThresholdResult, MAX_BINS};
+use crate::threshold::{
+    self, FrameStatus, LocalLevels, Threshold, ThresholdParams, ThresholdResult, MAX_BINS,
+};
 use crate::{
     CodeStatus, Detection, Detections, DetectorOptions, RejectReason, TargetKind, Uncertainty,
     VisionError,
@@ -58,6 +60,9 @@ pub struct Detector {
     candidates: Vec<Candidate>,
     order: Vec<u32>,
     tables: RingTables,
+    /// The window's local levels (all at the global level unless
+    /// [`DetectorOptions::local_threshold`] found dim surroundings).
+    levels: LocalLevels,
     out: Detections,
 }
 
@@ -97,6 +102,7 @@ impl Detector {
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
             tables: RingTables::default(),
+            levels: LocalLevels::new(max_width as usize, max_height as usize),
             out: Detections::with_capacity(options.max_targets),
         })
     }
@@ -224,6 +230,15 @@ impl Detector {
         if t.status != FrameStatus::Normal {
             return;
         }
+        // Local levels: only for a threshold found on this window.
+        if given.is_none() && self.options.local_threshold > 0.0 {
+            let o = &self.options;
+            let floor = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+            self.levels.compute(plane, &t, o.local_threshold, floor);
+        } else {
+            self.levels.set_global(plane, t.threshold);
+        }
+        self.out.local_levels = self.levels.any_local();
         // 2. Connected components.
         if !self.label(plane, t.threshold, max_value) {
             return;
@@ -261,7 +276,12 @@ impl Detector {
     /// Stage 2: connected components; false (with the frame's status set)
     /// if the window has more runs or blobs than the capacity.
     fn label<P: Pixel>(&mut self, plane: &Plane<'_, P>, t: Threshold, max_value: u32) -> bool {
-        match self.labeller.label(plane, t, max_value) {
+        let outcome = if self.levels.any_local() {
+            self.labeller.label_local(plane, &self.levels, max_value)
+        } else {
+            self.labeller.label(plane, t, max_value)
+        };
+        match outcome {
             LabelOutcome::Complete => {
                 self.out.n_blobs = self.labeller.blobs().len();
                 true
@@ -288,11 +308,15 @@ impl Detector {
             labeller,
             candidates,
             tables,
+            levels,
             out,
             ..
         } = self;
-        let code_params = CodeParams {
-            min_contrast: (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64),
+        let min_read = (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+        let min_local = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+        let mut code_params = CodeParams {
+            min_contrast: min_read,
+            min_isolation_contrast: min_read,
             sector_margin: o.sector_margin,
             sample_margin: o.sample_margin,
             dark_tolerance: o.dark_tolerance,
@@ -307,6 +331,27 @@ impl Detector {
                 out.reject(blob, reason);
                 continue;
             }
+            // The blob's level: its tile's (the global one but in dim
+            // surroundings).
+            let local;
+            // A dim blob (in a lowered tile) may be judged isolated with
+            // the local floor's contrast; its ring is read only above the
+            // global one.
+            let t = if levels.any_local() {
+                let (c, r) = blob.centre();
+                local = ThresholdResult {
+                    threshold: levels.at(c.max(0.0) as usize, r.max(0.0) as usize),
+                    ..*t
+                };
+                code_params.min_isolation_contrast = if local.threshold == t.threshold {
+                    min_read
+                } else {
+                    min_local
+                };
+                &local
+            } else {
+                t
+            };
             // 4. Centroid and moments.
             let m = match centroid(plane, blob, t, o, max_value) {
                 Ok(m) => m,

@@ -11,7 +11,9 @@
 //!    a noise floor; degenerate frames end here with a [`FrameStatus`]. The
 //!    result is one [`Threshold`] value that the later stages ask; a
 //!    threshold found before can be passed in instead
-//!    ([`Detector::detect_with`]).
+//!    ([`Detector::detect_with`]). Where the surroundings of a tile peak
+//!    well below the frame's bright targets, the tile gets a lower level of
+//!    its own ([`threshold::LocalLevels`]; `local_threshold`).
 //! 2. [`label`]: run-length connected components with union-find, blob
 //!    statistics in the same pass.
 //! 3. Blob tests: area, border, saturation, and shape from second moments;
@@ -134,6 +136,19 @@ pub struct DetectorOptions {
     /// error in distance) and raises σ0, while the uniform plateau stays
     /// unbiased (< 0.002 px; `photopose-locate`'s over-exposure test).
     pub saturated_knee: f64,
+    /// Local threshold: in tiles of 64 × 64 px whose surroundings (the
+    /// tile and its neighbours) peak well below the frame's bright targets,
+    /// the level drops to this share of the local peak's height above the
+    /// background (never below the noise floor, never above the global
+    /// level), so that dim targets next to bright ones are found. 0: one
+    /// global level. Only for thresholds found on the window itself
+    /// ([`Detector::detect`]), not for given ones ([`Detector::detect_with`]).
+    pub local_threshold: f64,
+    /// The local levels lie at least this many noise σ above the
+    /// background (and `min_contrast` of the saturation level); lower than
+    /// `noise_factor`, as a tile is lowered only where its surroundings
+    /// peak above it.
+    pub local_noise_factor: f64,
 }
 
 impl Default for DetectorOptions {
@@ -156,6 +171,8 @@ impl Default for DetectorOptions {
             dark_tolerance: 0.3,
             measure_saturated: true,
             saturated_knee: 1.0,
+            local_threshold: 0.3,
+            local_noise_factor: 5.0,
         }
     }
 }
@@ -264,6 +281,8 @@ pub struct Detections {
     pub n_dropped: usize,
     /// Targets with saturated pixels (over-exposed, measured less precisely).
     pub n_saturated: usize,
+    /// Some tiles were labelled below the global level (local threshold).
+    pub local_levels: bool,
 }
 
 impl Detections {
@@ -285,6 +304,7 @@ impl Detections {
             n_small: 0,
             n_dropped: 0,
             n_saturated: 0,
+            local_levels: false,
         }
     }
 
@@ -296,6 +316,7 @@ impl Detections {
         self.n_small = 0;
         self.n_dropped = 0;
         self.n_saturated = 0;
+        self.local_levels = false;
     }
 
     pub(crate) fn reject(&mut self, blob: &Blob, reason: RejectReason) {
