@@ -121,7 +121,9 @@ fn sweep(blur_px: f64, frames: usize) -> Tally {
         t.frames += 1;
         for id in loc.targets {
             let tr = truth.iter().find(|g| g.id == id.id).unwrap();
-            if !((id.col - tr.col).hypot(id.row - tr.row) < 1.0) {
+            if (id.col - tr.col).hypot(id.row - tr.row).partial_cmp(&1.0)
+                != Some(std::cmp::Ordering::Less)
+            {
                 t.wrong_ids += 1;
                 eprintln!(
                     "frame {f}: wrong id {} at ({:.1}, {:.1})",

@@ -60,7 +60,9 @@ fn sweep(options: DetectorOptions, beam_deg: f64) -> Tally {
         let mut f = Tally::default();
         for id in loc.targets {
             let tr = truth.iter().find(|g| g.id == id.id).unwrap();
-            if !((id.col - tr.col).hypot(id.row - tr.row) < 1.0) {
+            if (id.col - tr.col).hypot(id.row - tr.row).partial_cmp(&1.0)
+                != Some(std::cmp::Ordering::Less)
+            {
                 f.wrong_ids += 1;
             }
         }
