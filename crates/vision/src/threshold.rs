@@ -169,7 +169,11 @@ impl LocalLevels {
     ) {
         let global = t.threshold.level();
         self.set_global(plane, t.threshold);
-        if t.status != FrameStatus::Normal || share <= 0.0 {
+        let bg = t.background;
+        let floor = ((bg + floor).ceil().max(0.0) as u32).min(global);
+        // Nothing can be lowered (and the peaks are not looked for) when
+        // the global level is the local floor already.
+        if t.status != FrameStatus::Normal || share <= 0.0 || floor >= global {
             return;
         }
         self.peaks.clear();
@@ -191,8 +195,6 @@ impl LocalLevels {
             }
             row += 2;
         }
-        let bg = t.background;
-        let floor = ((bg + floor).ceil().max(0.0) as u32).min(global);
         for r in 0..self.rows {
             for c in 0..self.cols {
                 let mut peak = 0;
