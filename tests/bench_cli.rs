@@ -19,11 +19,19 @@ fn bench_json_ends_with_one_object_with_the_headline_figures() {
     );
     let last = stdout.lines().last().expect("output");
     let v: serde_json::Value = serde_json::from_str(last).expect("a JSON object");
-    let full = v["full_frame_median_us"].as_f64().expect("full_frame_median_us");
+    let full = v["full_frame_median_us"]
+        .as_f64()
+        .expect("full_frame_median_us");
     assert!(full > 0.0);
     assert_eq!(full, v["total"]["median_us"].as_f64().unwrap());
     assert!(v["tracking_median_us"].is_null());
-    for stage in ["threshold", "labelling", "centroids", "decoding", "final_pose"] {
+    for stage in [
+        "threshold",
+        "labelling",
+        "centroids",
+        "decoding",
+        "final_pose",
+    ] {
         assert!(v[stage]["median_us"].as_f64().is_some(), "{stage}");
         assert!(v[stage]["p99_us"].as_f64().is_some(), "{stage}");
     }

@@ -590,6 +590,67 @@ mod tests {
     }
 
     #[test]
+    fn local_levels_drop_only_in_dim_surroundings() {
+        // 320 × 192 px (5 × 3 tiles), background 20, a bright patch (220)
+        // in tile (0, 0) and a dim one (60) in tile (4, 2).
+        let (w, h) = (320usize, 192usize);
+        let mut v = vec![20u8; w * h];
+        for (c0, r0, val) in [(20usize, 20usize, 220u8), (280, 150, 60)] {
+            for r in r0..r0 + 6 {
+                for c in c0..c0 + 6 {
+                    v[r * w + c] = val;
+                }
+            }
+        }
+        let plane = Plane::whole(&v, w, h);
+        let t = ThresholdResult {
+            threshold: Threshold::global(100),
+            otsu: 100,
+            floor: 40,
+            background: 20.0,
+            noise: 2.0,
+            max_sampled: 220,
+            status: FrameStatus::Normal,
+        };
+        let mut l = LocalLevels::new(w, h);
+        l.compute(&plane, &t, 0.3, 10.0);
+        assert!(l.any_local());
+        // Around the dim patch: 20 + 0.3 × 40 = 32, above the local floor 30.
+        for (c, r) in [(290, 160), (230, 160), (290, 100), (230, 100)] {
+            assert_eq!(l.at(c, r).level(), 32, "({c}, {r})");
+        }
+        // Near the bright patch, and where nothing rises: the global level.
+        for (c, r) in [(25, 25), (100, 100), (160, 20), (10, 180)] {
+            assert_eq!(l.at(c, r).level(), 100, "({c}, {r})");
+        }
+        // The row view: offsets map to their tiles.
+        let row = l.row(&plane, 160);
+        assert_eq!(row.at(0).level(), 100);
+        assert_eq!(row.at(300).level(), 32);
+        assert_eq!(row.lowest(0, 256).level(), 32);
+        assert_eq!(row.lowest(0, 192).level(), 100);
+        assert_eq!(row.tile_end(70), 128);
+        // A local floor above the dim peak, or no share: one level.
+        l.compute(&plane, &t, 0.3, 45.0);
+        assert!(!l.any_local());
+        l.compute(&plane, &t, 0.0, 10.0);
+        assert!(!l.any_local());
+        // A window not aligned to the tiles: the same levels in full-frame
+        // coordinates.
+        let win = Plane {
+            data: &v[100 * w + 200..],
+            width: 110,
+            height: 80,
+            stride: w,
+            col0: 200,
+            row0: 100,
+        };
+        l.compute(&win, &t, 0.3, 10.0);
+        assert_eq!(l.at(290, 160).level(), 32);
+        assert_eq!(l.row(&win, 160).at(90).level(), 32);
+    }
+
+    #[test]
     fn sixteen_bit_is_binned() {
         assert_eq!(bin_shift(255), 0);
         assert_eq!(bin_shift(4095), 0);
