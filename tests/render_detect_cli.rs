@@ -106,7 +106,10 @@ fn render_png_16_bit_then_detect_finds_the_true_ids() {
         if code == "read" {
             assert!(t["code_value"].is_u64(), "{t}");
         }
+        // A frame exposed as rendered by default: no dot is clipped.
+        assert_eq!(t["saturated"], false, "{t}");
     }
+    assert_eq!(v[0]["n_saturated"], 0);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -62,6 +62,8 @@ struct TargetLine {
     /// The canonical 12-bit value read from the ring (certain readings
     /// only).
     code_value: Option<u16>,
+    /// The dot is over-exposed (saturated pixels): measured, weighted down.
+    saturated: bool,
 }
 
 #[derive(Serialize)]
@@ -73,6 +75,8 @@ struct ImageLine<'a> {
     targets: Vec<TargetLine>,
     n_targets: usize,
     n_identified: usize,
+    /// Targets with saturated pixels: over-exposure costs precision.
+    n_saturated: usize,
 }
 
 /// Runs the command.
@@ -135,6 +139,7 @@ fn detect_one<'a>(
             used: ident.is_some_and(|t| t.used),
             code: d.code.name(),
             code_value: d.code.value(),
+            saturated: d.saturated,
         });
     }
     Ok(ImageLine {
@@ -143,6 +148,7 @@ fn detect_one<'a>(
         status,
         n_targets: targets.len(),
         n_identified: targets.iter().filter(|t| t.id.is_some()).count(),
+        n_saturated: loc.detections.n_saturated,
         targets,
     })
 }

@@ -27,7 +27,8 @@ use photopose_geometry::{
     ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{
-    DetectStage, Detections, Detector, DetectorOptions, FrameStatus, VisionError, WindowMeasurer,
+    DetectStage, Detection, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
+    WindowMeasurer,
 };
 use thiserror::Error;
 
@@ -62,6 +63,12 @@ pub struct LocateOptions {
     /// (the centre of the imaged ellipse is not the image of the circle's
     /// centre), with the first pose.
     pub eccentricity: bool,
+    /// Standard deviation of a saturated (over-exposed) target's image
+    /// coordinates as a multiple of an unsaturated one's: its observation
+    /// gets the weight `1 / factor²` in both resections. A clipped dot's
+    /// centre is unbiased but less precise (the detector's over-exposure
+    /// test: RMS 0.009 px unclipped, up to 0.019 px clipped).
+    pub saturated_sigma_factor: f64,
 }
 
 impl Default for LocateOptions {
@@ -74,6 +81,7 @@ impl Default for LocateOptions {
             min_coded: 4,
             edge_margin_px: 2.0,
             eccentricity: true,
+            saturated_sigma_factor: 2.0,
         }
     }
 }
@@ -131,6 +139,9 @@ pub struct Identified {
     pub detection: usize,
     /// Used in the final pose (not rejected by the adjustment).
     pub used: bool,
+    /// The dot is over-exposed (saturated pixels): its observation is
+    /// weighted down ([`LocateOptions::saturated_sigma_factor`]).
+    pub saturated: bool,
 }
 
 /// The result of [`Locator::locate`].
@@ -148,6 +159,9 @@ pub struct Location<'a> {
     pub detections: &'a Detections,
     /// Ids rejected by the final adjustment.
     pub rejected_ids: &'a [u64],
+    /// Identified targets that are over-exposed (weighted down in the
+    /// adjustment): when it is not zero, over-exposure costs precision.
+    pub n_saturated: usize,
 }
 
 /// The per-frame pipeline with all its buffers.
@@ -302,6 +316,7 @@ impl Locator {
             targets: &self.identified,
             detections: self.detector.detections(),
             rejected_ids: &self.rejected,
+            n_saturated: self.identified.iter().filter(|t| t.saturated).count(),
         })
     }
 
@@ -338,13 +353,14 @@ impl Locator {
                 blob_row: d.row,
                 detection: k,
                 used: true,
+                saturated: d.saturated,
             });
-            self.obs.push(Observation::from_pixel(
+            self.obs.push(observation(
                 &self.camera,
                 id,
                 t.position,
-                d.col,
-                d.row,
+                d,
+                self.options.saturated_sigma_factor,
             ));
         }
         let coded = self.obs.len();
@@ -488,16 +504,33 @@ impl Locator {
                 blob_row: d.row,
                 detection: k as usize,
                 used: true,
+                saturated: d.saturated,
             });
-            self.obs.push(Observation::from_pixel(
+            self.obs.push(observation(
                 &self.camera,
                 t.id,
                 t.position,
-                d.col,
-                d.row,
+                d,
+                self.options.saturated_sigma_factor,
             ));
         }
     }
+}
+
+/// The observation of a detection: its centre corrected with `camera`,
+/// weighted down by `1 / saturated_factor²` when the dot is over-exposed.
+fn observation(
+    camera: &Camera,
+    id: u64,
+    object: Vector3<f64>,
+    d: &Detection,
+    saturated_factor: f64,
+) -> Observation {
+    let mut o = Observation::from_pixel(camera, id, object, d.col, d.row);
+    if d.saturated && saturated_factor.is_finite() && saturated_factor > 0.0 {
+        o.weight = Matrix2::identity() / (saturated_factor * saturated_factor);
+    }
+    o
 }
 
 /// The eccentricity of a circular target facing `+Z` (centre `position`,
@@ -524,4 +557,57 @@ pub fn eccentricity(
     let ellipse_centre = -(a2.try_inverse()? * Vector2::new(q[(0, 2)], q[(1, 2)]));
     let offset = ellipse_centre - centre;
     (offset.x.is_finite() && offset.y.is_finite()).then_some(offset)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photopose_vision::{CodeStatus, TargetKind};
+
+    fn detection(saturated: bool) -> Detection {
+        Detection {
+            col: 650.0,
+            row: 515.0,
+            semi_major: 5.0,
+            semi_minor: 5.0,
+            angle: 0.0,
+            area: 80,
+            peak: 255,
+            signal: 1.0e4,
+            background: 13.0,
+            kind: TargetKind::Uncoded,
+            id: None,
+            code: CodeStatus::NoRing,
+            saturated,
+        }
+    }
+
+    #[test]
+    fn saturated_observations_are_weighted_down() {
+        let camera = photopose_geometry::Camera::new(
+            photopose_geometry::Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            photopose_geometry::Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            photopose_geometry::Distortion::default(),
+        )
+        .unwrap();
+        let p = Vector3::new(1.0, 2.0, 0.0);
+        let plain = observation(&camera, 7, p, &detection(false), 2.0);
+        let clipped = observation(&camera, 7, p, &detection(true), 2.0);
+        assert_eq!(plain.weight, Matrix2::identity());
+        assert_eq!(clipped.weight, Matrix2::identity() * 0.25);
+        assert_eq!(plain.image, clipped.image);
+        // A factor that is no factor leaves the weight alone.
+        for f in [0.0, -1.0, f64::NAN] {
+            let o = observation(&camera, 7, p, &detection(true), f);
+            assert_eq!(o.weight, Matrix2::identity());
+        }
+    }
 }

@@ -22,7 +22,9 @@ use crate::{Identified, Locator, PoseStatus, Projected};
 use photopose_field::TargetKind;
 use photopose_frame::ImageView;
 use photopose_geometry::precision::projection_with_covariance;
-use photopose_geometry::{Exterior, Matrix3, Matrix6, Observation, ResectionReport, Rotation3};
+use photopose_geometry::{
+    Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3,
+};
 use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
 
 /// Tuning of tracking mode.
@@ -196,14 +198,14 @@ impl Locator {
                 blob_row: m.row,
                 detection: usize::MAX,
                 used: true,
+                saturated: m.saturated,
             });
-            self.obs.push(Observation::from_pixel(
-                &self.camera,
-                t.id,
-                t.position,
-                m.col,
-                m.row,
-            ));
+            let mut o = Observation::from_pixel(&self.camera, t.id, t.position, m.col, m.row);
+            let f = self.options.saturated_sigma_factor;
+            if m.saturated && f.is_finite() && f > 0.0 {
+                o.weight = Matrix2::identity() / (f * f);
+            }
+            self.obs.push(o);
         }
         let found = self.obs.len();
         if found < options.min_targets.max(self.options.min_coded.max(4)) {

@@ -16,9 +16,17 @@
 //! dark background, targets whose brightness falls with the square of their
 //! distance from the camera (relative to `reference_distance_mm`), with the
 //! off-axis angle (cos⁴ vignetting) and gently with the incidence angle;
-//! then a Gaussian blur (`blur_px`) and Gaussian noise (`noise_dn`) from a
-//! seeded generator, rounded and clamped to the image's saturation level.
+//! optionally the ring light's own beam (`cosᵐ` off the axis,
+//! `beam_half_angle_deg`); then a Gaussian blur (`blur_px`) and Gaussian
+//! noise (`noise_dn`) from a seeded generator, rounded and clamped to the
+//! image's saturation level (`target` above 1 over-exposes: the dots clip).
 //! Same options and seed, same bytes.
+//!
+//! Motion blur ([`Renderer::render_moving`]): the camera moves from one
+//! pose to another during the exposure; the frame is the mean of
+//! sub-exposures along the path, close enough that no target's image
+//! moves more than [`MOTION_STEP_PX`] between two; exposure and truth are
+//! those of mid-exposure.
 //!
 //! Code-ring phase: sector `k` spans the angles `[k·30°, (k+1)·30°)` measured
 //! counter-clockwise from the plate's `+X` axis seen from `+Z`, and carries
@@ -70,7 +78,7 @@ mod truth;
 
 pub use options::RenderOptions;
 pub use plate::Plate;
-pub use renderer::Renderer;
+pub use renderer::{interpolate, Renderer, MAX_SUB_EXPOSURES, MOTION_STEP_PX};
 use thiserror::Error;
 pub use truth::TargetTruth;
 

@@ -25,6 +25,11 @@ pub struct RenderOptions {
     /// Set the exposure per frame so that the nearest target in view has the
     /// brightness `target`, as a camera's auto-exposure would.
     pub auto_exposure: bool,
+    /// Half angle of the ring light's beam, degrees: the light on a target
+    /// falls as `cosᵐ` of its angle off the optical axis, to half at this
+    /// angle (on top of the inverse square of the distance and the lens's
+    /// cos⁴). 0: a uniform beam (the default).
+    pub beam_half_angle_deg: f64,
 }
 
 impl Default for RenderOptions {
@@ -38,6 +43,7 @@ impl Default for RenderOptions {
             target: 0.8,
             reference_distance_mm: 1000.0,
             auto_exposure: true,
+            beam_half_angle_deg: 0.0,
         }
     }
 }
@@ -65,6 +71,15 @@ impl RenderOptions {
                 "reference_distance_mm",
                 self.reference_distance_mm,
                 "must be positive",
+            );
+        }
+        if !(self.beam_half_angle_deg.is_finite()
+            && (0.0..90.0).contains(&self.beam_half_angle_deg))
+        {
+            return bad(
+                "beam_half_angle_deg",
+                self.beam_half_angle_deg,
+                "must be in [0, 90) degrees",
             );
         }
         Ok(())

@@ -7,10 +7,39 @@ use crate::noise::Normal;
 use crate::pattern::{analytic_coverage, near_edge, reflectance, Flat};
 use crate::truth::{outline_minimum, OUTLINE};
 use crate::{blur, quantise, Plate, RenderError, RenderOptions, TargetTruth};
-use nalgebra::{Matrix2, Vector2, Vector3};
+use nalgebra::{Matrix2, Rotation3, Vector2, Vector3};
 use photopose_field::{codes, Field, TargetKind};
 use photopose_frame::Image;
 use photopose_geometry::{Camera, Exterior};
+
+/// Largest image displacement of a target between two sub-exposures of a
+/// moving exposure, px ([`Renderer::render_moving`]).
+pub const MOTION_STEP_PX: f64 = 0.2;
+
+/// Most sub-exposures of one moving exposure.
+pub const MAX_SUB_EXPOSURES: usize = 256;
+
+/// The pose at the share `t` of the way from `a` to `b`: centre moved
+/// linearly, rotation turned about the one axis that takes `a`'s to `b`'s,
+/// by `t` of the angle.
+pub fn interpolate(a: &Exterior, b: &Exterior, t: f64) -> Exterior {
+    let rel = Rotation3::from_matrix(&(b.rotation * a.rotation.transpose()));
+    let step = Rotation3::new(rel.scaled_axis() * t);
+    Exterior::new(
+        step.matrix() * a.rotation,
+        a.center + (b.center - a.center) * t,
+    )
+}
+
+/// The exponent `m` of a beam `cosᵐ(angle)` that falls to half its
+/// intensity at `half_angle_deg` (0: a uniform beam).
+fn beam_exponent(half_angle_deg: f64) -> f64 {
+    if half_angle_deg <= 0.0 {
+        0.0
+    } else {
+        0.5f64.ln() / half_angle_deg.to_radians().cos().ln()
+    }
+}
 
 /// The renderer with its scratch buffers.
 #[derive(Debug, Clone)]
@@ -28,6 +57,8 @@ pub struct Renderer {
     scratch: Vec<f32>,
     /// Bounding boxes touched this frame `[c0, r0, c1, r1]`.
     boxes: Vec<[usize; 4]>,
+    /// Per target, its entry in `boxes` this frame (`u32::MAX`: none yet).
+    box_of: Vec<u32>,
     truth: Vec<TargetTruth>,
     kernel: Vec<f32>,
     normal: Normal,
@@ -71,6 +102,7 @@ impl Renderer {
             n,
             truth: Vec::with_capacity(targets.len()),
             boxes: Vec::with_capacity(targets.len()),
+            box_of: vec![u32::MAX; targets.len()],
             targets,
             excess: vec![0.0; size],
             scratch: vec![0.0; size],
@@ -142,6 +174,61 @@ impl Renderer {
         exterior: &Exterior,
         out: &mut Image,
     ) -> Result<&[TargetTruth], RenderError> {
+        self.begin(out)?;
+        let reference = self.exposure_reference(exterior);
+        self.expose(exterior, reference, 1.0, true);
+        self.finish(out);
+        Ok(&self.truth)
+    }
+
+    /// Renders a frame whose exposure lasts while the camera moves from
+    /// `start` to `end` (motion blur): the frame is the mean of
+    /// sub-exposures at poses evenly spaced in time along the path (centre
+    /// moved linearly, rotation about one fixed axis at a constant rate),
+    /// as many as keep consecutive images of every target less than
+    /// [`MOTION_STEP_PX`] apart (at most [`MAX_SUB_EXPOSURES`]). The
+    /// exposure (auto-exposure included) and the truth are those of the
+    /// pose at mid-exposure, the instant a frame's time stamp names.
+    /// Allocates nothing once warm, like [`Renderer::render`].
+    pub fn render_moving(
+        &mut self,
+        start: &Exterior,
+        end: &Exterior,
+        out: &mut Image,
+    ) -> Result<&[TargetTruth], RenderError> {
+        self.begin(out)?;
+        let mid = interpolate(start, end, 0.5);
+        let reference = self.exposure_reference(&mid);
+        // The truth at mid-exposure (no light).
+        self.expose(&mid, reference, 0.0, true);
+        let n = self.sub_exposures(start, end);
+        for k in 0..n {
+            let e = interpolate(start, end, (k as f64 + 0.5) / n as f64);
+            self.expose(&e, reference, 1.0 / n as f64, false);
+        }
+        self.finish(out);
+        Ok(&self.truth)
+    }
+
+    /// Number of sub-exposures for the path `start` → `end`: the largest
+    /// image displacement of a target centre in front of the camera at
+    /// both ends, divided by [`MOTION_STEP_PX`], at least 1.
+    fn sub_exposures(&self, start: &Exterior, end: &Exterior) -> usize {
+        let mut largest: f64 = 0.0;
+        for t in &self.targets {
+            let c = self.origin + self.u * t.at.x + self.v * t.at.y;
+            if let (Some(a), Some(b)) = (
+                start.project_pixel(&self.camera, &c),
+                end.project_pixel(&self.camera, &c),
+            ) {
+                largest = largest.max((a - b).norm());
+            }
+        }
+        ((largest / MOTION_STEP_PX).ceil() as usize).clamp(1, MAX_SUB_EXPOSURES)
+    }
+
+    /// Checks the output's size and clears the frame's truth and boxes.
+    fn begin(&mut self, out: &Image) -> Result<(), RenderError> {
         let (w, h) = (self.camera.sensor.width, self.camera.sensor.height);
         if (out.width(), out.height()) != (w, h) {
             return Err(RenderError::Size {
@@ -151,15 +238,39 @@ impl Renderer {
                 got_height: out.height(),
             });
         }
-        let (w, h) = (w as usize, h as usize);
         self.truth.clear();
         self.boxes.clear();
-        let rt = exterior.rotation.transpose();
-        // Optical axis in the object frame (the camera looks along -z).
-        let axis = -exterior.rotation.row(2).transpose();
-        let ss = self.options.supersample as usize;
-        // Exposure: fixed (reference distance), or set so that the nearest
-        // target in view has the brightness `target` (an auto-exposure).
+        self.box_of.fill(u32::MAX);
+        Ok(())
+    }
+
+    /// Blur and quantisation of the accumulated excess into `out`.
+    fn finish(&mut self, out: &mut Image) {
+        let (w, h) = (
+            self.camera.sensor.width as usize,
+            self.camera.sensor.height as usize,
+        );
+        blur::blur(
+            &self.kernel,
+            &mut self.excess,
+            &mut self.scratch,
+            &mut self.boxes,
+            w,
+            h,
+        );
+        quantise::quantise(
+            &self.options,
+            &mut self.excess,
+            &mut self.normal,
+            w * h,
+            out,
+        );
+    }
+
+    /// The exposure: the distance at which a target on the axis has the
+    /// brightness `target`: fixed (reference distance), or that of the
+    /// nearest target in view (an auto-exposure).
+    fn exposure_reference(&self, exterior: &Exterior) -> f64 {
         let mut reference = self.options.reference_distance_mm;
         if self.options.auto_exposure {
             let nearest = self
@@ -177,6 +288,22 @@ impl Renderer {
                 reference = nearest;
             }
         }
+        reference
+    }
+
+    /// Adds `weight` × the targets' excess brightness seen from `exterior`
+    /// to the frame (nothing for weight 0), growing each target's box;
+    /// with `record_truth` the truth of every target is recorded.
+    fn expose(&mut self, exterior: &Exterior, reference: f64, weight: f64, record_truth: bool) {
+        let (w, h) = (
+            self.camera.sensor.width as usize,
+            self.camera.sensor.height as usize,
+        );
+        let rt = exterior.rotation.transpose();
+        // Optical axis in the object frame (the camera looks along -z).
+        let axis = -exterior.rotation.row(2).transpose();
+        let ss = self.options.supersample as usize;
+        let beam = beam_exponent(self.options.beam_half_angle_deg);
         for ti in 0..self.targets.len() {
             let t = self.targets[ti];
             let centre = self.origin + self.u * t.at.x + self.v * t.at.y;
@@ -224,15 +351,20 @@ impl Renderer {
             // the quiet zone (or dark surround) on the sensor. The image of
             // the outline is a convex curve, so the target lies inside too.
             let visible = all_in_front && margin_px >= 0.0;
-            self.truth.push(TargetTruth {
-                id: t.id,
-                kind: t.kind,
-                col,
-                row,
-                visible,
-                margin_px,
-                radius_px: dot_px,
-            });
+            if record_truth {
+                self.truth.push(TargetTruth {
+                    id: t.id,
+                    kind: t.kind,
+                    col,
+                    row,
+                    visible,
+                    margin_px,
+                    radius_px: dot_px,
+                });
+            }
+            if weight == 0.0 {
+                continue;
+            }
             let Some(p) = centre_px else { continue };
             if !all_in_front || !ext.is_finite() {
                 continue;
@@ -246,17 +378,33 @@ impl Renderer {
                 continue;
             }
             let (c0, r0, c1, r1) = (c0 as usize, r0 as usize, c1 as usize, r1 as usize);
-            self.boxes.push([c0, r0, c1, r1]);
+            // One box per target, grown over the sub-exposures.
+            match self.box_of[ti] {
+                u32::MAX => {
+                    self.box_of[ti] = self.boxes.len() as u32;
+                    self.boxes.push([c0, r0, c1, r1]);
+                }
+                b => {
+                    let bx = &mut self.boxes[b as usize];
+                    *bx = [bx[0].min(c0), bx[1].min(r0), bx[2].max(c1), bx[3].max(r1)];
+                }
+            }
             // Ring light, evaluated at the target's centre (the gradient
             // across one dot is below 0.5 % and is left out): inverse square
             // of the distance, cos⁴ of the off-axis angle, retro-reflection
-            // falling gently with the incidence angle.
+            // falling gently with the incidence angle, and the ring light's
+            // beam (cosᵐ of the off-axis angle, half the intensity at the
+            // beam's half angle; none by default).
             let to_target = centre - exterior.center;
             let dist = to_target.norm();
             let ray = to_target / dist;
             let off_axis = ray.dot(&axis).clamp(0.0, 1.0);
             let cos_inc = (-ray.dot(&self.n)).clamp(0.0, 1.0);
-            let gain = (reference / dist).powi(2) * off_axis.powi(4) * (0.6 + 0.4 * cos_inc);
+            let gain = (reference / dist).powi(2)
+                * off_axis.powi(4)
+                * (0.6 + 0.4 * cos_inc)
+                * off_axis.powf(beam)
+                * weight;
             // Largest footprint of a pixel on the plate, mm (for adaptive
             // sampling): the longest plate distance one pixel step covers
             // (foreshortened direction), from the narrowest axis of the
@@ -293,22 +441,6 @@ impl Renderer {
                 }
             }
         }
-        blur::blur(
-            &self.kernel,
-            &mut self.excess,
-            &mut self.scratch,
-            &mut self.boxes,
-            w,
-            h,
-        );
-        quantise::quantise(
-            &self.options,
-            &mut self.excess,
-            &mut self.normal,
-            w * h,
-            out,
-        );
-        Ok(&self.truth)
     }
 
     /// Jacobian of the target-local plate coordinates (dot radii) with

@@ -369,3 +369,199 @@ fn analytic_coverage_matches_dense_sampling_of_the_pattern() {
     }
     assert!(checked > 1000, "{checked}");
 }
+
+/// Peak grey value inside `radius` px of `(col, row)`.
+fn peak(img: &Image, col: f64, row: f64, radius: f64) -> u16 {
+    let r = radius.ceil() as i64;
+    let mut best = 0;
+    for dr in -r..=r {
+        for dc in -r..=r {
+            let (c, rr) = (col.round() as i64 + dc, row.round() as i64 + dr);
+            if c >= 0 && rr >= 0 && c < 1300 && rr < 1030 {
+                best = best.max(img.get(c as u32, rr as u32));
+            }
+        }
+    }
+    best
+}
+
+#[test]
+fn over_exposure_clips_at_the_saturation_level() {
+    let field = default_plate();
+    let e = Exterior::from_kuka_pose([0.0, 0.0, 900.0, 0.0, 0.0, 0.0]);
+    let mut img = Image::new_mono8(1300, 1030);
+    let mut r = Renderer::new(camera(Distortion::default()), &field, exact()).unwrap();
+    r.render(&e, &mut img).unwrap();
+    let visible: Vec<_> = r.truth().iter().filter(|t| t.visible).copied().collect();
+    assert!(visible.len() > 100);
+    // At 80 % of the full scale nothing clips ...
+    assert!(visible
+        .iter()
+        .all(|t| peak(&img, t.col, t.row, t.radius_px * 0.5) < 255));
+    // ... at twice the full scale every dot is clipped at the saturation
+    // level (8 and 16 bit).
+    r.set_options(RenderOptions {
+        target: 2.0,
+        ..exact()
+    })
+    .unwrap();
+    r.render(&e, &mut img).unwrap();
+    assert!(visible
+        .iter()
+        .all(|t| peak(&img, t.col, t.row, t.radius_px * 0.5) == 255));
+    let mut img16 = Image::new_mono16(1300, 1030, 4095);
+    r.render(&e, &mut img16).unwrap();
+    assert!(visible
+        .iter()
+        .all(|t| peak(&img16, t.col, t.row, t.radius_px * 0.5) == 4095));
+}
+
+#[test]
+fn the_ring_lights_beam_dims_targets_off_axis() {
+    let field = default_plate();
+    let cam = camera(Distortion::default());
+    let e = Exterior::from_kuka_pose([0.0, 0.0, 600.0, 0.0, 0.0, 0.0]);
+    let axis = -e.rotation.row(2).transpose();
+    let options = RenderOptions {
+        auto_exposure: false,
+        reference_distance_mm: 600.0,
+        target: 0.5,
+        ..exact()
+    };
+    let mut flat = Renderer::new(cam, &field, options).unwrap();
+    let mut beam = Renderer::new(
+        cam,
+        &field,
+        RenderOptions {
+            beam_half_angle_deg: 12.0,
+            ..options
+        },
+    )
+    .unwrap();
+    let (mut a, mut b) = (
+        Image::new_mono16(1300, 1030, 65535),
+        Image::new_mono16(1300, 1030, 65535),
+    );
+    flat.render(&e, &mut a).unwrap();
+    beam.render(&e, &mut b).unwrap();
+    let bg = options.background * 65535.0;
+    let m = 0.5f64.ln() / 12f64.to_radians().cos().ln();
+    let mut n = 0;
+    for (t, f) in flat.truth().iter().zip(field.targets()) {
+        if !t.visible || t.radius_px < 4.0 {
+            continue;
+        }
+        let cos = (f.position - e.center).normalize().dot(&axis);
+        let (pa, pb) = (
+            peak(&a, t.col, t.row, 1.0) as f64 - bg,
+            peak(&b, t.col, t.row, 1.0) as f64 - bg,
+        );
+        let want = cos.powf(m);
+        assert!(
+            (pb / pa - want).abs() < 0.01,
+            "target {}: {:.4} vs cos^m {:.4}",
+            t.id,
+            pb / pa,
+            want
+        );
+        n += 1;
+    }
+    assert!(n > 50);
+    assert!(flat
+        .set_options(RenderOptions {
+            beam_half_angle_deg: 90.0,
+            ..options
+        })
+        .is_err());
+}
+
+/// A camera moving 2 mm sideways (and turning 0.05°) during the exposure
+/// at 900 mm: each dot is smeared along its image path (≈ 4 px), centred
+/// where the still dot at mid-exposure is, its second moment along the
+/// path grown by the line's `len² / 12` and unchanged across it. (Over
+/// much longer paths the ring light's gain varies along the path and
+/// moves the centroid towards the brighter end: physics, not error.)
+#[test]
+fn motion_blur_smears_along_the_path_with_the_truth_at_mid_exposure() {
+    let field = default_plate();
+    let cam = camera(Distortion::default());
+    let start = Exterior::from_kuka_pose([-1.0, 0.0, 900.0, 0.0, 0.0, 0.0]);
+    let end = Exterior::from_kuka_pose([1.0, 0.0, 900.0, 0.05, 0.0, 0.0]);
+    let mid = crate::interpolate(&start, &end, 0.5);
+    let options = RenderOptions {
+        blur_px: 0.6,
+        ..exact()
+    };
+    let mut r = Renderer::new(cam, &field, options).unwrap();
+    let mut still = Image::new_mono16(1300, 1030, 65535);
+    let mut moving = Image::new_mono16(1300, 1030, 65535);
+    let truth_mid = r.render(&mid, &mut still).unwrap().to_vec();
+    let truth = r.render_moving(&start, &end, &mut moving).unwrap().to_vec();
+    assert!(truth == truth_mid, "the truth is that of mid-exposure");
+    // Same path, same bytes; a path of no length is a still frame.
+    let mut again = Image::new_mono16(1300, 1030, 65535);
+    r.render_moving(&start, &end, &mut again).unwrap();
+    assert!(again.pixels() == moving.pixels());
+    r.render_moving(&mid, &mid, &mut again).unwrap();
+    assert!(again.pixels() == still.pixels());
+    let bg = options.background * 65535.0;
+    let mut n = 0;
+    for (t, f) in truth.iter().zip(field.targets()) {
+        if !(t.visible && t.kind == TargetKind::Uncoded) {
+            continue;
+        }
+        // The image path of this target over the exposure.
+        let a = start.project_pixel(&cam, &f.position).unwrap();
+        let b = end.project_pixel(&cam, &f.position).unwrap();
+        let len = (b - a).norm();
+        assert!(len > 3.0, "{len}");
+        let u = (b - a) / len;
+        let reach = 1.5 * t.radius_px + len / 2.0;
+        // The smeared dot is centred where the still dot at mid-exposure is
+        // (whose centroid differs from the truth by the eccentricity).
+        let (c, rr) = centroid(&moving, t.col, t.row, reach, bg);
+        let (sc0, sr0) = centroid(&still, t.col, t.row, reach, bg);
+        assert!(
+            (c - sc0).hypot(rr - sr0) < 0.01,
+            "target {}: ({c:.3}, {rr:.3}) vs ({sc0:.3}, {sr0:.3})",
+            t.id
+        );
+        assert!((c - t.col).hypot(rr - t.row) < 0.1);
+        // Second moments along and across the motion: the still dot's plus
+        // the line's len²/12 along it.
+        let moments = |img: &Image| {
+            let (mut s, mut along, mut across) = (0.0, 0.0, 0.0);
+            let r = reach.ceil() as i64 + 1;
+            for dr in -r..=r {
+                for dc in -r..=r {
+                    let (cc, rw) = (t.col.round() as i64 + dc, t.row.round() as i64 + dr);
+                    let (x, y) = (cc as f64 - t.col, rw as f64 - t.row);
+                    if x.hypot(y) > reach {
+                        continue;
+                    }
+                    let v = img.get(cc as u32, rw as u32) as f64 - bg;
+                    let (p, q) = (x * u.x + y * u.y, -x * u.y + y * u.x);
+                    s += v;
+                    along += v * p * p;
+                    across += v * q * q;
+                }
+            }
+            (along / s, across / s)
+        };
+        let (sa, sc) = moments(&still);
+        let (ma, mc) = moments(&moving);
+        assert!(
+            (ma - sa - len * len / 12.0).abs() < 0.05 * len * len / 12.0 + 0.02,
+            "target {}: along {ma:.3} vs {sa:.3} + {:.3}",
+            t.id,
+            len * len / 12.0
+        );
+        assert!(
+            (mc - sc).abs() < 0.05,
+            "target {}: across {mc:.3} vs {sc:.3}",
+            t.id
+        );
+        n += 1;
+    }
+    assert!(n > 50);
+}

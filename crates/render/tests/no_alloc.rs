@@ -1,4 +1,5 @@
-//! Rendering allocates nothing once the renderer has rendered a frame.
+//! Rendering allocates nothing once the renderer has rendered a frame
+//! (still or with motion blur).
 
 use photopose_field::design::default_plate;
 use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
@@ -34,9 +35,12 @@ fn rendering_allocates_nothing_once_warm() {
         Exterior::from_kuka_pose([40.0, -30.0, 800.0, 30.0, 10.0, -5.0]),
     ];
     r.render(&poses[0], &mut img).unwrap();
+    r.render_moving(&poses[0], &poses[1], &mut img).unwrap();
     let before = allocations();
     for e in &poses {
         r.render(e, &mut img).unwrap();
     }
+    // Motion blur: many sub-exposures, one box per target.
+    r.render_moving(&poses[1], &poses[0], &mut img).unwrap();
     assert_eq!(allocations() - before, 0);
 }

@@ -178,8 +178,13 @@ impl CodeStatus {
 /// Parameters of the reader.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CodeParams {
-    /// Least dot-to-gap contrast, grey values.
+    /// Least dot-to-gap contrast to read a code, grey values.
     pub min_contrast: f64,
+    /// Least dot-to-gap contrast to judge the dot's isolation (gap dark,
+    /// ring present) at all, grey values; at most `min_contrast`. Between
+    /// the two a dot is judged but its ring never read (dim targets found
+    /// with a local threshold).
+    pub min_isolation_contrast: f64,
     /// A sector's mean must be this fraction of the contrast away from the threshold.
     pub sector_margin: f64,
     /// Each sample must lie on its sector's side, at least this fraction of
@@ -465,11 +470,12 @@ pub fn read<P: Pixel>(
     out.bright = bright;
     out.dark = dark;
     let contrast = bright - dark;
-    if contrast < params.min_contrast {
+    if contrast < params.min_isolation_contrast.min(params.min_contrast) {
         out.gap = Gap::NotDark;
         out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
+    let too_dim_to_read = contrast < params.min_contrast;
     let thr = dark + 0.5 * contrast;
     // Presence and phase: the ring's middle every 5°, first every 15° (at
     // least one sample in the middle half of every sector).
@@ -511,6 +517,10 @@ pub fn read<P: Pixel>(
         return out;
     }
     if outside {
+        return out;
+    }
+    if too_dim_to_read {
+        out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
     match zone(plane, f, ZONE_RADII[1], tables) {

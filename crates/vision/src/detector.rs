@@ -13,7 +13,9 @@ use crate::code::{self, CodeParams, Gap, Reading, RingFrame, RingTables};
 use crate::label::{Blob, LabelOutcome, Labeller};
 use crate::measure::{self, Measurement};
 use crate::pixel::{Pixel, Plane};
-use crate::threshold::{self, FrameStatus, Threshold, ThresholdParams, ThresholdResult, MAX_BINS};
+use crate::threshold::{
+    self, FrameStatus, LocalLevels, Threshold, ThresholdParams, ThresholdResult, MAX_BINS,
+};
 use crate::{
     CodeStatus, Detection, Detections, DetectorOptions, RejectReason, TargetKind, Uncertainty,
     VisionError,
@@ -58,6 +60,9 @@ pub struct Detector {
     candidates: Vec<Candidate>,
     order: Vec<u32>,
     tables: RingTables,
+    /// The window's local levels (all at the global level unless
+    /// [`DetectorOptions::local_threshold`] found dim surroundings).
+    levels: LocalLevels,
     out: Detections,
 }
 
@@ -97,6 +102,7 @@ impl Detector {
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
             tables: RingTables::default(),
+            levels: LocalLevels::new(max_width as usize, max_height as usize),
             out: Detections::with_capacity(options.max_targets),
         })
     }
@@ -224,6 +230,15 @@ impl Detector {
         if t.status != FrameStatus::Normal {
             return;
         }
+        // Local levels: only for a threshold found on this window.
+        if given.is_none() && self.options.local_threshold > 0.0 {
+            let o = &self.options;
+            let floor = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+            self.levels.compute(plane, &t, o.local_threshold, floor);
+        } else {
+            self.levels.set_global(plane, t.threshold);
+        }
+        self.out.local_levels = self.levels.any_local();
         // 2. Connected components.
         if !self.label(plane, t.threshold, max_value) {
             return;
@@ -261,7 +276,12 @@ impl Detector {
     /// Stage 2: connected components; false (with the frame's status set)
     /// if the window has more runs or blobs than the capacity.
     fn label<P: Pixel>(&mut self, plane: &Plane<'_, P>, t: Threshold, max_value: u32) -> bool {
-        match self.labeller.label(plane, t, max_value) {
+        let outcome = if self.levels.any_local() {
+            self.labeller.label_local(plane, &self.levels, max_value)
+        } else {
+            self.labeller.label(plane, t, max_value)
+        };
+        match outcome {
             LabelOutcome::Complete => {
                 self.out.n_blobs = self.labeller.blobs().len();
                 true
@@ -288,11 +308,15 @@ impl Detector {
             labeller,
             candidates,
             tables,
+            levels,
             out,
             ..
         } = self;
-        let code_params = CodeParams {
-            min_contrast: (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64),
+        let min_read = (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+        let min_local = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+        let mut code_params = CodeParams {
+            min_contrast: min_read,
+            min_isolation_contrast: min_read,
             sector_margin: o.sector_margin,
             sample_margin: o.sample_margin,
             dark_tolerance: o.dark_tolerance,
@@ -307,8 +331,29 @@ impl Detector {
                 out.reject(blob, reason);
                 continue;
             }
+            // The blob's level: its tile's (the global one but in dim
+            // surroundings).
+            let local;
+            // A dim blob (in a lowered tile) may be judged isolated with
+            // the local floor's contrast; its ring is read only above the
+            // global one.
+            let t = if levels.any_local() {
+                let (c, r) = blob.centre();
+                local = ThresholdResult {
+                    threshold: levels.at(c.max(0.0) as usize, r.max(0.0) as usize),
+                    ..*t
+                };
+                code_params.min_isolation_contrast = if local.threshold == t.threshold {
+                    min_read
+                } else {
+                    min_local
+                };
+                &local
+            } else {
+                t
+            };
             // 4. Centroid and moments.
-            let m = match centroid(plane, blob, t, o) {
+            let m = match centroid(plane, blob, t, o, max_value) {
                 Ok(m) => m,
                 Err(reason) => {
                     out.reject(blob, reason);
@@ -338,7 +383,21 @@ impl Detector {
                     measure::CODED_MAX_SCALE,
                 );
                 probe(DetectStage::Measure);
-                m2.unwrap_or(m)
+                m2.map_or(m, |mut m2| {
+                    if blob.saturated > 0 {
+                        saturated_centre(
+                            plane,
+                            blob,
+                            t,
+                            max_value,
+                            o.saturated_knee,
+                            measure::CODED_GROW,
+                            measure::CODED_MAX_SCALE,
+                            &mut m2,
+                        );
+                    }
+                    m2
+                })
             } else {
                 m
             };
@@ -448,7 +507,9 @@ impl Detector {
                 },
                 id: c.reading.status.id(),
                 code: c.reading.status,
+                saturated: blob.saturated > 0,
             });
+            self.out.n_saturated += (blob.saturated > 0) as usize;
         }
     }
 }
@@ -473,7 +534,7 @@ pub(crate) fn blob_tests<P: Pixel>(
     {
         return Err(RejectReason::Border);
     }
-    if blob.saturated > 0 {
+    if blob.saturated > 0 && !o.measure_saturated {
         return Err(RejectReason::Saturated);
     }
     let (cxx, cyy, cxy) = blob.covariance();
@@ -495,8 +556,9 @@ pub(crate) fn centroid<P: Pixel>(
     blob: &Blob,
     t: &ThresholdResult,
     o: &DetectorOptions,
+    max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    let m = measure::measure(
+    let mut m = measure::measure(
         plane,
         blob,
         t.threshold,
@@ -505,10 +567,61 @@ pub(crate) fn centroid<P: Pixel>(
         measure::MAX_SCALE,
     )
     .ok_or(RejectReason::NoSignal)?;
+    if blob.saturated > 0 {
+        saturated_centre(
+            plane,
+            blob,
+            t,
+            max_value,
+            o.saturated_knee,
+            measure::GROW,
+            measure::MAX_SCALE,
+            &mut m,
+        );
+    }
     if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
         return Err(RejectReason::Shape);
     }
     Ok(m)
+}
+
+/// The centre of a blob at least half of whose pixels are saturated: the
+/// centroid with the grey values rolled off smoothly below the saturation
+/// level ([`measure::Knee`], from `knee` of the way between background and
+/// saturation), replacing the centre of `m` (its moments and signal stay
+/// those of the clipped profile). Blobs with fewer clipped pixels keep the
+/// plain centroid: there the roll-off would throw away more signal than
+/// the kink costs (see the detector's over-exposure test).
+#[allow(clippy::too_many_arguments)]
+fn saturated_centre<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    max_value: u32,
+    knee: f64,
+    grow: f64,
+    max_scale: f64,
+    m: &mut Measurement,
+) {
+    if 2 * blob.saturated < blob.area || knee >= 1.0 {
+        return;
+    }
+    let knee = measure::Knee {
+        knee: (m.background + knee * (max_value as f64 - m.background)) as u32,
+        top: max_value,
+    };
+    if let Some(k) = measure::measure_weighted(
+        plane,
+        blob,
+        t.threshold,
+        t.background,
+        grow,
+        max_scale,
+        knee,
+    ) {
+        m.col = k.col;
+        m.row = k.row;
+    }
 }
 
 /// What stage 5 found around a dot.

@@ -9,7 +9,49 @@
 //! pixel coordinates, whatever window is labelled.
 
 use crate::pixel::{Pixel, Plane};
-use crate::threshold::Threshold;
+use crate::threshold::{LocalLevels, Threshold, TileRow};
+
+/// The levels the labeller compares a row's pixels with, a block of the
+/// row at a time.
+pub trait BlockLevels: Copy {
+    /// The threshold of the block that starts at row offset `i`.
+    fn at(&self, i: usize) -> Threshold;
+    /// The lowest threshold over row offsets `a..b`.
+    fn lowest(&self, a: usize, b: usize) -> Threshold;
+    /// Where the block that starts at offset `i` ends (at most 64 pixels,
+    /// at most `width`).
+    fn block_end(&self, i: usize, width: usize) -> usize;
+}
+
+impl BlockLevels for Threshold {
+    #[inline(always)]
+    fn at(&self, _: usize) -> Threshold {
+        *self
+    }
+    #[inline(always)]
+    fn lowest(&self, _: usize, _: usize) -> Threshold {
+        *self
+    }
+    #[inline(always)]
+    fn block_end(&self, i: usize, width: usize) -> usize {
+        (i + 64).min(width)
+    }
+}
+
+impl BlockLevels for TileRow<'_> {
+    #[inline(always)]
+    fn at(&self, i: usize) -> Threshold {
+        TileRow::at(self, i)
+    }
+    #[inline(always)]
+    fn lowest(&self, a: usize, b: usize) -> Threshold {
+        TileRow::lowest(self, a, b)
+    }
+    #[inline(always)]
+    fn block_end(&self, i: usize, width: usize) -> usize {
+        self.tile_end(i).min(width)
+    }
+}
 
 /// A horizontal run of foreground pixels.
 #[derive(Debug, Clone, Copy, Default)]
@@ -165,6 +207,26 @@ impl Labeller {
         threshold: Threshold,
         saturation: u32,
     ) -> LabelOutcome {
+        self.label_rows(plane, |_| threshold, saturation)
+    }
+
+    /// [`Labeller::label`] with a level per tile ([`LocalLevels`] laid out
+    /// for this window).
+    pub fn label_local<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        levels: &LocalLevels,
+        saturation: u32,
+    ) -> LabelOutcome {
+        self.label_rows(plane, |row| levels.row(plane, row), saturation)
+    }
+
+    fn label_rows<P: Pixel, L: BlockLevels>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        levels_of: impl Fn(usize) -> L,
+        saturation: u32,
+    ) -> LabelOutcome {
         self.runs.clear();
         self.parent.clear();
         self.blob_of.clear();
@@ -175,7 +237,7 @@ impl Labeller {
         for row in plane.row0..=plane.last_row() {
             let line = plane.row(row);
             let row_start = self.runs.len();
-            if !self.extract_runs(line, row as u32, col0, threshold, saturation) {
+            if !self.extract_runs(line, row as u32, col0, levels_of(row), saturation) {
                 return LabelOutcome::TooManyRuns;
             }
             let row_end = self.runs.len();
@@ -258,12 +320,12 @@ impl Labeller {
     /// stretches of ones, so dark stretches cost a few instructions per
     /// block.
     #[inline]
-    fn extract_runs<P: Pixel>(
+    fn extract_runs<P: Pixel, L: BlockLevels>(
         &mut self,
         line: &[P],
         row: u32,
         col0: u32,
-        threshold: Threshold,
+        levels: L,
         saturation: u32,
     ) -> bool {
         const NONE: usize = usize::MAX;
@@ -274,13 +336,15 @@ impl Labeller {
             // Dark stretches (most of a frame) in steps of 256 pixels.
             if open == NONE
                 && width - base >= DARK_SKIP
-                && threshold.all_background(&line[base..base + DARK_SKIP])
+                && levels
+                    .lowest(base, base + DARK_SKIP)
+                    .all_background(&line[base..base + DARK_SKIP])
             {
                 base += DARK_SKIP;
                 continue;
             }
-            let n = (width - base).min(64);
-            let m = threshold.foreground_mask(&line[base..base + n]);
+            let n = levels.block_end(base, width) - base;
+            let m = levels.at(base).foreground_mask(&line[base..base + n]);
             if m == 0 && open == NONE {
                 base += n;
                 continue;

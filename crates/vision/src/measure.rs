@@ -207,6 +207,69 @@ fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
     q
 }
 
+/// The weight a grey value gets in the centroid sums (in units of
+/// `1 / SCALE` grey values).
+pub trait Weight: Copy {
+    /// Weight units per grey value.
+    const SCALE: f64;
+    /// The weight of grey value `v`.
+    fn weight(&self, v: u32) -> i64;
+    /// The weight of a level between grey values (the background), unrounded.
+    fn level(&self, v: f64) -> f64;
+}
+
+/// The grey value itself (the default centroid).
+#[derive(Debug, Clone, Copy)]
+pub struct Linear;
+
+impl Weight for Linear {
+    const SCALE: f64 = 1.0;
+    #[inline(always)]
+    fn weight(&self, v: u32) -> i64 {
+        v as i64
+    }
+    #[inline(always)]
+    fn level(&self, v: f64) -> f64 {
+        v
+    }
+}
+
+/// The grey value rolled off smoothly to a constant before the
+/// saturation level: linear up to `knee`, then a parabola that meets the
+/// constant `knee + (top − knee) / 2` with zero slope at `top` (the
+/// saturation level). A clipped profile has a kink where it meets the
+/// saturation level; sampled at pixel centres, that kink moves the
+/// centroid with the dot's sub-pixel phase. Through this roll-off the
+/// weight of the clipped profile is smooth (its slope is zero where the
+/// clipping sets in), so the phase error of a saturated dot shrinks.
+#[derive(Debug, Clone, Copy)]
+pub struct Knee {
+    /// End of the linear part, grey value.
+    pub knee: u32,
+    /// The saturation level.
+    pub top: u32,
+}
+
+impl Weight for Knee {
+    const SCALE: f64 = 16.0;
+    #[inline(always)]
+    fn weight(&self, v: u32) -> i64 {
+        self.level(v as f64).round() as i64
+    }
+    fn level(&self, v: f64) -> f64 {
+        let (k, t) = (self.knee as f64, self.top.max(self.knee + 1) as f64);
+        let w = if v <= k {
+            v
+        } else if v >= t {
+            k + (t - k) / 2.0
+        } else {
+            let x = v - k;
+            k + x - x * x / (2.0 * (t - k))
+        };
+        w * Self::SCALE
+    }
+}
+
 /// Measures a blob (full-frame coordinates, pixels read inside `plane`
 /// only); `None` if the window holds no signal.
 pub fn measure<P: Pixel>(
@@ -216,6 +279,28 @@ pub fn measure<P: Pixel>(
     fallback_background: f64,
     grow: f64,
     max_scale: f64,
+) -> Option<Measurement> {
+    measure_weighted(
+        plane,
+        blob,
+        threshold,
+        fallback_background,
+        grow,
+        max_scale,
+        Linear,
+    )
+}
+
+/// [`measure`] with the grey values weighted by `w` in the centroid and
+/// moment sums (the signal is in the weight's units).
+pub fn measure_weighted<P: Pixel, W: Weight>(
+    plane: &Plane<P>,
+    blob: &Blob,
+    threshold: Threshold,
+    fallback_background: f64,
+    grow: f64,
+    max_scale: f64,
+    w: W,
 ) -> Option<Measurement> {
     let (bx, by) = blob.centre();
     let (cxx, cyy, cxy) = blob.covariance();
@@ -347,7 +432,7 @@ pub fn measure<P: Pixel>(
         let px = &line[(a - first_col) as usize..=(b - first_col) as usize];
         let (mut t0, mut t1, mut t2) = (0i64, 0i64, 0i64);
         for (k, p) in (a - cc..).zip(px) {
-            let vi = p.value() as i64;
+            let vi = w.weight(p.value());
             t0 += vi;
             t1 += vi * k;
             t2 += vi * k * k;
@@ -408,7 +493,8 @@ pub fn measure<P: Pixel>(
     } else {
         fallback_background
     };
-    let m = |i: usize| gm[i] - background * nm[i];
+    let bw = w.level(background);
+    let m = |i: usize| gm[i] - bw * nm[i];
     let (sw, sx, sxx, sy, syy, sxy) = (m(0), m(1), m(2), m(3), m(4), m(5));
     if sw.is_nan() || sw <= 0.0 {
         return None;
@@ -425,7 +511,7 @@ pub fn measure<P: Pixel>(
         cxx: sxx / sw - mx * mx - 1.0 / 12.0,
         cyy: syy / sw - my * my - 1.0 / 12.0,
         cxy: sxy / sw - mx * my,
-        signal: sw,
+        signal: sw / W::SCALE,
         background,
         kurtosis,
     })

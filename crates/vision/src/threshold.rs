@@ -9,6 +9,16 @@
 //! same pixels as its frame): the threshold is a property of the grey-value
 //! distribution, and a quarter of the pixels estimate it as well as all of
 //! them. 16-bit values are binned down to at most [`MAX_BINS`] bins.
+//!
+//! The local levels ([`LocalLevels`]): one level per tile of
+//! [`TILE`] × [`TILE`] pixels (aligned to the full frame), never above the
+//! global level and never below the noise floor, so that dim targets (far
+//! from the ring light) are found next to bright ones: where the brightest
+//! pixel near a tile (its own and its eight neighbours', sampled on every
+//! second row) rises less than half as high above the background as the
+//! frame's brightest, the tile's level drops to a share of that local
+//! peak's height above the background. Tiles with nothing above the
+//! (local) floor, or with bright surroundings, keep the global level.
 
 use crate::pixel::{Pixel, Plane};
 
@@ -51,6 +61,191 @@ impl Threshold {
     #[inline(always)]
     pub fn all_background<P: Pixel>(self, block: &[P]) -> bool {
         !self.is_foreground(P::max_of(block))
+    }
+}
+
+/// Side of a tile of the local levels, px (the labeller's block of 64
+/// pixels of a row lies in one tile).
+pub const TILE: usize = 64;
+const TILE_SHIFT: u32 = 6;
+
+/// One level per tile of a window: its buffers, sized once for the
+/// largest window.
+#[derive(Debug, Clone)]
+pub struct LocalLevels {
+    /// Levels, row-major over the window's tiles.
+    levels: Vec<u32>,
+    /// Sampled peak per tile.
+    peaks: Vec<u32>,
+    /// Full-frame tile index of the window's first tile column and row.
+    tile_col0: usize,
+    tile_row0: usize,
+    /// Tiles per row and rows of tiles of the window.
+    cols: usize,
+    rows: usize,
+    /// Whether any tile's level is below the global one.
+    any_local: bool,
+}
+
+/// The levels of the tiles that one row of a window crosses.
+#[derive(Debug, Clone, Copy)]
+pub struct TileRow<'a> {
+    levels: &'a [u32],
+    /// Full-frame column of the window's first pixel, and of its tile's first.
+    col0: usize,
+    tile_start: usize,
+}
+
+impl TileRow<'_> {
+    /// The threshold of the tile holding window offset `i` of the row.
+    #[inline(always)]
+    pub fn at(&self, i: usize) -> Threshold {
+        Threshold::global(self.levels[(self.col0 + i - self.tile_start) >> TILE_SHIFT])
+    }
+
+    /// The lowest level of the tiles holding window offsets `a..b` (`a < b`).
+    #[inline(always)]
+    pub fn lowest(&self, a: usize, b: usize) -> Threshold {
+        let first = (self.col0 + a - self.tile_start) >> TILE_SHIFT;
+        let last = (self.col0 + b - 1 - self.tile_start) >> TILE_SHIFT;
+        Threshold::global(self.levels[first..=last].iter().copied().min().unwrap_or(0))
+    }
+
+    /// Window offset where the tile after the one holding offset `i` begins.
+    #[inline(always)]
+    pub fn tile_end(&self, i: usize) -> usize {
+        (((self.col0 + i) >> TILE_SHIFT) + 1) * TILE - self.col0
+    }
+}
+
+impl LocalLevels {
+    /// Levels for windows of up to `max_width × max_height` pixels.
+    pub fn new(max_width: usize, max_height: usize) -> Self {
+        // A window not aligned to the tiles crosses one more of them.
+        let n = (max_width.div_ceil(TILE) + 1) * (max_height.div_ceil(TILE) + 1);
+        LocalLevels {
+            levels: Vec::with_capacity(n),
+            peaks: Vec::with_capacity(n),
+            tile_col0: 0,
+            tile_row0: 0,
+            cols: 0,
+            rows: 0,
+            any_local: false,
+        }
+    }
+
+    /// Lays out the tiles of the window `plane`.
+    fn layout<P>(&mut self, plane: &Plane<'_, P>) {
+        self.tile_col0 = plane.col0 >> TILE_SHIFT;
+        self.tile_row0 = plane.row0 >> TILE_SHIFT;
+        self.cols = ((plane.col0 + plane.width.max(1) - 1) >> TILE_SHIFT) - self.tile_col0 + 1;
+        self.rows = ((plane.row0 + plane.height.max(1) - 1) >> TILE_SHIFT) - self.tile_row0 + 1;
+        self.any_local = false;
+    }
+
+    /// Every tile of the window at the global level of `t`.
+    pub fn set_global<P>(&mut self, plane: &Plane<'_, P>, t: Threshold) {
+        self.layout(plane);
+        self.levels.clear();
+        self.levels.resize(self.cols * self.rows, t.level());
+    }
+
+    /// The local levels of the window `plane`: per tile, the largest value
+    /// on every second row (full-frame rows `≡ 1 mod 2`) of the tile and
+    /// its eight neighbours is the local peak; where it rises less than half
+    /// as high above the background as the frame's brightest sampled pixel,
+    /// the level is `share` of the peak's height above the background,
+    /// between the local floor
+    /// (`floor` above the background: a lower noise multiple than the
+    /// global floor's, as only tiles with a peak above it are lowered) and
+    /// the global level; tiles whose peak does not rise above the local
+    /// floor keep the global level.
+    pub fn compute<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        t: &ThresholdResult,
+        share: f64,
+        floor: f64,
+    ) {
+        let global = t.threshold.level();
+        self.set_global(plane, t.threshold);
+        let bg = t.background;
+        let floor = ((bg + floor).ceil().max(0.0) as u32).min(global);
+        // Nothing can be lowered (and the peaks are not looked for) when
+        // the global level is the local floor already.
+        if t.status != FrameStatus::Normal || share <= 0.0 || floor >= global {
+            return;
+        }
+        self.peaks.clear();
+        self.peaks.resize(self.cols * self.rows, 0);
+        let mut row = plane.row0 + grid_start(plane.row0, 2);
+        while row <= plane.last_row() {
+            let line = plane.row(row);
+            let tr = ((row >> TILE_SHIFT) - self.tile_row0) * self.cols;
+            let mut i = 0;
+            let mut tc = 0;
+            while i < line.len() {
+                let end =
+                    ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(line.len());
+                let m = P::max_of(&line[i..end]);
+                let p = &mut self.peaks[tr + tc];
+                *p = (*p).max(m);
+                i = end;
+                tc += 1;
+            }
+            row += 2;
+        }
+        for r in 0..self.rows {
+            for c in 0..self.cols {
+                let mut peak = 0;
+                for rr in r.saturating_sub(1)..(r + 2).min(self.rows) {
+                    for cc in c.saturating_sub(1)..(c + 2).min(self.cols) {
+                        peak = peak.max(self.peaks[rr * self.cols + cc]);
+                    }
+                }
+                // Only surroundings that peak at less than half the height
+                // of the frame's brightest sampled pixel: elsewhere the
+                // global level serves (and the frame is labelled exactly
+                // as with one level).
+                if peak <= floor || peak as f64 - bg >= 0.5 * (t.max_sampled as f64 - bg) {
+                    continue;
+                }
+                let level = (bg + share * (peak as f64 - bg)).ceil();
+                let level = (level.max(floor as f64) as u32).min(global);
+                if level < global {
+                    self.levels[r * self.cols + c] = level;
+                    self.any_local = true;
+                }
+            }
+        }
+    }
+
+    /// Whether any tile's level lies below the global level.
+    pub fn any_local(&self) -> bool {
+        self.any_local
+    }
+
+    /// The tiles of full-frame row `row` of the window `plane` the levels
+    /// were laid out for.
+    #[inline(always)]
+    pub fn row<P>(&self, plane: &Plane<'_, P>, row: usize) -> TileRow<'_> {
+        let tr = (row >> TILE_SHIFT) - self.tile_row0;
+        TileRow {
+            levels: &self.levels[tr * self.cols..(tr + 1) * self.cols],
+            col0: plane.col0,
+            tile_start: self.tile_col0 << TILE_SHIFT,
+        }
+    }
+
+    /// The threshold at full-frame position `(col, row)` inside the window.
+    pub fn at(&self, col: usize, row: usize) -> Threshold {
+        let tc = (col >> TILE_SHIFT)
+            .saturating_sub(self.tile_col0)
+            .min(self.cols - 1);
+        let tr = (row >> TILE_SHIFT)
+            .saturating_sub(self.tile_row0)
+            .min(self.rows - 1);
+        Threshold::global(self.levels[tr * self.cols + tc])
     }
 }
 
@@ -392,6 +587,67 @@ mod tests {
             .collect();
         assert_eq!(n as usize, odd.len());
         assert!(odd.iter().all(|&i| h[data8[i] as usize] == 1));
+    }
+
+    #[test]
+    fn local_levels_drop_only_in_dim_surroundings() {
+        // 320 × 192 px (5 × 3 tiles), background 20, a bright patch (220)
+        // in tile (0, 0) and a dim one (60) in tile (4, 2).
+        let (w, h) = (320usize, 192usize);
+        let mut v = vec![20u8; w * h];
+        for (c0, r0, val) in [(20usize, 20usize, 220u8), (280, 150, 60)] {
+            for r in r0..r0 + 6 {
+                for c in c0..c0 + 6 {
+                    v[r * w + c] = val;
+                }
+            }
+        }
+        let plane = Plane::whole(&v, w, h);
+        let t = ThresholdResult {
+            threshold: Threshold::global(100),
+            otsu: 100,
+            floor: 40,
+            background: 20.0,
+            noise: 2.0,
+            max_sampled: 220,
+            status: FrameStatus::Normal,
+        };
+        let mut l = LocalLevels::new(w, h);
+        l.compute(&plane, &t, 0.3, 10.0);
+        assert!(l.any_local());
+        // Around the dim patch: 20 + 0.3 × 40 = 32, above the local floor 30.
+        for (c, r) in [(290, 160), (230, 160), (290, 100), (230, 100)] {
+            assert_eq!(l.at(c, r).level(), 32, "({c}, {r})");
+        }
+        // Near the bright patch, and where nothing rises: the global level.
+        for (c, r) in [(25, 25), (100, 100), (160, 20), (10, 180)] {
+            assert_eq!(l.at(c, r).level(), 100, "({c}, {r})");
+        }
+        // The row view: offsets map to their tiles.
+        let row = l.row(&plane, 160);
+        assert_eq!(row.at(0).level(), 100);
+        assert_eq!(row.at(300).level(), 32);
+        assert_eq!(row.lowest(0, 256).level(), 32);
+        assert_eq!(row.lowest(0, 192).level(), 100);
+        assert_eq!(row.tile_end(70), 128);
+        // A local floor above the dim peak, or no share: one level.
+        l.compute(&plane, &t, 0.3, 45.0);
+        assert!(!l.any_local());
+        l.compute(&plane, &t, 0.0, 10.0);
+        assert!(!l.any_local());
+        // A window not aligned to the tiles: the same levels in full-frame
+        // coordinates.
+        let win = Plane {
+            data: &v[100 * w + 200..],
+            width: 110,
+            height: 80,
+            stride: w,
+            col0: 200,
+            row0: 100,
+        };
+        l.compute(&win, &t, 0.3, 10.0);
+        assert_eq!(l.at(290, 160).level(), 32);
+        assert_eq!(l.row(&win, 160).at(90).level(), 32);
     }
 
     #[test]

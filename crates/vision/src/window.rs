@@ -63,6 +63,9 @@ pub struct WindowTarget {
     pub background: f64,
     /// The ring's reading, when asked for.
     pub code: Option<CodeStatus>,
+    /// The dot has saturated pixels (measured as the whole frame measures
+    /// it; to be weighted down).
+    pub saturated: bool,
 }
 
 /// What came of one window.
@@ -186,7 +189,7 @@ impl WindowMeasurer {
         if let Err(reason) = blob_tests(&outer_plane, &blob, &self.options) {
             return WindowOutcome::Rejected(reason);
         }
-        let m = match centroid(&outer_plane, &blob, t, &self.options) {
+        let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
             Ok(m) => m,
             Err(reason) => return WindowOutcome::Rejected(reason),
         };
@@ -201,9 +204,11 @@ impl WindowMeasurer {
             e.col - edge < fc0 || e.row - edge < fr0 || e.col + edge > fc1 || e.row + edge > fr1;
         let mut code = None;
         if near_edge || (e.coded && e.read_code) {
+            let min_read = (self.options.noise_factor * t.noise)
+                .max(self.options.min_contrast * max_value as f64);
             let params = CodeParams {
-                min_contrast: (self.options.noise_factor * t.noise)
-                    .max(self.options.min_contrast * max_value as f64),
+                min_contrast: min_read,
+                min_isolation_contrast: min_read,
                 sector_margin: self.options.sector_margin,
                 sample_margin: self.options.sample_margin,
                 dark_tolerance: self.options.dark_tolerance,
@@ -243,6 +248,7 @@ impl WindowMeasurer {
             signal: m.signal,
             background: m.background,
             code,
+            saturated: blob.saturated > 0,
         })
     }
 }

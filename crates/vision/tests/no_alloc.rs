@@ -16,8 +16,9 @@ const W: usize = 400;
 const H: usize = 300;
 
 /// A frame with uncoded dots, coded targets (frontal), a bright bar and a
-/// saturated blob, over a noisy background.
-fn frame(seed: u64) -> Vec<f64> {
+/// saturated blob, over a noisy background; with `dim` the row of uncoded
+/// dots is dim (found through the local threshold).
+fn frame(seed: u64, dim: bool) -> Vec<f64> {
     let mut v = vec![15.0; W * H];
     let mut state = seed;
     let mut rnd = move || {
@@ -54,7 +55,7 @@ fn frame(seed: u64) -> Vec<f64> {
     };
     for k in 0..12 {
         let (cx, cy) = (40.0 + 30.0 * k as f64 + rnd(), 40.0 + rnd());
-        draw(cx, cy, 4.0 + rnd(), None, 180.0);
+        draw(cx, cy, 4.0 + rnd(), None, if dim { 45.0 } else { 180.0 });
     }
     for (k, id) in [2u64, 17, 42, 200].into_iter().enumerate() {
         draw(
@@ -65,7 +66,7 @@ fn frame(seed: u64) -> Vec<f64> {
             180.0,
         );
     }
-    draw(300.0, 250.0, 6.0, None, 400.0); // saturated
+    draw(300.0, 250.0, 6.0, None, 400.0); // saturated: measured and flagged
     for col in 20..200 {
         v[250 * W + col] = 200.0; // a line
     }
@@ -95,7 +96,7 @@ fn mono16(v: &[f64]) -> Image {
 fn detect_allocates_nothing_once_warm() {
     let mut frames = Vec::new();
     for seed in 0..3 {
-        let v = frame(seed);
+        let v = frame(seed, false);
         frames.push(mono8(&v));
         frames.push(mono16(&v));
     }
@@ -114,7 +115,8 @@ fn detect_allocates_nothing_once_warm() {
     // Warm-up (nothing should allocate here either, but only the steady
     // state is the contract).
     let first = detector.detect(frames[0].view()).unwrap();
-    assert_eq!(first.targets.len(), 16, "{:?}", first.targets);
+    assert_eq!(first.targets.len(), 17, "{:?}", first.targets);
+    assert_eq!(first.n_saturated, 1);
     assert_eq!(
         first
             .targets
@@ -134,7 +136,39 @@ fn detect_allocates_nothing_once_warm() {
     }
     let after = allocations();
     assert_eq!(after - before, 0, "allocations during detection");
-    assert_eq!(found, 3 * 6 * 16);
+    assert_eq!(found, 3 * 6 * 17);
+
+    // Dim dots next to bright targets: the local threshold finds them,
+    // without allocating either.
+    let dim: Vec<Image> = (0..2)
+        .flat_map(|seed| {
+            let v = frame(seed, true);
+            [mono8(&v), mono16(&v)]
+        })
+        .collect();
+    let global = {
+        let mut d = Detector::new(
+            W as u32,
+            H as u32,
+            DetectorOptions {
+                local_threshold: 0.0,
+                ..options
+            },
+        )
+        .unwrap();
+        d.detect(dim[0].view()).unwrap().targets.len()
+    };
+    let d = detector.detect(dim[0].view()).unwrap();
+    assert!(d.local_levels);
+    assert_eq!(d.targets.len(), 17, "{:?}", d.rejected);
+    assert!(global < 17, "the global threshold alone finds {global}");
+    let before = allocations();
+    for f in &dim {
+        let d = detector.detect(f.view()).unwrap();
+        assert!(d.local_levels && d.targets.len() == 17);
+    }
+    assert_eq!(allocations() - before, 0, "allocations with local levels");
+    frames.extend(dim);
 
     // Windows of varying size below the capacity, with their own threshold
     // and with the whole frame's; then windows of a frame twice as wide
