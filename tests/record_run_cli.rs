@@ -36,9 +36,9 @@ fn poses(config: &Path, rx: &UdpSocket) -> (Vec<String>, String) {
     let mut buf = [0u8; 8192];
     let mut lines = Vec::new();
     while let Ok(n) = rx.recv(&mut buf) {
-        let mut v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
-        v.as_object_mut().unwrap().remove("latency_us");
-        lines.push(v.to_string());
+        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
+        common::check_pose_message(&v);
+        lines.push(common::without_run_times(v).to_string());
     }
     (lines, summary)
 }

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::Duration;
 
 /// Runs `photopose run` on `config` (plus `args`), collecting the UDP
-/// messages; returns them without their latency and the run's summary.
+/// messages; returns them without their run-dependent times (sending, monotonic stamps) and the run's summary.
 fn replay(config: &Path, rx: &UdpSocket, args: &[&str]) -> (Vec<String>, String) {
     let out = bin()
         .args(["run", "--config"])
@@ -29,9 +29,9 @@ fn replay(config: &Path, rx: &UdpSocket, args: &[&str]) -> (Vec<String>, String)
     let mut buf = [0u8; 8192];
     let mut lines = Vec::new();
     while let Ok(n) = rx.recv(&mut buf) {
-        let mut v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
-        v.as_object_mut().unwrap().remove("latency_us");
-        lines.push(v.to_string());
+        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
+        common::check_pose_message(&v);
+        lines.push(common::without_run_times(v).to_string());
     }
     (lines, summary)
 }

@@ -242,8 +242,15 @@ fn start(
     tracing::info!(
         workers = config.workers,
         slots = config.slots,
-        udp = ?config.udp,
-        tcp = ?pipeline.tcp_addr(),
+        udp = %config
+            .udp
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", "),
+        tcp = %pipeline
+            .tcp_addr()
+            .map_or_else(|| "off".to_string(), |a| a.to_string()),
         "photopose running"
     );
     Ok((pipeline, config))

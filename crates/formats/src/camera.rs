@@ -189,23 +189,37 @@ pub fn load_camera(path: &Path) -> Result<Camera, FormatError> {
 pub fn camera_to_toml(cam: &Camera) -> String {
     let d = &cam.distortion;
     format!(
-        "[sensor]\nwidth = {}          # px\nheight = {}         # px\npixel_size = {:?}   # mm\n\n\
-         [interior]\nc = {:?}              # principal distance, mm\nx0 = {:?}             # principal point, mm from the image centre\ny0 = {:?}\n\n\
-         [distortion]          # Brown/Fraser parameters, mm-based\nk1 = {:?}\nk2 = {:?}\nk3 = {:?}\np1 = {:?}\np2 = {:?}\nb1 = {:?}\nb2 = {:?}\n",
+        "[sensor]\nwidth = {}          # px\nheight = {}         # px\npixel_size = {}   # mm\n\n\
+         [interior]\nc = {}              # principal distance, mm\nx0 = {}             # principal point, mm from the image centre\ny0 = {}\n\n\
+         [distortion]          # Brown/Fraser parameters, mm-based\nk1 = {}\nk2 = {}\nk3 = {}\np1 = {}\np2 = {}\nb1 = {}\nb2 = {}\n",
         cam.sensor.width,
         cam.sensor.height,
-        cam.sensor.pixel_size,
-        cam.interior.c,
-        cam.interior.x0,
-        cam.interior.y0,
-        d.k1,
-        d.k2,
-        d.k3,
-        d.p1,
-        d.p2,
-        d.b1,
-        d.b2
+        toml_float(cam.sensor.pixel_size),
+        toml_float(cam.interior.c),
+        toml_float(cam.interior.x0),
+        toml_float(cam.interior.y0),
+        toml_float(d.k1),
+        toml_float(d.k2),
+        toml_float(d.k3),
+        toml_float(d.p1),
+        toml_float(d.p2),
+        toml_float(d.b1),
+        toml_float(d.b2)
     )
+}
+
+/// A number as a TOML float that reads back to the same `f64`: the
+/// shortest round-trip digits, with a `.0` where they would read as an
+/// integer.
+pub(crate) fn toml_float(v: f64) -> String {
+    let s = v.to_string();
+    if v.is_finite() && !s.contains(['.', 'e', 'E']) {
+        s + ".0"
+    } else if v.is_nan() {
+        "nan".into()
+    } else {
+        s
+    }
 }
 
 #[cfg(test)]

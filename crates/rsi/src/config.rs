@@ -253,13 +253,13 @@ impl RsiConfig {
         let ip: IpAddr = self
             .bind
             .parse()
-            .map_err(|_| bad("bind", format!("{:?}", self.bind), "not an IP address"))?;
+            .map_err(|_| bad("bind", format!("\"{}\"", self.bind), "not an IP address"))?;
         let mut controllers = Vec::new();
         for c in &self.controllers {
             // An IPv4-mapped IPv6 address is its IPv4 address.
             controllers.push(
                 c.parse::<IpAddr>()
-                    .map_err(|_| bad("controllers", format!("{c:?}"), "not an IP address"))?
+                    .map_err(|_| bad("controllers", format!("\"{c}\""), "not an IP address"))?
                     .to_canonical(),
             );
         }
@@ -330,7 +330,7 @@ impl RsiConfig {
                 let port = self.port.filter(|p| *p != 0).ok_or_else(|| {
                     bad(
                         "port",
-                        format!("{:?}", self.port),
+                        self.port.map_or_else(|| "(not set)".to_string(), |p| p.to_string()),
                         "set a port (or ethernet_config)",
                     )
                 })?;
@@ -343,7 +343,7 @@ impl RsiConfig {
                     if !is_xml_name(v.as_bytes()) {
                         return Err(bad(
                             key,
-                            format!("{v:?}"),
+                            format!("\"{v}\""),
                             "must be an XML name (a letter or '_', then letters, digits, '_', '-', '.')",
                         ));
                     }

@@ -120,7 +120,13 @@ impl GigeConfig {
                 || r.height == 0
                 || r.x.max(r.y).max(r.width).max(r.height) > i32::MAX as u32
             {
-                return bad("roi", format!("{r:?} is empty or too large"));
+                return bad(
+                    "roi",
+                    format!(
+                        "[{}, {}, {}, {}] (x, y, width, height px) is empty or too large",
+                        r.x, r.y, r.width, r.height
+                    ),
+                );
             }
         }
         if self.lost_after.is_zero() || self.backoff_initial.is_zero() {

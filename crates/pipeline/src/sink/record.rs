@@ -283,7 +283,11 @@ impl RecordLink {
             seq: result.seq,
             camera_time_ns: result.times.camera_ns,
             host_time_ns: result.times.handover_utc_ns,
-            pose: m.center.zip(m.quaternion_wxyz),
+            // The camera's pose in the field: the centre and Rᵀ (w, x, y, z).
+            pose: m.pose.as_ref().map(|p| {
+                let [x, y, z, w] = p.quaternion_xyzw;
+                (p.position_mm, [w, x, y, z])
+            }),
             line,
         });
         if self.0.queue.try_send(item).is_err() {
