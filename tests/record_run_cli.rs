@@ -79,6 +79,17 @@ fn a_daemon_recording_is_standard_mcap_and_replays_the_same_twice() {
             0,
         ));
         e.2 += 1;
+        if m.channel.topic == "/pose/message" {
+            // The schema the file carries is the repository's, and every
+            // recorded message validates against it.
+            assert_eq!(
+                schema.data.as_ref(),
+                std::fs::read(common::root().join("docs/schema/pose-message.v2.json"))
+                    .unwrap()
+                    .as_slice()
+            );
+            common::check_pose_message(&serde_json::from_slice(&m.data).unwrap());
+        }
     }
     assert_eq!(
         per_topic["/camera/image"],
