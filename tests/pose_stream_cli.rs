@@ -13,7 +13,10 @@ use std::time::{Duration, Instant};
 /// The one ```python block of docs/streams.md.
 fn python_reader() -> String {
     let doc = std::fs::read_to_string(common::root().join("docs/streams.md")).unwrap();
-    let start = doc.find("```python\n").expect("a python block in docs/streams.md") + 10;
+    let start = doc
+        .find("```python\n")
+        .expect("a python block in docs/streams.md")
+        + 10;
     let len = doc[start..].find("```").expect("the block ends");
     doc[start..start + len].to_string()
 }
@@ -79,8 +82,20 @@ fn the_python_reader_of_the_docs_reads_the_daemons_stream() {
     let mut out = String::new();
     let mut err = String::new();
     use std::io::Read;
-    reader.0.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-    reader.0.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    reader
+        .0
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    reader
+        .0
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
     assert!(status.success(), "{out}{err}");
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines.len(), 5, "{out}");

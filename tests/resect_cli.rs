@@ -55,7 +55,10 @@ fn resect_recovers_the_simulated_pose_with_the_fixed_keys() {
         "sigma0_px",
         "n_targets",
     ] {
-        assert!(v["pose"].get(key).is_some(), "missing key pose.{key} in {v}");
+        assert!(
+            v["pose"].get(key).is_some(),
+            "missing key pose.{key} in {v}"
+        );
     }
     common::check_pose_object(&v["pose"]);
     assert_eq!(v["ok"], true);
@@ -464,27 +467,31 @@ fn resect_reports_the_adjustments_covariance_and_the_cameras_quaternion() {
     common::check_pose_object(pose);
     let camera = photopose_formats::default_camera();
     let field = photopose_field::design::default_plate();
-    let mut locator = photopose_locate::Locator::new(
-        camera,
-        field,
-        photopose_locate::LocateOptions::default(),
-    )
-    .unwrap();
+    let mut locator =
+        photopose_locate::Locator::new(camera, field, photopose_locate::LocateOptions::default())
+            .unwrap();
     let frame = photopose_formats::load_image(&image).unwrap();
     let located = locator.locate(frame.view()).unwrap();
     let report = *located.pose.expect("a pose of the rendered frame");
+    // Equal to 1e-12 of the scale of each element, √(c_ii·c_jj) (the
+    // adjustment's own pairs c_ij, c_ji differ by rounding only).
     let got = common::covariance(pose);
+    let c = &report.covariance;
     for i in 0..6 {
         for j in 0..6 {
-            let want = report.covariance[(i, j)];
+            let scale = (c[(i, i)] * c[(j, j)]).sqrt();
             assert!(
-                (got[(i, j)] - want).abs() <= 1e-12 * want.abs().max(1e-30),
-                "covariance ({i}, {j}): {} vs {want}",
-                got[(i, j)]
+                (got[(i, j)] - c[(i, j)]).abs() <= 1e-12 * scale,
+                "covariance ({i}, {j}): {} vs {}",
+                got[(i, j)],
+                c[(i, j)]
             );
         }
     }
-    assert_eq!(pose["n_targets"].as_u64().unwrap() as usize, report.n_points);
+    assert_eq!(
+        pose["n_targets"].as_u64().unwrap() as usize,
+        report.n_points
+    );
     // (position, quaternion) is the camera's pose: Rᵀ maps camera axes
     // into the field, so the camera's −z (its viewing direction) points at
     // the plate (−Z for a camera above it).

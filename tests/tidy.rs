@@ -224,7 +224,9 @@ fn debug_formatting(code: &str) -> bool {
 fn no_rust_debug_text_reaches_users() {
     assert!(debug_formatting(r#"format!("{x:?}")"#));
     assert!(debug_formatting(r#"tracing::debug!(?exit, "joined")"#));
-    assert!(debug_formatting(r#"tracing::info!(threads = ?threads, "x")"#));
+    assert!(debug_formatting(
+        r#"tracing::info!(threads = ?threads, "x")"#
+    ));
     assert!(!debug_formatting(r#"let v = f(x)?; let w = g()?;"#));
     assert!(!debug_formatting(r#"tracing::info!(error = %e, "x")"#));
     let mut files = Vec::new();

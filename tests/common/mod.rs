@@ -158,10 +158,7 @@ pub fn check_pose_object(pose: &serde_json::Value) {
     for i in 0..6 {
         for j in 0..6 {
             let (a, b) = (c[(i, j)], c[(j, i)]);
-            assert!(
-                (a - b).abs() <= 1e-12 * a.abs().max(b.abs()),
-                "covariance not symmetric at ({i}, {j}): {a} vs {b}"
-            );
+            assert!(a == b, "covariance not symmetric at ({i}, {j}): {a} vs {b}");
         }
     }
     assert!(
@@ -173,7 +170,10 @@ pub fn check_pose_object(pose: &serde_json::Value) {
         let s = c[(k, k)].sqrt();
         assert!((std("std_position_mm", k) - s).abs() <= 1e-12 * s, "σ {k}");
         let r = c[(k + 3, k + 3)].sqrt().to_degrees();
-        assert!((std("std_rotation_deg", k) - r).abs() <= 1e-12 * r, "σ rot {k}");
+        assert!(
+            (std("std_rotation_deg", k) - r).abs() <= 1e-12 * r,
+            "σ rot {k}"
+        );
     }
 }
 

@@ -113,8 +113,9 @@ pub fn build(
 }
 
 /// The pose object of the wire message (and of `photopose resect`'s lines)
-/// of an adjustment: the camera's pose in the field frame, `R`, the full
-/// covariance exactly as the adjustment gives it, σ, σ0, targets used.
+/// of an adjustment: the camera's pose in the field frame, `R`, the
+/// adjustment's full covariance (made exactly symmetric), σ, σ0, targets
+/// used.
 pub fn pose_estimate(report: &ResectionReport) -> PoseEstimate {
     let e = &report.exterior;
     let r = e.rotation;
@@ -132,7 +133,13 @@ pub fn pose_estimate(report: &ResectionReport) -> PoseEstimate {
         position_mm: [e.center.x, e.center.y, e.center.z],
         quaternion_xyzw: [x, y, z, w],
         rotation_field_to_camera: rows(&r),
-        covariance: std::array::from_fn(|k| c[(k / 6, k % 6)]),
+        // The adjustment's σ0²·N⁻¹ is symmetric up to rounding (its
+        // off-diagonal pairs differ in the last digits): the message's is
+        // exactly symmetric, the mean of each pair.
+        covariance: std::array::from_fn(|k| {
+            let (i, j) = (k / 6, k % 6);
+            0.5 * (c[(i, j)] + c[(j, i)])
+        }),
         covariance_order: COVARIANCE_ORDER,
         std_position_mm: report.std_center().into(),
         std_rotation_deg: report.std_rotation_deg().into(),

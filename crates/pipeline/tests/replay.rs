@@ -84,7 +84,10 @@ fn two_replays_give_identical_poses() {
             assert_eq!(x[k], y[k], "key {k} differs between replays");
         }
         for k in ["camera_clock_ns", "handover_utc_ns", "exposure_utc_ns"] {
-            assert_eq!(x["time"][k], y["time"][k], "time.{k} differs between replays");
+            assert_eq!(
+                x["time"][k], y["time"][k],
+                "time.{k} differs between replays"
+            );
         }
     }
     let seqs: Vec<u64> = a.iter().map(|v| v["seq"].as_u64().unwrap()).collect();

@@ -330,7 +330,8 @@ impl RsiConfig {
                 let port = self.port.filter(|p| *p != 0).ok_or_else(|| {
                     bad(
                         "port",
-                        self.port.map_or_else(|| "(not set)".to_string(), |p| p.to_string()),
+                        self.port
+                            .map_or_else(|| "(not set)".to_string(), |p| p.to_string()),
                         "set a port (or ethernet_config)",
                     )
                 })?;

@@ -110,8 +110,7 @@ impl Stats {
         if self.rist_cycles.load(Ordering::Acquire) == 0 {
             return None;
         }
-        let arrival =
-            epoch() + Duration::from_nanos(self.rist_arrival_ns.load(Ordering::Relaxed));
+        let arrival = epoch() + Duration::from_nanos(self.rist_arrival_ns.load(Ordering::Relaxed));
         let age = now.saturating_duration_since(arrival);
         (age <= silence).then(|| RobotReading {
             ipoc: self.rist_ipoc.load(Ordering::Relaxed),
@@ -407,9 +406,14 @@ mod tests {
         assert_eq!(r.age, Duration::from_millis(30));
         assert_eq!(s.robot_pose(), Some(pose));
         // Silent longer than the session's timeout: no robot any more.
-        assert_eq!(s.robot_reading(t0 + Duration::from_millis(101), silence), None);
+        assert_eq!(
+            s.robot_reading(t0 + Duration::from_millis(101), silence),
+            None
+        );
         // An arrival the reader has not seen yet is not negative.
-        let r = s.robot_reading(t0 - Duration::from_millis(1), silence).unwrap();
+        let r = s
+            .robot_reading(t0 - Duration::from_millis(1), silence)
+            .unwrap();
         assert_eq!(r.age, Duration::ZERO);
     }
 

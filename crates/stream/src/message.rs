@@ -88,8 +88,8 @@ pub struct PoseEstimate {
     /// `R` of the collinearity equations (field → camera), rows: the camera
     /// axes written in the field frame.
     pub rotation_field_to_camera: [[f64; 3]; 3],
-    /// The a-posteriori 6×6 covariance, row-major, exactly the
-    /// adjustment's; rows and columns in [`COVARIANCE_ORDER`].
+    /// The a-posteriori 6×6 covariance, row-major, the adjustment's (made
+    /// exactly symmetric); rows and columns in [`COVARIANCE_ORDER`].
     #[serde(serialize_with = "flat")]
     pub covariance: [f64; 36],
     /// [`COVARIANCE_ORDER`].

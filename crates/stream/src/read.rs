@@ -132,7 +132,10 @@ mod tests {
         assert_eq!(p.covariance, vec![0.5; 36]);
         assert_eq!(l.time_utc_ns(), Some(2_000));
         let r = l.robot.as_ref().unwrap();
-        assert_eq!((r.ipoc, r.xyzabc_mm_deg), (11, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        assert_eq!(
+            (r.ipoc, r.xyzabc_mm_deg),
+            (11, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+        );
         let stale = PoseMessage::stale(&camera, Some(&m));
         stale.encode_line(&mut buf);
         let l = PoseLine::parse(std::str::from_utf8(&buf).unwrap().trim()).unwrap();

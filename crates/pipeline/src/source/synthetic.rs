@@ -104,7 +104,10 @@ pub(crate) fn validate(
     if !s.center_mm.iter().all(|v| v.is_finite()) || s.center_mm[2] <= 0.0 {
         return Err(bad(
             "source.synthetic.center_mm",
-            format!("[{}, {}, {}]", s.center_mm[0], s.center_mm[1], s.center_mm[2]),
+            format!(
+                "[{}, {}, {}]",
+                s.center_mm[0], s.center_mm[1], s.center_mm[2]
+            ),
             "must be finite with Z above the plate (> 0)",
         ));
     }
