@@ -743,7 +743,7 @@ mod tests {
         w.finish().unwrap();
         let e = decode_image(&bytes, "colour.png").unwrap_err().to_string();
         assert!(
-            e.starts_with("colour.png: unsupported image: PNG colour type Rgb"),
+            e.starts_with("colour.png: unsupported image: PNG colour type RGB;"),
             "{e}"
         );
     }
@@ -770,7 +770,7 @@ mod tests {
         w.write_image_data(&[0, 1, 0, 2]).unwrap();
         w.finish().unwrap();
         let e = decode_image(&bytes, "ga.png").unwrap_err().to_string();
-        assert!(e.contains("GrayscaleAlpha"), "{e}");
+        assert!(e.contains("colour type grey with alpha"), "{e}");
     }
 
     #[test]
