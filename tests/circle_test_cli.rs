@@ -10,7 +10,8 @@ use common::{bin, scratch};
 use nalgebra::Matrix6;
 use photopose_circle::cell::{perturb, CameraMount, Cell};
 use photopose_geometry::rng::SplitMix64;
-use photopose_stream::{PoseMessage, PoseStatus};
+use photopose_stream::message::COVARIANCE_ORDER;
+use photopose_stream::{PoseEstimate, PoseMessage, PoseStatus};
 use serde_json::Value;
 use std::io::Write;
 
@@ -28,28 +29,50 @@ fn write_stream(cell: &Cell, path: &std::path::Path) -> usize {
     let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
     let mut buf = Vec::new();
     let mut used = 0;
+    let camera: std::sync::Arc<str> = std::sync::Arc::from("camera");
+    let mut flat = [0.0; 36];
+    for (k, v) in flat.iter_mut().enumerate() {
+        *v = cov[(k / 6, k % 6)];
+    }
+    let mut last = None;
     for (i, s) in samples.iter().enumerate() {
         let t = (s.time_s * 1e9) as u64;
-        let m = if i % 100 == 50 {
-            PoseMessage::without_pose(i as u64, t, t, PoseStatus::TooFewTargets)
+        let mut m = if i % 100 == 50 {
+            PoseMessage::new(&camera, i as u64, PoseStatus::TooFewTargets)
         } else {
             let e = photopose_geometry::pose::exterior_from_camera_pose(&perturb(
                 &s.camera, &cov, &mut rng,
             ));
             let r = e.rotation;
-            let mut m = PoseMessage::without_pose(i as u64, t, t, PoseStatus::Ok);
-            m.center = Some(e.center.into());
-            m.rotation = Some([0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]));
-            m.n_targets = 200;
+            let [w, x, y, z] =
+                photopose_geometry::rotation::quaternion_wxyz_from_matrix(&r.transpose()).unwrap();
+            let mut m = PoseMessage::new(&camera, i as u64, PoseStatus::Ok);
+            m.pose = Some(PoseEstimate {
+                position_mm: e.center.into(),
+                quaternion_xyzw: [x, y, z, w],
+                rotation_field_to_camera: [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]]),
+                covariance: flat,
+                covariance_order: COVARIANCE_ORDER,
+                std_position_mm: [0.005; 3],
+                std_rotation_deg: [0.0005; 3],
+                sigma0_px: 0.02,
+                n_targets: 200,
+            });
             used += 1;
             m
         };
+        m.time.handover_utc_ns = Some(t);
+        m.time.camera_clock_ns = Some(t);
         m.encode_line(&mut buf);
+        common::check_pose_message(&serde_json::from_slice(&buf).unwrap());
         file.write_all(&buf).unwrap();
         if i == 1000 {
-            PoseMessage::without_pose(i as u64, t, t, PoseStatus::Stale).encode_line(&mut buf);
+            let stale = PoseMessage::stale(&camera, last.as_ref());
+            stale.encode_line(&mut buf);
+            common::check_pose_message(&serde_json::from_slice(&buf).unwrap());
             file.write_all(&buf).unwrap();
         }
+        last = Some(m);
     }
     used
 }
@@ -272,8 +295,10 @@ fn resect_lines_are_read_and_a_sparse_circle_has_no_filtered_g() {
         } else {
             serde_json::json!({
                 "image": format!("f{i}.png"), "ok": true,
-                "center": [e.center.x, e.center.y, e.center.z],
-                "rotation": rows,
+                "pose": {
+                    "position_mm": [e.center.x, e.center.y, e.center.z],
+                    "rotation_field_to_camera": rows,
+                },
             })
         };
         text.push_str(&format!("{line}\n"));

@@ -41,6 +41,7 @@ fn run_streams_poses_and_stops_on_sigterm() {
     while seqs.len() < 10 {
         let n = rx.recv(&mut buf).expect("a pose datagram within 20 s");
         let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
+        common::check_pose_message(&v);
         if v["status"] == "stale" {
             continue; // no fresh pose in time on a loaded machine: said, not hidden
         }

@@ -47,7 +47,17 @@ fn the_demo_runs_the_chain_and_finds_the_injected_deviation() {
         .count();
     // 2π · 149.9 mm at 160 mm/s, 25 frames/s.
     assert_eq!(ok, 148, "{stdout}");
-    assert!(lines.contains("\"rsi\":\"measure_only\""));
+    // Every message is a valid `photopose.pose.v2`; while the simulated
+    // controller runs they carry the robot with the correction's state.
+    let mut measure_only = 0;
+    for l in lines.lines() {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        common::check_pose_message(&v);
+        if v["robot"]["correction"] == "measure_only" {
+            measure_only += 1;
+        }
+    }
+    assert!(measure_only > 0, "no message with the robot measuring only");
     // The injected pattern's F (the cell's default, 168.2 µm) is found at
     // the TCP by the filtered profile, within the pose noise.
     let report: serde_json::Value =

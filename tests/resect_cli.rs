@@ -34,33 +34,38 @@ fn resect_recovers_the_simulated_pose_with_the_fixed_keys() {
     for key in [
         "image",
         "ok",
-        "center",
-        "rotation",
-        "std_center",
-        "std_rotation_deg",
-        "sigma0_px",
+        "frame_id",
+        "pose",
         "rms_px",
-        "n_points",
         "n_rejected",
         "rejected_ids",
+        "camera_xyzabc_mm_deg",
     ] {
         assert!(v.get(key).is_some(), "missing key {key} in {v}");
     }
+    // The pose object is the pose message's, key for key.
+    for key in [
+        "position_mm",
+        "quaternion_xyzw",
+        "rotation_field_to_camera",
+        "covariance",
+        "covariance_order",
+        "std_position_mm",
+        "std_rotation_deg",
+        "sigma0_px",
+        "n_targets",
+    ] {
+        assert!(
+            v["pose"].get(key).is_some(),
+            "missing key pose.{key} in {v}"
+        );
+    }
+    common::check_pose_object(&v["pose"]);
     assert_eq!(v["ok"], true);
     assert_eq!(v["image"], obs.display().to_string());
     // The fixture was simulated at X,Y,Z = 150,-300,900 (see fixtures/README.md).
-    let c: Vec<f64> = v["center"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
-    let s: Vec<f64> = v["std_center"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let c = numbers(&v["pose"]["position_mm"]);
+    let s = numbers(&v["pose"]["std_position_mm"]);
     for (k, want) in [150.0, -300.0, 900.0].iter().enumerate() {
         assert!(
             (c[k] - want).abs() < 4.0 * s[k],
@@ -69,13 +74,21 @@ fn resect_recovers_the_simulated_pose_with_the_fixed_keys() {
             s[k]
         );
     }
-    let sigma0 = v["sigma0_px"].as_f64().unwrap();
+    let sigma0 = v["pose"]["sigma0_px"].as_f64().unwrap();
     assert!(
         (0.08..0.12).contains(&sigma0),
         "σ0 {sigma0} px for 0.1 px noise"
     );
-    let r = v["rotation"].as_array().unwrap();
+    let r = v["pose"]["rotation_field_to_camera"].as_array().unwrap();
     assert_eq!(r.len(), 3);
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
 }
 
 /// The ids of the good fixture at pseudo-random image positions.
@@ -290,12 +303,7 @@ fn simulated_observations_round_trip_through_resect() {
         .unwrap();
     let v = &lines(&out)[0];
     assert_eq!(v["ok"], true, "{v}");
-    let p: Vec<f64> = v["pose_xyzabc"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let p = numbers(&v["camera_xyzabc_mm_deg"]);
     let want = [-50.0, 40.0, 800.0, 30.0, 5.0, -10.0];
     for k in 0..3 {
         assert!((p[k] - want[k]).abs() < 0.5, "{p:?}");
@@ -356,17 +364,12 @@ fn resect_takes_images_and_says_why_one_fails() {
     let v = lines(&out);
     assert_eq!(v.len(), 4);
     assert_eq!(v[0]["ok"], true, "{}", v[0]);
-    let c: Vec<f64> = v[0]["center"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let c = numbers(&v[0]["pose"]["position_mm"]);
     assert!(
         (c[0] - 15.0).abs() < 0.1 && (c[1] + 10.0).abs() < 0.1 && (c[2] - 950.0).abs() < 0.1,
         "{c:?}"
     );
-    assert!(v[0]["n_points"].as_u64().unwrap() > 200);
+    assert!(v[0]["pose"]["n_targets"].as_u64().unwrap() > 200);
     assert_eq!(v[1]["ok"], false);
     assert!(
         v[1]["error"].as_str().unwrap().contains("black.pgm"),
@@ -441,4 +444,65 @@ fn detect_lists_every_target_with_true_ids() {
         identified as f64 >= 0.95 * visible as f64,
         "{identified} of {visible} visible targets identified"
     );
+}
+
+/// A rendered frame resected both ways — by `photopose resect` and by the
+/// library in this process — gives the same pose and exactly the
+/// adjustment's covariance (1e-12), symmetric and positive definite; the
+/// quaternion is that of `Rᵀ` (the camera's attitude in the field).
+#[test]
+fn resect_reports_the_adjustments_covariance_and_the_cameras_quaternion() {
+    let dir = scratch("resect-covariance");
+    let image = dir.join("frame.pgm");
+    let kuka = [25.0, -15.0, 1000.0, 30.0, 6.0, -4.0];
+    render_to(&image, kuka, 5);
+    let out = bin().arg("resect").arg(&image).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = &lines(&out)[0];
+    let pose = &v["pose"];
+    common::check_pose_object(pose);
+    let camera = photopose_formats::default_camera();
+    let field = photopose_field::design::default_plate();
+    let mut locator =
+        photopose_locate::Locator::new(camera, field, photopose_locate::LocateOptions::default())
+            .unwrap();
+    let frame = photopose_formats::load_image(&image).unwrap();
+    let located = locator.locate(frame.view()).unwrap();
+    let report = *located.pose.expect("a pose of the rendered frame");
+    // Equal to 1e-12 of the scale of each element, √(c_ii·c_jj) (the
+    // adjustment's own pairs c_ij, c_ji differ by rounding only).
+    let got = common::covariance(pose);
+    let c = &report.covariance;
+    for i in 0..6 {
+        for j in 0..6 {
+            let scale = (c[(i, i)] * c[(j, j)]).sqrt();
+            assert!(
+                (got[(i, j)] - c[(i, j)]).abs() <= 1e-12 * scale,
+                "covariance ({i}, {j}): {} vs {}",
+                got[(i, j)],
+                c[(i, j)]
+            );
+        }
+    }
+    assert_eq!(
+        pose["n_targets"].as_u64().unwrap() as usize,
+        report.n_points
+    );
+    // (position, quaternion) is the camera's pose: Rᵀ maps camera axes
+    // into the field, so the camera's −z (its viewing direction) points at
+    // the plate (−Z for a camera above it).
+    let q = numbers(&pose["quaternion_xyzw"]);
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        q[3], q[0], q[1], q[2],
+    ));
+    let rt = report.exterior.rotation.transpose();
+    let diff = (uq.to_rotation_matrix().into_inner() - rt).abs().max();
+    assert!(diff < 1e-12, "quaternion is not of Rᵀ: {diff}");
+    let view = uq * nalgebra::Vector3::new(0.0, 0.0, -1.0);
+    assert!(view.z < -0.9, "viewing direction {view}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -13,6 +13,25 @@ use std::net::{SocketAddr, TcpListener, UdpSocket};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// `n` pose messages from a new client of the TCP stream at `addr`, each
+/// checked against the schema.
+fn read_messages(addr: SocketAddr, n: usize) -> Vec<serde_json::Value> {
+    use std::io::BufRead;
+    let stream = std::net::TcpStream::connect(addr).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut lines = std::io::BufReader::new(stream).lines();
+    (0..n)
+        .map(|_| {
+            let line = lines.next().expect("a pose line").unwrap();
+            let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+            common::check_pose_message(&v);
+            v
+        })
+        .collect()
+}
+
 #[test]
 fn a_station_is_taken_while_the_robot_stands_still() {
     let dir = scratch("stations");
@@ -83,11 +102,26 @@ fn a_station_is_taken_while_the_robot_stands_still() {
         .output()
         .unwrap();
     let actual = controller.state().actual;
+    // The stream's messages carry the robot with its IPOC and age while the
+    // controller sends; once it has been silent longer than the session
+    // timeout (`session_idle_ms`, 100 ms) the robot is gone from them.
+    let with_robot = read_messages(tcp, 10);
+    let robot = with_robot
+        .iter()
+        .find_map(|v| v.get("robot"))
+        .unwrap_or_else(|| panic!("no message with the robot: {with_robot:?}"));
+    assert!(robot["ipoc"].as_u64().unwrap() > 0, "{robot}");
+    assert!(robot["age_ms"].as_f64().unwrap() <= 100.0, "{robot}");
+    assert!(robot["correction"].is_string(), "{robot}");
+    let _ = controller.stop();
+    std::thread::sleep(Duration::from_millis(300));
+    for v in read_messages(tcp, 5) {
+        assert!(v.get("robot").is_none(), "a silent controller's robot: {v}");
+    }
     let _ = Command::new("kill")
         .args(["-TERM", &daemon.id().to_string()])
         .status();
     let status = daemon.wait().unwrap();
-    let _ = controller.stop();
     assert!(
         out.status.success(),
         "{}\n{}",

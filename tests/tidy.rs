@@ -9,7 +9,11 @@
 //!   from the binary's and the pipeline's trees without their features;
 //! - `unsafe` is allowed in the quarantined modules only;
 //! - every module opens with a `//!` comment saying what it owns;
-//! - no document of the repository points outside it (`../shared`).
+//! - no document of the repository points outside it (`../shared`);
+//! - no Rust Debug text reaches a user: the sources of the binary and of
+//!   every library (their code before `#[cfg(test)]`) format no value with
+//!   `{:?}` and log no tracing field with `?` (Debug); values are named
+//!   and printed with their units.
 
 mod common;
 
@@ -280,6 +284,62 @@ fn no_document_points_outside_the_repository() {
     assert!(
         found.is_empty(),
         "pointers outside the repository:\n{}",
+        found.join("\n")
+    );
+}
+
+/// Where a line of code formats a value as Rust Debug text: `{:?}`,
+/// `{x:?}`, `{:#?}` or a tracing field recorded with `?`.
+fn debug_formatting(code: &str) -> bool {
+    let b = code.as_bytes();
+    let format_spec = b.windows(3).any(|w| w == b":?}") || b.windows(4).any(|w| w == b":#?}");
+    // `?field` or `name = ?value` in a tracing macro's field list.
+    let tracing_field = code.trim_start().starts_with('?')
+        || ["(?", ", ?", "= ?"].iter().any(|p| {
+            code.match_indices(p).any(|(i, _)| {
+                code[i + p.len()..]
+                    .chars()
+                    .next()
+                    .is_some_and(|c| c.is_ascii_lowercase() || c == '_')
+            })
+        });
+    format_spec || tracing_field
+}
+
+#[test]
+fn no_rust_debug_text_reaches_users() {
+    assert!(debug_formatting(r#"format!("{x:?}")"#));
+    assert!(debug_formatting(r#"tracing::debug!(?exit, "joined")"#));
+    assert!(debug_formatting(
+        r#"tracing::info!(threads = ?threads, "x")"#
+    ));
+    assert!(!debug_formatting(r#"let v = f(x)?; let w = g()?;"#));
+    assert!(!debug_formatting(r#"tracing::info!(error = %e, "x")"#));
+    let mut files = Vec::new();
+    rust_files(&root().join("src"), &mut files);
+    if let Ok(crates) = std::fs::read_dir(root().join("crates")) {
+        for c in crates.flatten() {
+            rust_files(&c.path().join("src"), &mut files);
+        }
+    }
+    let mut found = Vec::new();
+    for f in &files {
+        if f.file_name().is_some_and(|n| n == "tests.rs") {
+            continue; // a test module of its own
+        }
+        let text = std::fs::read_to_string(f).unwrap();
+        for (k, line) in text.lines().enumerate() {
+            if line.trim_start().starts_with("#[cfg(test)]") {
+                break;
+            }
+            if debug_formatting(code(line)) {
+                found.push(format!("{}:{}: {}", f.display(), k + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "Rust Debug text in what users see (name the value and its unit instead):\n{}",
         found.join("\n")
     );
 }

@@ -160,8 +160,7 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             if det.status != FrameStatus::Normal {
                 unreadable.push(Skipped {
                     image: name,
-                    reason: format!("test field not found: the frame is {:?}", det.status)
-                        .to_lowercase(),
+                    reason: format!("test field not found: the frame is {}", det.status.name()),
                 });
                 return Ok(());
             }

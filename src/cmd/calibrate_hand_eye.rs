@@ -280,9 +280,10 @@ fn locate(
         (PoseStatus::TooFewTargets { coded }, _) => Err(format!(
             "{name}: too few targets: {coded} coded targets identified, a pose needs 4"
         )),
-        (PoseStatus::Frame(status), _) => {
-            Err(format!("{name}: no targets: the frame is {status:?}"))
-        }
+        (PoseStatus::Frame(status), _) => Err(format!(
+            "{name}: no targets: the frame is {}",
+            status.name()
+        )),
         (PoseStatus::NoPose(e), _) => Err(format!("{name}: {e}")),
         (PoseStatus::Ok, None) => Err(format!("{name}: no pose")),
     }

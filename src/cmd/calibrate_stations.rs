@@ -57,11 +57,13 @@ fn sample(l: &photopose_stream::PoseLine) -> Option<Sample> {
     if l.has_pose() != Some(true) {
         return None;
     }
-    let (c, r, sc, sr) = (l.center?, l.rotation?, l.std_center?, l.std_rotation_deg?);
+    let p = l.pose.as_ref()?;
+    let (c, r) = (p.position_mm, p.rotation_field_to_camera);
+    let (sc, sr) = (p.std_position_mm?, p.std_rotation_deg?);
     let r = photopose_geometry::Matrix3::from_fn(|i, j| r[i][j]);
     Some(Sample {
-        time_s: l.camera_time_ns? as f64 / 1e9,
-        robot_xyzabc: l.robot_xyzabc?,
+        time_s: l.time_utc_ns()? as f64 / 1e9,
+        robot_xyzabc: l.robot.as_ref()?.xyzabc_mm_deg,
         camera: photopose_geometry::pose::camera_pose(&photopose_geometry::Exterior::new(
             r,
             photopose_geometry::Vector3::from(c),
@@ -189,12 +191,12 @@ fn gather(
         if let Some(row) = gatherer.push(s) {
             writeln!(out, "{}", row.csv_line()?)?;
             out.flush()?;
+            let [x, y, z, a, b, c] = row.robot_xyzabc;
             status.suspend(|| {
                 outln!(
-                    "station {} of {}: robot {:?}",
+                    "station {} of {}: robot X {x:.3} Y {y:.3} Z {z:.3} mm, A {a:.4} B {b:.4} C {c:.4} deg",
                     row.name,
-                    args.count,
-                    row.robot_xyzabc
+                    args.count
                 )
             })?;
         }

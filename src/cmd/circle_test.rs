@@ -357,15 +357,16 @@ pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSum
         if !has_pose {
             continue;
         }
-        let (Some(c), Some(r)) = (l.center, l.rotation) else {
-            bail!("{at}: a pose line without \"center\" and \"rotation\"");
+        let Some(p) = &l.pose else {
+            bail!("{at}: a pose line without \"pose\"");
         };
+        let (c, r) = (p.position_mm, p.rotation_field_to_camera);
         let r = Matrix3::from_fn(|i, j| r[i][j]);
-        if !c.iter().all(|v| v.is_finite()) {
-            bail!("{at}: \"center\" {c:?} is not finite");
+        if let Some(v) = c.iter().find(|v| !v.is_finite()) {
+            bail!("{at}: \"pose.position_mm\" has {v}, not a finite number");
         }
         if !rotation::is_rotation(&r, 1e-6) {
-            bail!("{at}: \"rotation\" is not a rotation matrix");
+            bail!("{at}: \"pose.rotation_field_to_camera\" is not a rotation matrix");
         }
         out.push(camera_pose(&Exterior::new(r, Vector3::from(c))));
         summary.used += 1;

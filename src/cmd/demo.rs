@@ -180,16 +180,16 @@ pub fn run(args: Args) -> Result<ExitCode> {
             let p50 = c.latency_quantile_us(0.5).unwrap_or(f64::NAN) / 1000.0;
             let rsi = c.rsi.as_ref().map(|r| r.snapshot());
             let pose = last.as_ref().map_or(String::from("-"), |v| {
-                let n = |k: &str, i: usize| v[k][i].as_f64().unwrap_or(f64::NAN);
+                let n = |k: &str, i: usize| v["pose"][k][i].as_f64().unwrap_or(f64::NAN);
                 format!(
                     "centre ({:8.3} {:8.3} {:7.3}) ± ({:.3} {:.3} {:.3}) mm, {} targets",
-                    n("center", 0),
-                    n("center", 1),
-                    n("center", 2),
-                    n("std_center", 0),
-                    n("std_center", 1),
-                    n("std_center", 2),
-                    v["n_targets"]
+                    n("position_mm", 0),
+                    n("position_mm", 1),
+                    n("position_mm", 2),
+                    n("std_position_mm", 0),
+                    n("std_position_mm", 1),
+                    n("std_position_mm", 2),
+                    v["pose"]["n_targets"]
                 )
             });
             let line = format!(

@@ -9,6 +9,7 @@ use clap::Parser;
 use photopose_field::Field;
 use photopose_geometry::{Camera, Observation, Resection, ResectionOptions, ResectionReport};
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
+use photopose_stream::PoseEstimate;
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
@@ -42,35 +43,29 @@ pub struct Args {
     pub critical: f64,
 }
 
-/// One line of output for a successful resection (keys fixed by the CLI contract).
+/// One line of output for a successful resection: the pose object of the
+/// pose message (`photopose.pose.v2`, docs/streams.md) under the same key
+/// and names, plus what only a resection reports.
 #[derive(Serialize)]
 pub struct PoseLine<'a> {
     /// The input path.
     pub image: &'a str,
     /// Always true here.
     pub ok: bool,
-    /// Projection centre, mm.
-    pub center: [f64; 3],
-    /// `R`, object → camera.
-    pub rotation: [[f64; 3]; 3],
-    /// σ of the centre, mm.
-    pub std_center: [f64; 3],
-    /// σ of the rotations about the field's X, Y, Z axes, degrees.
-    pub std_rotation_deg: [f64; 3],
-    /// A-posteriori σ0 of an image coordinate, px.
-    pub sigma0_px: f64,
+    /// The frame the pose is given in (the field's), as in the message.
+    pub frame_id: &'static str,
+    /// The camera's pose in the field frame with the adjustment's full
+    /// covariance, exactly as the pose message carries it.
+    pub pose: PoseEstimate,
     /// RMS image-coordinate residual, px.
     pub rms_px: f64,
-    /// Points used.
-    pub n_points: usize,
-    /// Points rejected.
+    /// Points rejected by data snooping.
     pub n_rejected: usize,
     /// Ids rejected.
     pub rejected_ids: &'a [u64],
-    /// Camera pose in the field as KUKA `X, Y, Z, A, B, C` (mm, degrees; `M = Rᵀ`).
-    pub pose_xyzabc: [f64; 6],
-    /// Unit quaternion `(w, x, y, z)` of `R`.
-    pub quaternion_wxyz: [f64; 4],
+    /// The camera's pose in the field as KUKA `X, Y, Z` (mm), `A, B, C`
+    /// (degrees), `M = Rᵀ`.
+    pub camera_xyzabc_mm_deg: [f64; 6],
     /// Iterations of the final adjustment.
     pub iterations: usize,
     /// Closed-form hypotheses tried.
@@ -80,28 +75,15 @@ pub struct PoseLine<'a> {
 impl<'a> PoseLine<'a> {
     /// The output line of a report.
     pub fn new(image: &'a str, r: &ResectionReport, rejected_ids: &'a [u64]) -> Self {
-        let e = &r.exterior;
-        let rot = e.rotation;
-        let q = photopose_geometry::rotation::quaternion_wxyz_from_matrix(&rot)
-            .unwrap_or([f64::NAN; 4]);
         PoseLine {
             image,
             ok: true,
-            center: [e.center.x, e.center.y, e.center.z],
-            rotation: [
-                [rot[(0, 0)], rot[(0, 1)], rot[(0, 2)]],
-                [rot[(1, 0)], rot[(1, 1)], rot[(1, 2)]],
-                [rot[(2, 0)], rot[(2, 1)], rot[(2, 2)]],
-            ],
-            std_center: r.std_center().into(),
-            std_rotation_deg: r.std_rotation_deg().into(),
-            sigma0_px: r.sigma0_px,
+            frame_id: photopose_stream::message::FIELD_FRAME,
+            pose: photopose_pipeline::sink::pose_estimate(r),
             rms_px: r.rms_px,
-            n_points: r.n_points,
             n_rejected: r.n_rejected,
             rejected_ids,
-            pose_xyzabc: e.to_kuka_pose(),
-            quaternion_wxyz: q,
+            camera_xyzabc_mm_deg: r.exterior.to_kuka_pose(),
             iterations: r.iterations,
             hypotheses: r.hypotheses,
         }
@@ -230,9 +212,10 @@ fn locate_image(
         (PoseStatus::TooFewTargets { coded }, _) => Err(format!(
             "{name}: too few targets: {coded} coded targets identified, a first pose needs 4"
         )),
-        (PoseStatus::Frame(status), _) => {
-            Err(format!("{name}: no targets: the frame is {status:?}"))
-        }
+        (PoseStatus::Frame(status), _) => Err(format!(
+            "{name}: no targets: the frame is {}",
+            status.name()
+        )),
         (PoseStatus::NoPose(e), _) => Err(format!("{name}: {e}")),
         (PoseStatus::Ok, None) => Err(format!("{name}: no pose")),
     }

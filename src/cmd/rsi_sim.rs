@@ -60,7 +60,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let mode = match args.mode.as_str() {
         "relative" => CorrectionMode::Relative,
         "absolute" => CorrectionMode::Absolute,
-        other => anyhow::bail!("--mode {other:?}: must be relative or absolute"),
+        other => anyhow::bail!("--mode '{other}': must be relative or absolute"),
     };
     let sen = match &args.ethernet_config {
         Some(p) => {

@@ -122,3 +122,88 @@ pub fn metric(body: &str, name: &str) -> Option<f64> {
         .parse()
         .ok()
 }
+
+/// The pose message's JSON Schema (`docs/schema/pose-message.v2.json`),
+/// compiled once per test binary.
+fn pose_schema() -> &'static jsonschema::Validator {
+    static SCHEMA: std::sync::OnceLock<jsonschema::Validator> = std::sync::OnceLock::new();
+    SCHEMA.get_or_init(|| {
+        let text = std::fs::read_to_string(root().join("docs/schema/pose-message.v2.json"))
+            .expect("the pose message's schema");
+        let schema: serde_json::Value = serde_json::from_str(&text).expect("the schema is JSON");
+        jsonschema::draft202012::new(&schema).expect("the schema compiles")
+    })
+}
+
+/// Checks one pose message (`photopose.pose.v2`) against the JSON Schema
+/// and, when it has a pose, its covariance: 36 numbers, symmetric and
+/// positive definite (a Cholesky factorisation succeeds), with the
+/// standard deviations of its diagonal.
+pub fn check_pose_message(v: &serde_json::Value) {
+    let errors: Vec<String> = pose_schema()
+        .iter_errors(v)
+        .map(|e| format!("{e} at {}", e.instance_path()))
+        .collect();
+    assert!(errors.is_empty(), "schema violations {errors:?} in {v}");
+    if let Some(pose) = v.get("pose").filter(|p| !p.is_null()) {
+        check_pose_object(pose);
+    }
+}
+
+/// Checks the `pose` object of a message or a `resect` line: the
+/// covariance is symmetric and positive definite and its diagonal gives
+/// the standard deviations.
+pub fn check_pose_object(pose: &serde_json::Value) {
+    let c = covariance(pose);
+    for i in 0..6 {
+        for j in 0..6 {
+            let (a, b) = (c[(i, j)], c[(j, i)]);
+            assert!(a == b, "covariance not symmetric at ({i}, {j}): {a} vs {b}");
+        }
+    }
+    assert!(
+        nalgebra::Cholesky::new(c).is_some(),
+        "covariance not positive definite: {c}"
+    );
+    let std = |key: &str, k: usize| pose[key][k].as_f64().unwrap();
+    for k in 0..3 {
+        let s = c[(k, k)].sqrt();
+        assert!((std("std_position_mm", k) - s).abs() <= 1e-12 * s, "σ {k}");
+        let r = c[(k + 3, k + 3)].sqrt().to_degrees();
+        assert!(
+            (std("std_rotation_deg", k) - r).abs() <= 1e-12 * r,
+            "σ rot {k}"
+        );
+    }
+}
+
+/// The 6×6 covariance of a `pose` object (row-major on the wire).
+pub fn covariance(pose: &serde_json::Value) -> nalgebra::Matrix6<f64> {
+    let flat: Vec<f64> = pose["covariance"]
+        .as_array()
+        .expect("a covariance array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect();
+    assert_eq!(flat.len(), 36, "the covariance has 36 numbers");
+    nalgebra::Matrix6::from_row_slice(&flat)
+}
+
+/// A pose message without what differs between two runs over the same
+/// frames: the sending instants and the host's monotonic stamps.
+pub fn without_run_times(mut v: serde_json::Value) -> serde_json::Value {
+    if let Some(t) = v.get_mut("time").and_then(|t| t.as_object_mut()) {
+        for k in [
+            "sent_utc_ns",
+            "sent_mono_ns",
+            "handover_mono_ns",
+            "exposure_mono_ns",
+        ] {
+            t.remove(k);
+        }
+    }
+    if let Some(r) = v.get_mut("robot").and_then(|r| r.as_object_mut()) {
+        r.remove("age_ms");
+    }
+    v
+}

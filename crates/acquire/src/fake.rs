@@ -33,7 +33,7 @@ pub enum FakeError {
     #[error("the fake camera serves Mono8 images only")]
     NotMono8,
     /// The image differs in size from the one the camera was started with.
-    #[error("image is {got:?}, the camera serves {want:?}")]
+    #[error("image is {}×{} px, the camera serves {}×{} px", got.0, got.1, want.0, want.1)]
     Size {
         /// Camera's (width, height).
         want: (u32, u32),

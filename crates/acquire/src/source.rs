@@ -18,7 +18,7 @@ use thiserror::Error;
 #[non_exhaustive]
 pub enum SourceError {
     /// No frame within the timeout; the source is alive: call again.
-    #[error("no frame within {0:?}")]
+    #[error("no frame within {} ms", .0.as_millis())]
     Timeout(Duration),
     /// The camera was lost just now (returned once per loss); the source
     /// reconnects by itself: call again.

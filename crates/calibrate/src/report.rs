@@ -264,7 +264,8 @@ impl Report {
                 im.image, im.n_used, im.rms_px
             );
             if !im.rejected_ids.is_empty() {
-                let _ = write!(s, ", rejected {:?}", im.rejected_ids);
+                let ids: Vec<String> = im.rejected_ids.iter().map(u64::to_string).collect();
+                let _ = write!(s, ", rejected ids {}", ids.join(", "));
             }
             let _ = writeln!(s);
         }

@@ -263,14 +263,14 @@ fn check_record(c: &CalibrationRecord) -> Result<(), String> {
     for (k, name) in c.fixed.iter().enumerate() {
         if !PARAMETERS.iter().any(|(p, _)| p == name) {
             return Err(format!(
-                "calibration.fixed[{k}] = {name:?} is not a camera parameter (c, x0, y0, k1, k2, k3, p1, p2, b1, b2)"
+                "calibration.fixed[{k}] = \"{name}\" is not a camera parameter (c, x0, y0, k1, k2, k3, p1, p2, b1, b2)"
             ));
         }
     }
     for (k, input) in c.inputs.iter().enumerate() {
         if !provenance::is_sha256_hex(&input.sha256) {
             return Err(format!(
-                "calibration.inputs[{k}].sha256 = {:?} must be 64 hex digits",
+                "calibration.inputs[{k}].sha256 = \"{}\" must be 64 hex digits",
                 input.sha256
             ));
         }
@@ -354,22 +354,22 @@ pub fn load_camera_file(path: &Path) -> Result<CameraFile, FormatError> {
 pub fn camera_to_toml(cam: &Camera) -> String {
     let d = &cam.distortion;
     format!(
-        "[sensor]\nwidth = {}          # px\nheight = {}         # px\npixel_size = {:?}   # mm\n\n\
-         [interior]\nc = {:?}              # principal distance, mm\nx0 = {:?}             # principal point, mm from the image centre\ny0 = {:?}\n\n\
-         [distortion]          # Brown/Fraser parameters, mm-based\nk1 = {:?}\nk2 = {:?}\nk3 = {:?}\np1 = {:?}\np2 = {:?}\nb1 = {:?}\nb2 = {:?}\n",
+        "[sensor]\nwidth = {}          # px\nheight = {}         # px\npixel_size = {}   # mm\n\n\
+         [interior]\nc = {}              # principal distance, mm\nx0 = {}             # principal point, mm from the image centre\ny0 = {}\n\n\
+         [distortion]          # Brown/Fraser parameters, mm-based\nk1 = {}\nk2 = {}\nk3 = {}\np1 = {}\np2 = {}\nb1 = {}\nb2 = {}\n",
         cam.sensor.width,
         cam.sensor.height,
-        cam.sensor.pixel_size,
-        cam.interior.c,
-        cam.interior.x0,
-        cam.interior.y0,
-        d.k1,
-        d.k2,
-        d.k3,
-        d.p1,
-        d.p2,
-        d.b1,
-        d.b2
+        toml_float(cam.sensor.pixel_size),
+        toml_float(cam.interior.c),
+        toml_float(cam.interior.x0),
+        toml_float(cam.interior.y0),
+        toml_float(d.k1),
+        toml_float(d.k2),
+        toml_float(d.k3),
+        toml_float(d.p1),
+        toml_float(d.p2),
+        toml_float(d.b1),
+        toml_float(d.b2)
     )
 }
 
@@ -392,16 +392,16 @@ pub fn camera_file_to_toml(file: &CameraFile) -> String {
          tool = {}\n\
          images = {}\n\
          observations = {}    # image points used\n\
-         sigma0_px = {:?}     # a-posteriori σ0 of an image coordinate, px\n\
-         sigma0_mm = {:?}     # the same, mm\n\
+         sigma0_px = {}     # a-posteriori σ0 of an image coordinate, px\n\
+         sigma0_mm = {}     # the same, mm\n\
          fixed = [{}]         # held at their initial value\n\
          \n[calibration.std]     # a-posteriori standard deviations, units of the parameters\n",
         toml_string(&c.date),
         toml_string(&c.tool),
         c.images,
         c.observations,
-        c.sigma0_px,
-        c.sigma0_mm,
+        toml_float(c.sigma0_px),
+        toml_float(c.sigma0_mm),
         c.fixed
             .iter()
             .map(|f| toml_string(f))
@@ -410,7 +410,7 @@ pub fn camera_file_to_toml(file: &CameraFile) -> String {
     );
     for ((name, unit), v) in PARAMETERS.iter().zip(c.std.values()) {
         if let Some(v) = v {
-            let _ = writeln!(s, "{name} = {v:?}   # {unit}");
+            let _ = writeln!(s, "{name} = {}   # {unit}", toml_float(*v));
         }
     }
     for input in &c.inputs {
@@ -422,6 +422,20 @@ pub fn camera_file_to_toml(file: &CameraFile) -> String {
         );
     }
     s
+}
+
+/// A number as a TOML float that reads back to the same `f64`: the
+/// shortest round-trip digits, with a `.0` where they would read as an
+/// integer.
+pub(crate) fn toml_float(v: f64) -> String {
+    let s = v.to_string();
+    if v.is_finite() && !s.contains(['.', 'e', 'E']) {
+        s + ".0"
+    } else if v.is_nan() {
+        "nan".into()
+    } else {
+        s
+    }
 }
 
 #[cfg(test)]

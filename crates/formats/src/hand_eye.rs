@@ -161,7 +161,7 @@ pub fn load_hand_eye(path: &Path) -> Result<HandEyeFile, FormatError> {
 }
 
 fn list(v: &[f64; 6]) -> String {
-    let items: Vec<String> = v.iter().map(|x| format!("{x:?}")).collect();
+    let items: Vec<String> = v.iter().map(|x| crate::camera::toml_float(*x)).collect();
     format!("[{}]", items.join(", "))
 }
 
@@ -180,8 +180,11 @@ pub fn hand_eye_to_toml(f: &HandEyeFile) -> String {
     s += &format!("std_xyzabc = {}\n", list(&f.plate_in_base.std_xyzabc));
     if let Some(fit) = &f.fit {
         s += &format!(
-            "[fit]\nstations = {}\nsigma0 = {:?}\nrms_mm = {:?}\nrms_deg = {:?}\n",
-            fit.stations, fit.sigma0, fit.rms_mm, fit.rms_deg
+            "[fit]\nstations = {}\nsigma0 = {}\nrms_mm = {}\nrms_deg = {}\n",
+            fit.stations,
+            crate::camera::toml_float(fit.sigma0),
+            crate::camera::toml_float(fit.rms_mm),
+            crate::camera::toml_float(fit.rms_deg)
         );
     }
     s

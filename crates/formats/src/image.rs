@@ -506,7 +506,14 @@ fn png_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, Fo
         return Err(FormatError::UnsupportedImage {
             origin: origin.into(),
             what: format!(
-                "PNG colour type {colour:?}; only greyscale images are read (convert to grey first)"
+                "PNG colour type {}; only greyscale images are read (convert to grey first)",
+                match colour {
+                    png::ColorType::Grayscale => "grey",
+                    png::ColorType::Rgb => "RGB",
+                    png::ColorType::Indexed => "indexed (palette)",
+                    png::ColorType::GrayscaleAlpha => "grey with alpha",
+                    png::ColorType::Rgba => "RGBA",
+                }
             ),
         });
     }
@@ -522,7 +529,7 @@ fn png_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, Fo
     if !matches!(depth, png::BitDepth::Eight | png::BitDepth::Sixteen) {
         return Err(FormatError::UnsupportedImage {
             origin: origin.into(),
-            what: format!("PNG bit depth {depth:?}"),
+            what: format!("PNG bit depth {} bits per sample", depth as u8),
         });
     }
     limits.check(width, height, origin)?;
@@ -553,7 +560,7 @@ fn png_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, Fo
         other => {
             return Err(FormatError::UnsupportedImage {
                 origin: origin.into(),
-                what: format!("PNG bit depth {other:?}"),
+                what: format!("PNG bit depth {} bits per sample", other as u8),
             })
         }
     };
@@ -736,7 +743,7 @@ mod tests {
         w.finish().unwrap();
         let e = decode_image(&bytes, "colour.png").unwrap_err().to_string();
         assert!(
-            e.starts_with("colour.png: unsupported image: PNG colour type Rgb"),
+            e.starts_with("colour.png: unsupported image: PNG colour type RGB;"),
             "{e}"
         );
     }
@@ -763,7 +770,7 @@ mod tests {
         w.write_image_data(&[0, 1, 0, 2]).unwrap();
         w.finish().unwrap();
         let e = decode_image(&bytes, "ga.png").unwrap_err().to_string();
-        assert!(e.contains("GrayscaleAlpha"), "{e}");
+        assert!(e.contains("colour type grey with alpha"), "{e}");
     }
 
     #[test]

@@ -13,10 +13,11 @@
 //! - either `image`: a frame taken at the station (path relative to the
 //!   station file), from which photopose measures the camera pose;
 //! - or `cam_x … cam_c`: the camera pose in the plate as photopose reports
-//!   it (`pose_xyzabc` of `photopose resect`: the projection centre and
-//!   `A, B, C` of `Rᵀ`), with optionally `cam_std_x … cam_std_z` (mm) and
-//!   `cam_std_rx … cam_std_rz` (degrees, rotations about the plate's axes:
-//!   `std_center` and `std_rotation_deg` of `photopose resect`).
+//!   it (`camera_xyzabc_mm_deg` of `photopose resect`: the projection
+//!   centre and `A, B, C` of `Rᵀ`), with optionally `cam_std_x … cam_std_z`
+//!   (mm) and `cam_std_rx … cam_std_rz` (degrees, rotations about the
+//!   plate's axes: `pose.std_position_mm` and `pose.std_rotation_deg` of
+//!   `photopose resect`).
 //!
 //! Only `station` and the six `robot_*` columns are required in the header;
 //! the others may be left out (all of a group or none). An unknown column is

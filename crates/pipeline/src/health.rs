@@ -142,7 +142,8 @@ impl Watchdog {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&stop);
         let tick = interval.map_or(STATUS_EVERY, |i| (i / 2).max(Duration::from_millis(10)));
-        tracing::debug!(tick_ms = tick.as_millis() as u64, threads = ?threads, "watchdog started");
+        let watched: Vec<&str> = threads.roles().collect();
+        tracing::debug!(tick_ms = tick.as_millis() as u64, threads = %watched.join(", "), "watchdog started");
         let handle = std::thread::Builder::new()
             .name("watchdog".into())
             .spawn(move || {

@@ -6,14 +6,13 @@ use crate::health::{Heartbeat, Threads, Watchdog};
 use crate::notify::Notifier;
 use crate::result::{CameraId, PoseResult, ResultStatus, TargetPool};
 use crate::sink::{Outgoing, Sinks};
-use crate::source::host_time_ns;
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender};
 use photopose_acquire::ring::RecvError;
 use photopose_acquire::{spawn_grabber_counted, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
 use photopose_geometry::Camera;
 use photopose_locate::{LocateOptions, Locator};
-use photopose_stream::{Edge, PoseMessage, PoseStatus};
+use photopose_stream::{Edge, PoseMessage};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -458,7 +457,12 @@ impl Pipeline {
             // Ending the grabber drops the ring's producer: the workers
             // finish the queued frames, then the output drains.
             let (_source, exit) = g.join();
-            tracing::debug!(?exit, "grabber joined");
+            let why = match &exit {
+                photopose_acquire::GrabberExit::Stopped => "stopped".to_string(),
+                photopose_acquire::GrabberExit::Ended => "the source ended".to_string(),
+                photopose_acquire::GrabberExit::Failed(e) => e.to_string(),
+            };
+            tracing::debug!(exit = %why, "grabber joined");
         }
         for t in self.threads {
             let _ = t.join();
@@ -601,19 +605,23 @@ fn output_loop(
                     next += 1;
                     if let Outcome::Message { result, .. } = o {
                         let mut message = crate::sink::message(&result);
-                        crate::sink::annotate(&mut message, sinks.rsi.as_deref());
+                        crate::sink::annotate(
+                            &mut message,
+                            sinks.rsi.as_deref(),
+                            sinks.rsi_silence,
+                        );
                         let latency = result.times.handover.elapsed();
-                        message.latency_us = latency.as_secs_f64() * 1e6;
                         counters.latency.record(latency);
                         if result.status == ResultStatus::Ok {
                             counters.poses_ok.inc();
                         } else {
                             counters.poses_failed.inc();
                         }
+                        let pose = message.pose.as_ref();
                         counters.record_pose(
-                            message.sigma0_px,
-                            message.n_targets,
-                            message.std_center,
+                            pose.map(|p| p.sigma0_px),
+                            pose.map_or(0, |p| p.n_targets),
+                            pose.map(|p| p.std_position_mm),
                         );
                         emit(Some(&result), &message, &mut sinks);
                         last_message = Some(message);
@@ -622,13 +630,13 @@ fn output_loop(
                 }
             }
             Err(RecvTimeoutError::Timeout) => {
-                if let Some(m) = last_message.as_mut() {
+                if let Some(m) = last_message.as_ref() {
                     if last_sent.elapsed() >= max_age && !stop.load(Ordering::Acquire) {
-                        // No fresh pose: say so, keep the last pose's data.
-                        let mut s = *m;
-                        s.status = PoseStatus::Stale;
-                        s.host_time_ns = host_time_ns();
-                        crate::sink::annotate(&mut s, sinks.rsi.as_deref());
+                        // No fresh pose: say so, without a frame of its own
+                        // (seq null), the last frame's pose and times kept
+                        // and named by last_seq.
+                        let mut s = PoseMessage::stale(&m.camera, Some(m));
+                        crate::sink::annotate(&mut s, sinks.rsi.as_deref(), sinks.rsi_silence);
                         emit(None, &s, &mut sinks);
                         counters.stale.inc();
                         last_sent = Instant::now();

@@ -85,10 +85,10 @@ fn poses_from_rendered_frames_over_gige_agree_with_the_truth() {
             assert!(last_seq.is_none_or(|l| seq > l), "frames in order");
             last_seq = Some(seq);
             assert!(
-                v["camera_time_ns"].as_u64().unwrap() > 0,
+                v["time"]["camera_clock_ns"].as_u64().unwrap() > 0,
                 "camera timestamp kept"
             );
-            let c: Vec<f64> = v["center"]
+            let c: Vec<f64> = v["pose"]["position_mm"]
                 .as_array()
                 .unwrap()
                 .iter()

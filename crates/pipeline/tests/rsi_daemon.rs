@@ -73,10 +73,16 @@ fn the_daemon_answers_the_controller_and_flags_its_poses() {
     while flagged < 10 {
         let n = poses.recv(&mut buf).expect("pose messages");
         let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
-        if v["status"] == "ok" {
-            // Measure-only: the correction's state is said in every pose.
-            assert_eq!(v["rsi"], "measure_only", "{v}");
-            flagged += 1;
+        // Once the controller has sent its actual pose, every message
+        // carries the robot with its IPOC and the correction's state:
+        // measure-only.
+        if let Some(robot) = v.get("robot") {
+            assert_eq!(robot["correction"], "measure_only", "{v}");
+            assert!(robot["ipoc"].as_u64().is_some(), "{v}");
+            assert_eq!(robot["xyzabc_mm_deg"].as_array().unwrap().len(), 6, "{v}");
+            if v["status"] == "ok" {
+                flagged += 1;
+            }
         }
     }
     let report = controller.join().unwrap();

@@ -108,13 +108,13 @@ fn poses_stream_in_order_and_agree_with_the_truth() {
         assert_eq!(v["status"], "ok", "{v}");
         let seq = v["seq"].as_u64().unwrap();
         let truth = SyntheticSource::pose_at(&syn, seq);
-        let c: Vec<f64> = v["center"]
+        let c: Vec<f64> = v["pose"]["position_mm"]
             .as_array()
             .unwrap()
             .iter()
             .map(|x| x.as_f64().unwrap())
             .collect();
-        let s: Vec<f64> = v["std_center"]
+        let s: Vec<f64> = v["pose"]["std_position_mm"]
             .as_array()
             .unwrap()
             .iter()
@@ -129,7 +129,12 @@ fn poses_stream_in_order_and_agree_with_the_truth() {
                 s[k]
             );
         }
-        assert!(v["latency_us"].as_f64().unwrap() > 0.0);
+        let t = &v["time"];
+        let sent = t["sent_mono_ns"].as_u64().unwrap();
+        assert!(sent > 0, "{t}");
+        if let Some(handover) = t["handover_mono_ns"].as_u64() {
+            assert!(sent > handover, "sent after the hand-over: {t}");
+        }
     }
 }
 
@@ -209,13 +214,17 @@ fn tracked_frames_give_the_whole_frame_poses() {
         assert_eq!(a["seq"], b["seq"]);
         assert_eq!(a["status"], "ok", "{a}");
         assert_eq!(b["status"], "ok", "{b}");
-        assert_eq!(a["n_targets"], b["n_targets"], "seq {}", a["seq"]);
+        assert_eq!(
+            a["pose"]["n_targets"], b["pose"]["n_targets"],
+            "seq {}",
+            a["seq"]
+        );
         for k in 0..3 {
             let (pa, pb) = (
-                a["center"][k].as_f64().unwrap(),
-                b["center"][k].as_f64().unwrap(),
+                a["pose"]["position_mm"][k].as_f64().unwrap(),
+                b["pose"]["position_mm"][k].as_f64().unwrap(),
             );
-            let s = a["std_center"][k].as_f64().unwrap();
+            let s = a["pose"]["std_position_mm"][k].as_f64().unwrap();
             // Tracked frames use the threshold of the last whole-frame pass;
             // the whole frame its own Otsu level, which moves by a grey
             // level from frame to frame and the pose by up to about 0.7 σ
@@ -272,4 +281,94 @@ fn frames_carry_their_exposure_and_arrive_after_the_transfer() {
         );
         assert!(m.exposure_utc_ns().is_some_and(|u| u < m.host_time_ns));
     }
+}
+
+#[test]
+fn stale_messages_name_the_last_frame_and_every_output_sends_the_same_bytes() {
+    let udp_rx = UdpSocket::bind("127.0.0.1:0").unwrap();
+    udp_rx
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let cfg = Config::parse(
+        &format!(
+            "[source]\nkind = \"synthetic\"\n[source.synthetic]\nrate_hz = 4.0\nframes = 0\n\
+             [pipeline]\nworkers = 1\nslots = 4\nmax_age_ms = 60.0\n\
+             [output]\nudp = [\"{}\"]\ntcp_listen = \"127.0.0.1:0\"\n",
+            udp_rx.local_addr().unwrap()
+        ),
+        "test",
+    )
+    .unwrap();
+    let Source::Synthetic(syn) = cfg.source.clone() else {
+        panic!("synthetic source expected")
+    };
+    let camera = photopose_formats::default_camera();
+    let field = default_plate();
+    let source = SyntheticSource::new(camera, &field, syn).unwrap();
+    let pipeline = Pipeline::start(&cfg, camera, field, Box::new(source)).unwrap();
+    let tcp = TcpStream::connect(pipeline.tcp_addr().unwrap()).unwrap();
+    tcp.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let mut tcp_lines = BufReader::new(tcp).lines();
+    let mut buf = [0u8; 8192];
+    let mut udp = Vec::new();
+    // Until two frames after the TCP client joined, each followed by stale
+    // messages (bounded: 4 frames/s, a stale message per 60 ms).
+    let mut frames_seen = 0;
+    while frames_seen < 3 && udp.len() < 200 {
+        let n = udp_rx.recv(&mut buf).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
+        if v["status"] != "stale" {
+            frames_seen += 1;
+        }
+        udp.push(buf[..n].to_vec());
+    }
+    pipeline.stop();
+    pipeline.join();
+    let tcp: Vec<Vec<u8>> = tcp_lines
+        .by_ref()
+        .map_while(Result::ok)
+        .map(|l| format!("{l}\n").into_bytes())
+        .collect();
+    let mut last_frame = None;
+    let mut stale = 0;
+    for d in &udp {
+        let v: serde_json::Value = serde_json::from_slice(d).unwrap();
+        assert_eq!(v["schema"], "photopose.pose.v2");
+        if v["status"] == "stale" {
+            stale += 1;
+            assert!(v["seq"].is_null(), "{v}");
+            if let Some(f) = last_frame {
+                assert_eq!(v["last_seq"], f, "{v}");
+            }
+        } else {
+            assert!(v.get("last_seq").is_none(), "{v}");
+            last_frame = Some(v["seq"].as_u64().unwrap());
+        }
+    }
+    assert!(stale >= 2, "{stale} stale messages");
+    // The TCP client joined late and may have missed the first lines, and
+    // read on after the datagrams: every frame's message both got is the
+    // same bytes.
+    let by_seq = |lines: &[Vec<u8>]| -> std::collections::BTreeMap<u64, Vec<u8>> {
+        lines
+            .iter()
+            .filter_map(|l| {
+                let v: serde_json::Value = serde_json::from_slice(l).unwrap();
+                Some((v["seq"].as_u64()?, l.clone()))
+            })
+            .collect()
+    };
+    let (udp, tcp) = (by_seq(&udp), by_seq(&tcp));
+    let mut common = 0;
+    for (seq, line) in &tcp {
+        if let Some(d) = udp.get(seq) {
+            assert_eq!(
+                String::from_utf8_lossy(d),
+                String::from_utf8_lossy(line),
+                "frame {seq}"
+            );
+            common += 1;
+        }
+    }
+    assert!(common >= 1, "no frame on both outputs");
 }

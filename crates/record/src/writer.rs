@@ -149,29 +149,9 @@ pub struct RsiCycle {
     pub clamped: bool,
 }
 
-/// The JSON Schema of the pose message (photopose's own message; the
-/// stream's version 1, see `photopose-stream`).
-const POSE_MESSAGE_SCHEMA: &str = r#"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "photopose.PoseMessage",
-  "type": "object",
-  "properties": {
-    "seq": {"type": "integer"},
-    "camera_time_ns": {"type": "integer"},
-    "host_time_ns": {"type": "integer"},
-    "latency_us": {"type": "number"},
-    "status": {"type": "string"},
-    "center": {"type": "array", "items": {"type": "number"}},
-    "rotation": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
-    "quaternion_wxyz": {"type": "array", "items": {"type": "number"}},
-    "std_center": {"type": "array", "items": {"type": "number"}},
-    "std_rotation_deg": {"type": "array", "items": {"type": "number"}},
-    "sigma0_px": {"type": "number"},
-    "n_targets": {"type": "integer"},
-    "rsi": {"type": "string"},
-    "robot_xyzabc": {"type": "array", "items": {"type": "number"}}
-  }
-}"#;
+/// The JSON Schema of the pose message (`photopose.pose.v2`), the
+/// repository's one copy (`docs/schema/pose-message.v2.json`).
+const POSE_MESSAGE_SCHEMA: &str = include_str!("../../../docs/schema/pose-message.v2.json");
 
 /// A file writer that knows how far it has written (for rotation by size).
 struct Counted {

@@ -284,7 +284,7 @@ impl RsiConfig {
         let ip: IpAddr = host_ip(&self.bind).ok_or_else(|| {
             bad(
                 "bind",
-                format!("{:?}", self.bind),
+                format!("\"{}\"", self.bind),
                 "not an IP address or a host name that resolves",
             )
         })?;
@@ -296,7 +296,7 @@ impl RsiConfig {
                     .ok_or_else(|| {
                         bad(
                             "controllers",
-                            format!("{c:?}"),
+                            format!("\"{c}\""),
                             "not an IP address or a host name that resolves",
                         )
                     })?
@@ -370,7 +370,8 @@ impl RsiConfig {
                 let port = self.port.filter(|p| *p != 0).ok_or_else(|| {
                     bad(
                         "port",
-                        format!("{:?}", self.port),
+                        self.port
+                            .map_or_else(|| "(not set)".to_string(), |p| p.to_string()),
                         "set a port (or ethernet_config)",
                     )
                 })?;
@@ -383,7 +384,7 @@ impl RsiConfig {
                     if !is_xml_name(v.as_bytes()) {
                         return Err(bad(
                             key,
-                            format!("{v:?}"),
+                            format!("\"{v}\""),
                             "must be an XML name (a letter or '_', then letters, digits, '_', '-', '.')",
                         ));
                     }

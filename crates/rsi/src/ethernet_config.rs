@@ -31,7 +31,7 @@ pub enum EthernetConfigError {
         key: &'static str,
     },
     /// A value that does not parse.
-    #[error("RSI_EthernetConfig.xml line {line}: bad {key} {value:?}")]
+    #[error("RSI_EthernetConfig.xml line {line}: bad {key} \"{value}\"")]
     BadValue {
         /// The key or attribute.
         key: &'static str,
@@ -42,7 +42,7 @@ pub enum EthernetConfigError {
     },
     /// A name the reply would carry (SENTYPE, a RECEIVE element or
     /// attribute) that is not an XML name.
-    #[error("RSI_EthernetConfig.xml line {line}: {key} {value:?} is not an XML name (a letter or '_', then letters, digits, '_', '-', '.')")]
+    #[error("RSI_EthernetConfig.xml line {line}: {key} \"{value}\" is not an XML name (a letter or '_', then letters, digits, '_', '-', '.')")]
     NotAName {
         /// The key or attribute (`SENTYPE`, `TAG`).
         key: &'static str,

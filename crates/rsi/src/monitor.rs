@@ -8,6 +8,7 @@
 
 use photopose_telemetry::{Collect, Counter, Scrape};
 use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
+use std::time::{Duration, Instant};
 
 /// The daemon's one latency histogram (eight buckets per octave, 1 µs to
 /// about 134 s): recording is lock-free and allocation-free.
@@ -71,6 +72,10 @@ pub struct Stats {
     pub rist: [AtomicU64; 6],
     /// Cycles that carried `RIst` (0: none yet).
     pub rist_cycles: AtomicU64,
+    /// The IPOC of the datagram that carried the last `RIst`.
+    pub rist_ipoc: AtomicU64,
+    /// When that datagram arrived: ns after [`epoch`].
+    pub rist_arrival_ns: AtomicU64,
     /// Turns of the server thread's loop (a datagram or a receive timeout
     /// each): the daemon's watchdog checks that it keeps advancing.
     pub loops: AtomicU64,
@@ -84,12 +89,34 @@ impl Stats {
         s
     }
 
-    /// Stores a cycle's `RIst`.
-    pub fn record_rist(&self, pose: &[f64; 6]) {
+    /// Stores a cycle's `RIst` with the IPOC of its datagram and the
+    /// datagram's arrival.
+    pub fn record_rist(&self, ipoc: u64, arrival: Instant, pose: &[f64; 6]) {
         for (a, v) in self.rist.iter().zip(pose) {
             a.store(v.to_bits(), Ordering::Relaxed);
         }
+        self.rist_ipoc.store(ipoc, Ordering::Relaxed);
+        let since = arrival.saturating_duration_since(epoch()).as_nanos();
+        self.rist_arrival_ns
+            .store(u64::try_from(since).unwrap_or(u64::MAX), Ordering::Relaxed);
         self.rist_cycles.fetch_add(1, Ordering::Release);
+    }
+
+    /// The last `RIst` with its IPOC and age at `now`, unless none came yet
+    /// or it is older than `silence` (the controller stopped sending). As
+    /// with [`Stats::robot_pose`], while the robot moves the values may
+    /// come from two consecutive cycles.
+    pub fn robot_reading(&self, now: Instant, silence: Duration) -> Option<RobotReading> {
+        if self.rist_cycles.load(Ordering::Acquire) == 0 {
+            return None;
+        }
+        let arrival = epoch() + Duration::from_nanos(self.rist_arrival_ns.load(Ordering::Relaxed));
+        let age = now.saturating_duration_since(arrival);
+        (age <= silence).then(|| RobotReading {
+            ipoc: self.rist_ipoc.load(Ordering::Relaxed),
+            age,
+            xyzabc: std::array::from_fn(|k| f64::from_bits(self.rist[k].load(Ordering::Relaxed))),
+        })
     }
 
     /// The last `RIst` the controller sent, if any. The six values are read
@@ -135,6 +162,23 @@ impl Stats {
             interarrival_max_us: self.interarrival.max_ns() as f64 / 1000.0,
         }
     }
+}
+
+/// The process-wide origin of the arrival instants kept as ns in [`Stats`].
+pub fn epoch() -> Instant {
+    static EPOCH: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+    *EPOCH.get_or_init(Instant::now)
+}
+
+/// The robot's last reported pose, as [`Stats::robot_reading`] gives it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotReading {
+    /// IPOC of the datagram that carried it.
+    pub ipoc: u64,
+    /// Time since that datagram arrived.
+    pub age: Duration,
+    /// KUKA `X, Y, Z` (mm), `A, B, C` (degrees).
+    pub xyzabc: [f64; 6],
 }
 
 /// A copy of [`Stats`] with the histograms reduced to quantiles (µs, the
@@ -345,6 +389,32 @@ mod tests {
         assert!((500.0..=500.0 * 1.0906).contains(&p50), "{p50}");
         assert!((990.0..=990.0 * 1.0906).contains(&p99), "{p99}");
         assert_eq!(snap.latency_max_us, 999.5);
+    }
+
+    #[test]
+    fn the_robot_reading_has_its_ipoc_and_age_and_expires() {
+        let s = Stats::new();
+        let silence = Duration::from_millis(100);
+        let t0 = epoch() + Duration::from_secs(1);
+        assert_eq!(s.robot_reading(t0, silence), None);
+        let pose = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        s.record_rist(4711, t0, &pose);
+        let r = s
+            .robot_reading(t0 + Duration::from_millis(30), silence)
+            .unwrap();
+        assert_eq!((r.ipoc, r.xyzabc), (4711, pose));
+        assert_eq!(r.age, Duration::from_millis(30));
+        assert_eq!(s.robot_pose(), Some(pose));
+        // Silent longer than the session's timeout: no robot any more.
+        assert_eq!(
+            s.robot_reading(t0 + Duration::from_millis(101), silence),
+            None
+        );
+        // An arrival the reader has not seen yet is not negative.
+        let r = s
+            .robot_reading(t0 - Duration::from_millis(1), silence)
+            .unwrap();
+        assert_eq!(r.age, Duration::ZERO);
     }
 
     #[test]

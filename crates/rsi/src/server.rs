@@ -266,7 +266,7 @@ fn set_fifo(p: u8) -> Result<(), String> {
         ThreadPriority::Crossplatform(value),
         ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
     )
-    .map_err(|e| format!("{e:?}"))
+    .map_err(|e| e.to_string())
 }
 
 #[cfg(not(unix))]
@@ -575,7 +575,7 @@ impl Worker {
             self.first_step = None;
         }
         if let Some(r) = &frame.rist {
-            self.stats.record_rist(r);
+            self.stats.record_rist(frame.ipoc.value(), t_rx, r);
         }
         if let Some(m) = self.slot.read() {
             self.latest = Some(m);

@@ -1,7 +1,7 @@
 //! photopose-stream: how poses leave the daemon.
 //!
-//! One [`PoseMessage`] per frame, encoded as one line of JSON
-//! ([`message`]); sent as one UDP datagram to each configured destination
+//! One [`PoseMessage`] per frame (`photopose.pose.v2`), encoded as one
+//! line of JSON ([`message`], stamped with the host clocks of [`clock`]); sent as one UDP datagram to each configured destination
 //! ([`udp`]) and as a JSON line to every client of a TCP server ([`tcp`]).
 //! The TCP server, like every network edge that serves people and other
 //! programs (also the metrics endpoint, [`http`], and the Foxglove live
@@ -12,6 +12,7 @@
 //!
 //! The formats are documented in `docs/streams.md`.
 
+pub mod clock;
 pub mod edge;
 pub mod http;
 pub mod live;
@@ -23,8 +24,8 @@ pub mod udp;
 pub use edge::{Edge, EdgeHandle};
 pub use http::{HttpLimits, HttpStats, TextEndpoint};
 pub use live::{LiveOptions, LiveSender, LiveServer};
-pub use message::{PoseMessage, PoseStatus};
-pub use read::PoseLine;
+pub use message::{MessageTimes, PoseEstimate, PoseMessage, PoseStatus, RobotState};
+pub use read::{LinePose, LineRobot, LineTimes, PoseLine};
 pub use tcp::{TcpLimits, TcpServer, TcpStats};
 pub use udp::{DestinationStats, UdpSender, UdpStats};
 

@@ -27,8 +27,9 @@ pub const MAX_CLIENTS: usize = 1024;
 /// Lines handed from the output thread to the hub at most at once (the
 /// feed's buffer pool); one pool for all clients.
 const FEED_LINES: usize = 1024;
-/// Initial capacity of a feed buffer: a pose line is about 600 bytes.
-const LINE_CAPACITY: usize = 1024;
+/// Initial capacity of a feed buffer: a pose line is about 1.9 kB with its
+/// 36 covariance numbers, 2.1 kB with the robot's state.
+const LINE_CAPACITY: usize = 4096;
 /// At most one log line per this interval about refused clients.
 const REFUSAL_LOG_INTERVAL: Duration = Duration::from_secs(10);
 

@@ -8,6 +8,25 @@
 use photopose_stream::{Edge, PoseMessage, PoseStatus, TcpLimits, TcpServer};
 use std::time::Duration;
 
+/// A pose at `x` mm along the field's X axis, as a message carries it.
+fn pose(x: f64) -> photopose_stream::PoseEstimate {
+    let mut covariance = [0.0; 36];
+    for k in 0..6 {
+        covariance[k * 7] = 1e-4;
+    }
+    photopose_stream::PoseEstimate {
+        position_mm: [x, 0.0, 1000.0],
+        quaternion_xyzw: [1.0, 0.0, 0.0, 0.0],
+        rotation_field_to_camera: [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+        covariance,
+        covariance_order: photopose_stream::message::COVARIANCE_ORDER,
+        std_position_mm: [0.01; 3],
+        std_rotation_deg: [0.001; 3],
+        sigma0_px: 0.02,
+        n_targets: 230,
+    }
+}
+
 #[global_allocator]
 static GLOBAL: photopose_testkit::CountingAllocator = photopose_testkit::CountingAllocator;
 
@@ -20,9 +39,8 @@ fn publishing_to_the_tcp_stream_allocates_nothing_once_warm() {
         TcpLimits::default(),
     )
     .unwrap();
-    let mut m = PoseMessage::without_pose(1, 2, 3, PoseStatus::Ok);
-    m.center = Some([1.0, 2.0, 1000.0]);
-    m.rotation = Some([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+    let mut m = PoseMessage::new(&std::sync::Arc::from("camera"), 1, PoseStatus::Ok);
+    m.pose = Some(pose(1.0));
     let mut line = Vec::with_capacity(2048);
     m.encode_line(&mut line);
     let publish = |server: &mut TcpServer, n: usize| {

@@ -9,6 +9,25 @@ use std::net::{SocketAddr, TcpStream};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+/// A pose at `x` mm along the field's X axis, as a message carries it.
+fn pose(x: f64) -> photopose_stream::PoseEstimate {
+    let mut covariance = [0.0; 36];
+    for k in 0..6 {
+        covariance[k * 7] = 1e-4;
+    }
+    photopose_stream::PoseEstimate {
+        position_mm: [x, 0.0, 1000.0],
+        quaternion_xyzw: [1.0, 0.0, 0.0, 0.0],
+        rotation_field_to_camera: [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+        covariance,
+        covariance_order: photopose_stream::message::COVARIANCE_ORDER,
+        std_position_mm: [0.01; 3],
+        std_rotation_deg: [0.001; 3],
+        sigma0_px: 0.02,
+        n_targets: 230,
+    }
+}
+
 /// (VmRSS kB, VmSize kB, threads) of this process.
 fn footprint() -> (u64, u64, u64) {
     let status = std::fs::read_to_string("/proc/self/status").unwrap();
@@ -39,8 +58,8 @@ fn churn(server: &mut TcpServer, addr: SocketAddr, n: u64, deadline: Instant) {
     for k in 0..n {
         drop(TcpStream::connect(addr).unwrap());
         if k % 10 == 0 {
-            let mut m = PoseMessage::without_pose(k, k, k, PoseStatus::Ok);
-            m.center = Some([k as f64, 0.0, 1000.0]);
+            let mut m = PoseMessage::new(&std::sync::Arc::from("camera"), k, PoseStatus::Ok);
+            m.pose = Some(pose(k as f64));
             m.encode_line(&mut buf);
             server.publish(&buf);
         }

@@ -90,7 +90,7 @@ pub(super) fn open(
         resolved.clone_from(&name);
     }
     tracing::debug!(
-        ?name,
+        name = name.as_deref().unwrap_or("-"),
         find_ms,
         open_ms = t0.elapsed().as_millis() as u64,
         "camera found"

@@ -161,7 +161,13 @@ impl GigeConfig {
                 || r.height == 0
                 || r.x.max(r.y).max(r.width).max(r.height) > i32::MAX as u32
             {
-                return bad("roi", format!("{r:?} is empty or too large"));
+                return bad(
+                    "roi",
+                    format!(
+                        "[{}, {}, {}, {}] (x, y, width, height px) is empty or too large",
+                        r.x, r.y, r.width, r.height
+                    ),
+                );
             }
         }
         for (name, value) in &self.features {

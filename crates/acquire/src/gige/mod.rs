@@ -427,9 +427,12 @@ impl FrameSource for GigeSource {
 
     fn describe(&self) -> String {
         format!(
-            "GigE Vision camera {} ({:?})",
+            "GigE Vision camera {} ({})",
             self.config.camera.as_deref().unwrap_or("(first found)"),
-            self.config.pixel
+            match self.config.pixel {
+                PixelDepth::Mono8 => "Mono8",
+                PixelDepth::Mono16 => "Mono16",
+            }
         )
     }
 

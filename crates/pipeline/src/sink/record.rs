@@ -394,7 +394,11 @@ impl RecordLink {
         };
         let item = Item::Pose(PoseItem {
             meta,
-            pose: m.center.zip(m.quaternion_wxyz),
+            // The camera's pose in the field: the centre and Rᵀ (w, x, y, z).
+            pose: m.pose.as_ref().map(|p| {
+                let [x, y, z, w] = p.quaternion_xyzw;
+                (p.position_mm, [w, x, y, z])
+            }),
             line,
             marks,
         });

@@ -120,7 +120,7 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
             if width == 0 || height == 0 || x.max(y).max(width).max(height) > 65_535 {
                 return Err(bad(
                     "source.gige.roi",
-                    format!("{:?}", [x, y, width, height]),
+                    format!("[{x}, {y}, {width}, {height}]"),
                     "must be [x, y, width, height] with a non-empty size below 65536",
                 ));
             }

@@ -287,10 +287,13 @@ impl FrameSource for ReplaySource {
 
     fn describe(&self) -> String {
         format!(
-            "replay of {} ({} frames, {:?}, {})",
+            "replay of {} ({} frames, {}, {})",
             self.recording.path(),
             self.recording.len(),
-            self.speed,
+            match self.speed {
+                Speed::Max => "speed max".to_string(),
+                Speed::Factor(f) => format!("{f} × the recorded pace"),
+            },
             match self.passes {
                 0 => "endless".to_string(),
                 n => format!("{n} passes"),

@@ -126,7 +126,10 @@ pub(crate) fn validate(
     if !s.center_mm.iter().all(|v| v.is_finite()) || s.center_mm[2] <= 0.0 {
         return Err(bad(
             "source.synthetic.center_mm",
-            format!("{:?}", s.center_mm),
+            format!(
+                "[{}, {}, {}]",
+                s.center_mm[0], s.center_mm[1], s.center_mm[2]
+            ),
             "must be finite with Z above the plate (> 0)",
         ));
     }
@@ -350,8 +353,12 @@ impl FrameSource for SyntheticSource {
                 p.len()
             ),
             None => format!(
-                "synthetic: {} frames/s on a circle of {} mm radius at {:?} mm",
-                self.config.rate_hz, self.config.radius_mm, self.config.center_mm
+                "synthetic: {} frames/s on a circle of {} mm radius at ({}, {}, {}) mm",
+                self.config.rate_hz,
+                self.config.radius_mm,
+                self.config.center_mm[0],
+                self.config.center_mm[1],
+                self.config.center_mm[2]
             ),
         }
     }
