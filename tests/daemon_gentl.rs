@@ -110,12 +110,12 @@ fn poses_from_the_test_producer_agree_with_the_render_truth() {
     let mut ok = 0;
     for v in frames {
         assert_eq!(v["status"], "ok", "{v}");
-        let ts = v["camera_time_ns"].as_u64().unwrap();
+        let ts = v["time"]["camera_clock_ns"].as_u64().unwrap();
         let id = photopose_gentl_producer::frame_of_timestamp(ts)
             .unwrap_or_else(|| panic!("camera timestamp {ts} is the producer's"));
         let pose = photopose_gentl_producer::truth_pose(id);
         let truth = photopose_geometry::Exterior::from_kuka_pose(pose).center;
-        let c: Vec<f64> = v["center"]
+        let c: Vec<f64> = v["pose"]["position_mm"]
             .as_array()
             .unwrap()
             .iter()

@@ -410,7 +410,7 @@ pub fn camera_file_to_toml(file: &CameraFile) -> String {
     );
     for ((name, unit), v) in PARAMETERS.iter().zip(c.std.values()) {
         if let Some(v) = v {
-            let _ = writeln!(s, "{name} = {}   # {unit}", toml_float(*v));
+            let _ = writeln!(s, "{name} = {}   # {unit}", toml_float(v));
         }
     }
     for input in &c.inputs {

@@ -322,7 +322,14 @@ impl Pipeline {
                     hold_wedged(stop, "detect-0");
                     return;
                 }
-                let result = locate(&mut locator, &tracker, &counters, &camera_id, &frame, &targets);
+                let result = locate(
+                    &mut locator,
+                    &tracker,
+                    &counters,
+                    &camera_id,
+                    &frame,
+                    &targets,
+                );
                 if let Some(link) = &on_change {
                     link.frame_on_change(&frame, result.status);
                 }
