@@ -10,7 +10,7 @@
 mod common;
 
 use common::{bin, scratch, Killed};
-use foxglove::schemas::{PoseInFrame, RawImage};
+use foxglove::schemas::{ImageAnnotations, PoseInFrame, RawImage};
 use foxglove::Decode;
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
@@ -138,21 +138,23 @@ fn a_foxglove_client_receives_image_and_pose_while_the_pipeline_runs() {
             {"id": 1, "channelId": id("/camera/image")},
             {"id": 2, "channelId": id("/pose")},
             {"id": 3, "channelId": id("/status")},
+            {"id": 4, "channelId": id("/camera/annotations")},
         ]
     });
     ws.send(Message::Text(subscribe.to_string().into()))
         .unwrap();
 
     // Binary message data: op 1, subscription id (u32), time (u64), payload.
-    let (mut image, mut pose, mut status) = (None, None, None);
+    let (mut image, mut pose, mut status, mut marks) = (None, None, None, None);
     let t0 = Instant::now();
-    while image.is_none() || pose.is_none() || status.is_none() {
+    while image.is_none() || pose.is_none() || status.is_none() || marks.is_none() {
         assert!(
             t0.elapsed() < Duration::from_secs(60),
-            "image {} pose {} status {}",
+            "image {} pose {} status {} annotations {}",
             image.is_some(),
             pose.is_some(),
-            status.is_some()
+            status.is_some(),
+            marks.is_some()
         );
         let Message::Binary(data) = ws.read().expect("the server keeps sending") else {
             continue;
@@ -166,6 +168,13 @@ fn a_foxglove_client_receives_image_and_pose_while_the_pipeline_runs() {
             1 => image = Some(RawImage::decode(payload).unwrap()),
             2 => pose = Some(PoseInFrame::decode(payload).unwrap()),
             3 => status = Some(serde_json::from_slice::<serde_json::Value>(payload).unwrap()),
+            4 => {
+                let a = ImageAnnotations::decode(payload).unwrap();
+                // The identified targets of the frame shown, with their ids.
+                if !a.texts.is_empty() {
+                    marks = Some(a);
+                }
+            }
             other => panic!("subscription {other}?"),
         }
     }
@@ -188,6 +197,13 @@ fn a_foxglove_client_receives_image_and_pose_while_the_pipeline_runs() {
     assert_eq!(status["status"], "ok", "{status}");
     assert!(status["n_targets"].as_u64().unwrap() >= 4, "{status}");
     assert_eq!(status["std_position_mm"].as_array().unwrap().len(), 3);
+    let marks = marks.unwrap();
+    assert!(
+        marks.texts.len() >= 4,
+        "{} target labels",
+        marks.texts.len()
+    );
+    assert!(marks.texts.iter().all(|t| !t.text.is_empty()));
     let _ = ws.close(None);
 
     let kill = Command::new("kill")

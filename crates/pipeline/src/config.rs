@@ -85,6 +85,7 @@ struct File {
     record: RecordSection,
     #[serde(default)]
     tracking: crate::track::TrackingSection,
+    #[serde(default)]
     live: LiveSection,
 }
 

@@ -365,10 +365,21 @@ impl PoseSink for LiveSink {
             s.rsi = rsi;
             s.line.clear();
             s.line.extend_from_slice(out.line);
-            // The detected targets join once the pose result carries them
-            // (image positions and ids); until then no annotations.
+            // The identified targets of the frame shown as an image, on
+            // it (same time stamp: the frame's hand-over, UTC).
             s.targets.clear();
             s.targets_time_ns = None;
+            if let (true, Some(r)) = (shown, out.result) {
+                s.targets.extend(r.targets.iter().map(|t| {
+                    photopose_stream::live::DetectedTarget {
+                        id: Some(t.id),
+                        col: t.col_px,
+                        row: t.row_px,
+                        coded: t.coded,
+                    }
+                }));
+                s.targets_time_ns = Some(r.times.handover_utc_ns);
+            }
         });
     }
 
