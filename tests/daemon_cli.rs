@@ -104,7 +104,14 @@ fn check_config_accepts_the_example_and_names_bad_keys() {
             "/nonexistent/hand-eye.toml",
         ),
     ] {
-        std::fs::write(&bad, text.replace("enabled = false", edit)).unwrap();
+        // (In the `[rsi]` section: other sections have an `enabled` too.)
+        let rsi = text.find("[rsi]").expect("an [rsi] section");
+        let edited = format!(
+            "{}{}",
+            &text[..rsi],
+            text[rsi..].replacen("enabled = false", edit, 1)
+        );
+        std::fs::write(&bad, edited).unwrap();
         let out = bin().args(["check-config"]).arg(&bad).output().unwrap();
         assert!(!out.status.success());
         let err = String::from_utf8_lossy(&out.stderr);

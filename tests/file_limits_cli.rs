@@ -127,7 +127,7 @@ fn dev_zero_is_refused_as_any_input_file() {
     let poses = out_dir.join("poses.jsonl");
     std::fs::write(
         &poses,
-        "{\"status\":\"ok\",\"center\":[0,0,1000],\"rotation\":[[1,0,0],[0,1,0],[0,0,1]]}\n",
+        "{\"status\":\"ok\",\"pose\":{\"position_mm\":[0,0,1000],\"rotation_field_to_camera\":[[1,0,0],[0,1,0],[0,0,1]]}}\n",
     )
     .unwrap();
     // (arguments, what the error must say)

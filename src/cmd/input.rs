@@ -22,6 +22,11 @@ pub fn is_recording(path: &Path) -> bool {
     {
         return true;
     }
+    // Only a regular file is looked into (opening a FIFO would wait for a
+    // writer); anything else is refused by the reader it goes to.
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return false;
+    }
     let mut head = [0u8; 8];
     std::fs::File::open(path)
         .and_then(|mut f| f.read_exact(&mut head))
