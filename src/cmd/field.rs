@@ -61,7 +61,7 @@ pub struct SvgArgs {
 }
 
 fn parse_paper(text: &str) -> Result<Paper, String> {
-    Paper::parse(text).ok_or_else(|| format!("{text:?}: one of A4, A3, A2, A1, A0"))
+    Paper::parse(text).ok_or_else(|| format!("\"{text}\": one of A4, A3, A2, A1, A0"))
 }
 
 /// Arguments of `photopose field new` (defaults: the default plate).

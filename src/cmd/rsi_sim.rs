@@ -130,14 +130,16 @@ fn resolve_server(text: &str) -> Result<SocketAddr> {
     }
     let found: Vec<SocketAddr> = text
         .to_socket_addrs()
-        .with_context(|| format!("--server {text:?}: not host:port, or the host does not resolve"))?
+        .with_context(|| {
+            format!("--server \"{text}\": not host:port, or the host does not resolve")
+        })?
         .collect();
     found
         .iter()
         .find(|a| a.is_ipv4())
         .or(found.first())
         .copied()
-        .with_context(|| format!("--server {text:?}: the name resolves to no address"))
+        .with_context(|| format!("--server \"{text}\": the name resolves to no address"))
 }
 
 /// The run's summary line and exit status.

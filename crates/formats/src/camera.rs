@@ -492,7 +492,7 @@ mod tests {
         let file = calibrated();
         let text = camera_file_to_toml(&file);
         assert!(text.contains("[calibration.std]") && text.contains("c = 0.00015   # mm"));
-        assert!(text.contains("k1 = 3e-7   # mm^-2"), "{text}");
+        assert!(text.contains("k1 = 0.0000003   # mm^-2"), "{text}");
         assert_eq!(parse_camera_file(&text, "cam.toml").unwrap(), file);
         assert_eq!(parse_camera(&text, "cam.toml").unwrap(), file.camera);
         // Without a section: none, and the plain writer stays as it was.
@@ -511,7 +511,7 @@ mod tests {
     fn a_bad_calibration_section_is_refused_naming_the_key() {
         let text = camera_file_to_toml(&calibrated());
         let cases = [
-            (text.replace("k1 = 3e-7", "k4 = 3e-7"), "k4"),
+            (text.replace("k1 = 0.0000003", "k4 = 0.0000003"), "k4"),
             (
                 text.replace("images = 12", "images = 12\nweather = 1"),
                 "weather",

@@ -137,7 +137,8 @@ pub fn rfc3339(t: SystemTime) -> String {
 
 /// Checks a date as written by [`rfc3339`] (UTC, RFC 3339).
 pub fn parse_rfc3339(text: &str) -> Result<SystemTime, String> {
-    humantime::parse_rfc3339(text).map_err(|e| format!("{text:?} is not a UTC RFC 3339 date: {e}"))
+    humantime::parse_rfc3339(text)
+        .map_err(|e| format!("\"{text}\" is not a UTC RFC 3339 date: {e}"))
 }
 
 /// True when `text` is 64 hex digits (a SHA-256 as written here).

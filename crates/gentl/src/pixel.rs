@@ -86,7 +86,7 @@ pub enum ConvertError {
         pfnc: u64,
     },
     /// The payload is shorter than its width, height and format need.
-    #[error("payload of {got} bytes is shorter than the {need} bytes a {width}×{height} {format:?} image needs")]
+    #[error("payload of {got} bytes is shorter than the {need} bytes a {width}×{height} {} image needs", format.name())]
     Short {
         /// The format.
         format: PixelFormat,
@@ -110,6 +110,26 @@ pub enum ConvertError {
 }
 
 impl PixelFormat {
+    /// The format's PFNC name (`Mono8`, `Mono12p`, `RGBa8` …).
+    pub fn name(self) -> &'static str {
+        use PixelFormat::*;
+        match self {
+            Mono8 => "Mono8",
+            Mono10 => "Mono10",
+            Mono12 => "Mono12",
+            Mono14 => "Mono14",
+            Mono16 => "Mono16",
+            Mono10p => "Mono10p",
+            Mono12p => "Mono12p",
+            Mono10Packed => "Mono10Packed",
+            Mono12Packed => "Mono12Packed",
+            Rgb8 => "RGB8",
+            Bgr8 => "BGR8",
+            Rgba8 => "RGBa8",
+            Bgra8 => "BGRa8",
+        }
+    }
+
     /// The format of a PFNC value, or `None` when not supported.
     pub fn from_pfnc(value: u64) -> Option<PixelFormat> {
         use PixelFormat::*;

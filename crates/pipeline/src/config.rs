@@ -39,7 +39,7 @@ pub enum ConfigError {
     },
     /// A host name where an address is asked does not resolve (or is not
     /// `host:port`).
-    #[error("{path}: `{key}` = {value:?}: {reason}")]
+    #[error("{path}: `{key}` = \"{value}\": {reason}")]
     Resolve {
         /// The file.
         path: String,

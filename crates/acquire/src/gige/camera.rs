@@ -205,7 +205,7 @@ fn set_feature(camera: &Camera, name: &str, value: &FeatureValue) -> Result<(), 
             .unwrap_or_default();
         if !entries.is_empty() && !entries.iter().any(|x| x == v) {
             return Err(refused(format!(
-                "{v:?} is not one of its entries ({})",
+                "\"{v}\" is not one of its entries ({})",
                 entries.join(", ")
             )));
         }

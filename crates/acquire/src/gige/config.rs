@@ -49,7 +49,7 @@ impl std::fmt::Display for FeatureValue {
             FeatureValue::Int(v) => write!(f, "{v}"),
             FeatureValue::Float(v) => write!(f, "{v}"),
             FeatureValue::Bool(v) => write!(f, "{v}"),
-            FeatureValue::Text(v) => write!(f, "{v:?}"),
+            FeatureValue::Text(v) => write!(f, "\"{v}\""),
         }
     }
 }
@@ -174,7 +174,7 @@ impl GigeConfig {
             if name.is_empty() || !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
                 return bad(
                     "features",
-                    format!("{name:?} is not a GenICam feature name"),
+                    format!("\"{name}\" is not a GenICam feature name"),
                 );
             }
             if let FeatureValue::Float(v) = value {

@@ -205,7 +205,7 @@ fn features(f: Features, bad: Bad<'_>) -> Result<Vec<(String, FeatureValue)>, Co
         if name.is_empty() || !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
             return Err(bad(
                 "source.gige.features",
-                format!("{name:?}"),
+                format!("\"{name}\""),
                 "must be GenICam feature names (letters, digits, '_')",
             ));
         }
