@@ -304,6 +304,56 @@ impl Recorder {
         }
     }
 
+    /// Encodes a protobuf message into the write buffer; `what` names it
+    /// in the error.
+    fn encode(
+        &mut self,
+        message: &impl Encode,
+        what: impl FnOnce() -> String,
+    ) -> Result<(), RecordError> {
+        self.buf.clear();
+        message
+            .encode(&mut self.buf)
+            .map_err(|e| RecordError::Mcap {
+                path: self.path.clone(),
+                message: format!("cannot encode {}: {e}", what()),
+            })
+    }
+
+    /// Serialises a JSON value into the write buffer; `what` names it in
+    /// the error.
+    fn encode_json(
+        &mut self,
+        value: &impl serde::Serialize,
+        what: impl FnOnce() -> String,
+    ) -> Result<(), RecordError> {
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, value).map_err(|e| RecordError::Mcap {
+            path: self.path.clone(),
+            message: format!("cannot encode {}: {e}", what()),
+        })
+    }
+
+    /// Writes the write buffer as one message on `channel`: sequence, log
+    /// and publish time as given (the sequence's low 32 bits).
+    fn write_buf(
+        &mut self,
+        channel: u16,
+        sequence: u64,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), RecordError> {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: sequence as u32,
+            log_time,
+            publish_time,
+        };
+        self.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| self.mcap_err(e))
+    }
+
     /// Bytes written to the file so far (compressed chunks as they close).
     pub fn bytes_written(&self) -> u64 {
         self.written.load(Ordering::Relaxed)
@@ -393,22 +443,8 @@ impl Recorder {
             step: width * u32::from(bytes_per_pixel),
             data: foxglove::bytes::Bytes::copy_from_slice(pixels),
         };
-        self.buf.clear();
-        message
-            .encode(&mut self.buf)
-            .map_err(|e| RecordError::Mcap {
-                path: self.path.clone(),
-                message: format!("cannot encode frame {}: {e}", meta.seq),
-            })?;
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: meta.seq as u32,
-            log_time: meta.host_time_ns,
-            publish_time: meta.camera_time_ns,
-        };
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| self.mcap_err(e))?;
+        self.encode(&message, || format!("frame {}", meta.seq))?;
+        self.write_buf(channel, meta.seq, meta.host_time_ns, meta.camera_time_ns)?;
         self.frames += 1;
         Ok(())
     }
@@ -461,20 +497,8 @@ impl Recorder {
             "exposure_ns": meta.exposure_ns,
             "exposure_utc_ns": meta.exposure_utc_ns(),
         });
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, &json).map_err(|e| RecordError::Mcap {
-            path: self.path.clone(),
-            message: format!("cannot encode the times of frame {}: {e}", meta.seq),
-        })?;
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: meta.seq as u32,
-            log_time: meta.host_time_ns,
-            publish_time: meta.camera_time_ns,
-        };
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| self.mcap_err(e))
+        self.encode_json(&json, || format!("the times of frame {}", meta.seq))?;
+        self.write_buf(channel, meta.seq, meta.host_time_ns, meta.camera_time_ns)
     }
 
     /// Appends the identified targets of frame `meta` as one
@@ -554,22 +578,8 @@ impl Recorder {
                 .collect(),
             metadata: Vec::new(),
         };
-        self.buf.clear();
-        message
-            .encode(&mut self.buf)
-            .map_err(|e| RecordError::Mcap {
-                path: self.path.clone(),
-                message: format!("cannot encode the targets of frame {}: {e}", meta.seq),
-            })?;
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: meta.seq as u32,
-            log_time: meta.host_time_ns,
-            publish_time: meta.camera_time_ns,
-        };
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| self.mcap_err(e))
+        self.encode(&message, || format!("the targets of frame {}", meta.seq))?;
+        self.write_buf(channel, meta.seq, meta.host_time_ns, meta.camera_time_ns)
     }
 
     /// Appends one RSI controller cycle on [`RSI_TOPIC`] (JSON, schema
@@ -584,20 +594,13 @@ impl Recorder {
             RSI_TOPIC,
             "json",
         )?;
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, cycle).map_err(|e| RecordError::Mcap {
-            path: self.path.clone(),
-            message: format!("cannot encode RSI cycle {}: {e}", cycle.ipoc),
-        })?;
-        let header = mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: cycle.ipoc as u32,
-            log_time: cycle.arrival_utc_ns,
-            publish_time: cycle.arrival_utc_ns,
-        };
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| self.mcap_err(e))
+        self.encode_json(cycle, || format!("RSI cycle {}", cycle.ipoc))?;
+        self.write_buf(
+            channel,
+            cycle.ipoc,
+            cycle.arrival_utc_ns,
+            cycle.arrival_utc_ns,
+        )
     }
 
     /// Appends one pose result: the full message always, the
@@ -627,16 +630,8 @@ impl Recorder {
                     }),
                 }),
             };
-            self.buf.clear();
-            message
-                .encode(&mut self.buf)
-                .map_err(|e| RecordError::Mcap {
-                    path: self.path.clone(),
-                    message: format!("cannot encode pose {}: {e}", pose.seq),
-                })?;
-            self.writer
-                .write_to_known_channel(&header(self.pose), &self.buf)
-                .map_err(|e| self.mcap_err(e))?;
+            self.encode(&message, || format!("pose {}", pose.seq))?;
+            self.write_buf(self.pose, pose.seq, pose.host_time_ns, pose.camera_time_ns)?;
         }
         let json = pose.json.strip_suffix(b"\n").unwrap_or(pose.json);
         self.writer
