@@ -313,9 +313,9 @@ pub fn read_poses(path: &Path, out: &mut Vec<Isometry3<f64>>) -> Result<InputSum
     // A recording's pose messages are its lines, `FILE#N` the N-th.
     let file_sha256;
     let (lines, mark) = if crate::cmd::input::is_recording(path) {
-        let bytes = photopose_formats::read_bytes(path, photopose_formats::FileKind::Recording)?;
-        file_sha256 = sha256_hex(&bytes);
-        drop(bytes);
+        file_sha256 =
+            photopose_formats::provenance::hash_file(path, photopose_formats::FileKind::Recording)?
+                .sha256;
         let messages = photopose_record::pose_messages(path)?;
         let lines = messages
             .iter()

@@ -453,9 +453,6 @@ impl Locator {
             if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
                 continue;
             }
-            // Largest standard deviation of the projected position, px.
-            let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
-            let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
             // Image distance to the nearest other target (pinhole is close
             // enough for a bound).
             let spacing = coarse
@@ -466,7 +463,7 @@ impl Locator {
                 field_index: fi,
                 col: p.x,
                 row: p.y,
-                sigma_px: lmax.max(0.0).sqrt() / px,
+                sigma_px: largest_sigma(&cov) / px,
                 spacing,
             });
         }
@@ -531,6 +528,14 @@ fn observation(
         o.weight = Matrix2::identity() / (saturated_factor * saturated_factor);
     }
     o
+}
+
+/// The largest standard deviation of a projected position with covariance
+/// `cov` (the square root of its larger eigenvalue), in its units.
+fn largest_sigma(cov: &Matrix2<f64>) -> f64 {
+    let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
+    let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    lmax.max(0.0).sqrt()
 }
 
 /// The eccentricity of a circular target facing `+Z` (centre `position`,

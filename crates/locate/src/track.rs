@@ -151,9 +151,7 @@ impl Locator {
             if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
                 continue;
             }
-            let (a, b, d) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
-            let lmax = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
-            let sigma_px = lmax.max(0.0).sqrt() / px;
+            let sigma_px = crate::largest_sigma(&cov) / px;
             let depth = (e.rotation * (t.position - e.center)).z.abs();
             let scale = c / (depth * px);
             let spacing = self.spacing[fi] * scale;
