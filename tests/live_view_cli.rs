@@ -1,7 +1,8 @@
 //! The live view in Foxglove (`[live]`): the daemon, running the synthetic
 //! source as fast as it goes, serves a Foxglove WebSocket; a client that
-//! speaks the protocol (offering the subprotocol `foxglove.websocket.v1`
-//! and its current name `foxglove.sdk.v1`) reads the advertised channels,
+//! speaks the protocol under its first name (offering only the subprotocol
+//! `foxglove.websocket.v1`, as Lichtblick and older Foxglove Studio
+//! releases do; answered with that name) reads the advertised channels,
 //! subscribes to the image and the pose, and receives both as binary
 //! message data: a downscaled mono8 `foxglove.RawImage` and a
 //! `foxglove.PoseInFrame` about 1 m above the plate. The daemon then stops
@@ -59,7 +60,7 @@ fn connect(addr: &str) -> WebSocket<TcpStream> {
     let mut request = format!("ws://{addr}").into_client_request().unwrap();
     request.headers_mut().insert(
         "Sec-WebSocket-Protocol",
-        "foxglove.websocket.v1, foxglove.sdk.v1".parse().unwrap(),
+        "foxglove.websocket.v1".parse().unwrap(),
     );
     let stream = TcpStream::connect(addr).unwrap();
     stream
@@ -72,7 +73,7 @@ fn connect(addr: &str) -> WebSocket<TcpStream> {
         .and_then(|v| v.to_str().ok())
         .unwrap_or_default()
         .to_string();
-    assert!(protocol.starts_with("foxglove."), "{protocol:?}");
+    assert_eq!(protocol, "foxglove.websocket.v1");
     ws
 }
 

@@ -97,6 +97,7 @@ struct LiveSection {
     image_hz: f64,
     image_scale: u32,
     pose_hz: f64,
+    max_clients: usize,
 }
 
 impl Default for LiveSection {
@@ -107,6 +108,7 @@ impl Default for LiveSection {
             image_hz: 5.0,
             image_scale: 4,
             pose_hz: 20.0,
+            max_clients: 4,
         }
     }
 }
@@ -125,6 +127,8 @@ pub struct Live {
     pub image_scale: u32,
     /// Poses (and status) per second sent to the view.
     pub pose_hz: f64,
+    /// Clients served at once (one more is refused).
+    pub max_clients: usize,
 }
 
 impl Live {
@@ -160,12 +164,20 @@ impl Live {
                 "must be > 0 and at most 1000 per second",
             ));
         }
+        if !(1..=64).contains(&l.max_clients) {
+            return Err(bad(
+                "live.max_clients",
+                l.max_clients.to_string(),
+                "must be 1..=64 clients at once",
+            ));
+        }
         Ok(Live {
             enabled: l.enabled,
             address,
             image_hz: l.image_hz,
             image_scale: l.image_scale,
             pose_hz: l.pose_hz,
+            max_clients: l.max_clients,
         })
     }
 }
@@ -901,10 +913,12 @@ mod tests {
             ("image_hz = 0.0", "live.image_hz"),
             ("image_hz = -2.0", "live.image_hz"),
             ("image_hz = 1000.0", "live.image_hz"),
+            ("max_clients = 0", "live.max_clients"),
+            ("max_clients = 65", "live.max_clients"),
             ("image_scale = 0", "live.image_scale"),
             ("image_scale = 65", "live.image_scale"),
             ("pose_hz = 0.0", "live.pose_hz"),
-            ("max_clients = 4", "max_clients"),
+            ("max_viewers = 4", "max_viewers"),
             ("enabled = \"yes\"", "live.enabled"),
             ("image_scale = \"big\"", "live.image_scale"),
         ];

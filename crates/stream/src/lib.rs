@@ -16,6 +16,7 @@ pub mod clock;
 pub mod edge;
 pub mod http;
 pub mod live;
+pub mod live_front;
 pub mod message;
 pub mod read;
 pub mod tcp;

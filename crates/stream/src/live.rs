@@ -20,6 +20,7 @@
 //! the 3-D channels are in metres, as Foxglove's 3-D panel expects.
 
 use crate::edge::EdgeHandle;
+use crate::live_front::FrontStats;
 use crate::StreamError;
 use crossbeam_queue::ArrayQueue;
 use foxglove::schemas::{
@@ -106,6 +107,8 @@ pub struct LiveOptions {
     /// Downscale factor of the published frames (1: full size); the
     /// annotations are scaled alike.
     pub image_scale: u32,
+    /// Clients served at once; one more is refused (`503`).
+    pub max_clients: usize,
 }
 
 /// A target of the plate, for the 3-D scene.
@@ -380,6 +383,7 @@ pub struct LiveServer {
     sender: LiveSender,
     addr: SocketAddr,
     server: Option<WebSocketServerHandle>,
+    front: Arc<FrontStats>,
     stop: tokio_util::sync::CancellationToken,
 }
 
@@ -433,14 +437,14 @@ impl LiveServer {
         let ctx = Context::new();
         let channels =
             Channels::new(&ctx).map_err(|e| failed("cannot open the live view on")(&e))?;
-        let host = match addr {
-            SocketAddr::V4(a) => a.ip().to_string(),
-            SocketAddr::V6(a) => format!("[{}]", a.ip()),
-        };
+        // The public listener is the front door (`live_front`: client
+        // limit, both names of the protocol); the SDK's server listens on
+        // the loopback behind it.
+        let (front, local) = edge.listen(addr, "cannot serve the live view on")?;
         let server = ctx
             .websocket_server()
             .name("photopose")
-            .bind(host, addr.port())
+            .bind("127.0.0.1", 0)
             .message_backlog_size(CLIENT_BACKLOG);
         // The server starts (binds, spawns its accept task) on the edge
         // runtime; this thread waits for the outcome.
@@ -457,8 +461,16 @@ impl LiveServer {
                 ))
             }
         };
-        let local = SocketAddr::new(addr.ip(), handle.port());
+        let inner = SocketAddr::from(([127, 0, 0, 1], handle.port()));
         let stop = edge.stop_token();
+        let front_stats = Arc::new(FrontStats::default());
+        edge.spawn(crate::live_front::serve(
+            front,
+            inner,
+            options.max_clients.max(1),
+            front_stats.clone(),
+            stop.clone(),
+        ));
         let publisher = Publisher {
             _context: ctx,
             shared: shared.clone(),
@@ -474,6 +486,7 @@ impl LiveServer {
             sender: LiveSender(shared),
             addr: local,
             server: Some(handle),
+            front: front_stats,
             stop,
         })
     }
@@ -486,6 +499,11 @@ impl LiveServer {
     /// The hand-over into the view.
     pub fn sender(&self) -> LiveSender {
         self.sender.clone()
+    }
+
+    /// The front door's counters (connections served, refused, renamed).
+    pub fn front(&self) -> &FrontStats {
+        &self.front
     }
 
     /// Clients connected now.
@@ -969,6 +987,7 @@ mod tests {
             &LiveOptions {
                 address: "127.0.0.1:0".parse().unwrap(),
                 image_scale: 4,
+                max_clients: 4,
             },
             2,
             16,

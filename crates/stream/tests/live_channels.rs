@@ -38,6 +38,7 @@ fn states_become_annotations_scene_and_transforms() {
         &LiveOptions {
             address: "127.0.0.1:0".parse().unwrap(),
             image_scale: 2,
+            max_clients: 4,
         },
         1,
         64,

@@ -84,6 +84,7 @@ impl LiveLink {
             &LiveOptions {
                 address: settings.address,
                 image_scale: scale,
+                max_clients: settings.max_clients,
             },
             IMAGE_BUFFERS,
             image_bytes,
