@@ -40,7 +40,9 @@ fn bench_json_ends_with_one_object_with_the_headline_figures() {
     }
     assert!(v["tracking_frames"].as_u64().unwrap() > 0, "{v}");
     // The bench's circle keeps the whole default plate (230 targets) in view.
-    let targets = v["tracking_targets_mean"].as_f64().expect("targets per frame");
+    let targets = v["tracking_targets_mean"]
+        .as_f64()
+        .expect("targets per frame");
     assert!(targets >= 220.0, "{targets} targets per tracked frame");
     for stage in [
         "threshold",
