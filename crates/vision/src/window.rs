@@ -130,7 +130,8 @@ impl WindowMeasurer {
         if !(e.col.is_finite() && e.row.is_finite() && e.gate_px >= 0.0) {
             return;
         }
-        let half = e.gate_px + 2.7 * e.radius_px.max(1.0) + 3.0;
+        // The core window (see `run`), which holds the rows the centroid reads.
+        let half = e.gate_px + 1.5 * e.radius_px.max(1.0) + 3.0;
         let sum = match image.pixels() {
             ViewPixels::Mono8(data) => touch(image, data, e, half),
             ViewPixels::Mono16(data) => touch(image, data, e, half),
