@@ -96,7 +96,8 @@ pub struct Motion {
 }
 
 impl Motion {
-    /// The pose predicted for frame `seq` (constant motion per frame), and
+    /// The pose predicted for frame `seq` (constant motion per frame; `seq`
+    /// may also lie before the latest pose), and
     /// the change from the latest pose as an image motion estimate, px,
     /// for a camera of principal distance `c` and pixel size `pixel_size`
     /// looking at targets `distance` mm away.
@@ -105,8 +106,10 @@ impl Motion {
         let Some((s0, e0)) = self.before.filter(|(s0, _)| *s0 < s1) else {
             return (e1, 0.0);
         };
+        // Negative for a frame older than the latest pose (workers finish
+        // frames out of order): the same motion, backwards.
         let k = (seq as f64 - s1 as f64) / (s1 - s0) as f64;
-        if !(k.is_finite() && k > 0.0) {
+        if !k.is_finite() || k == 0.0 {
             return (e1, 0.0);
         }
         let step = Rotation3::from_matrix_unchecked(e1.rotation * e0.rotation.transpose());

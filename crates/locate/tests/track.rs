@@ -117,6 +117,12 @@ fn motion_predicts_constant_velocity() {
     assert!((p.center - c.center).norm() < 1e-9);
     assert!((p.rotation - c.rotation).abs().max() < 1e-9);
     assert!(shift > 0.0);
+    // A frame between the two (finished after the later one): back along
+    // the same motion.
+    let (p, back) = m.predict(9, 12.0, 0.00645, 1000.0);
+    assert!((p.center - a.center).norm() < 1e-9);
+    assert!((p.rotation - a.rotation).abs().max() < 1e-9);
+    assert!((back - shift).abs() < 1e-9 * shift);
     let still = Motion {
         last: (10, b),
         before: None,
