@@ -276,8 +276,10 @@ fn track_circle(renderer: &mut Renderer, locator: &mut Locator, args: &Args) -> 
     if args.track_frames < 3 || !(args.track_rate.is_finite() && args.track_rate > 0.0) {
         bail!("--track-frames must be at least 3 and --track-rate positive");
     }
-    let mut cell = Cell::default();
-    cell.path = track_path(args.track_rate);
+    let cell = Cell {
+        path: track_path(args.track_rate),
+        ..Cell::default()
+    };
     let samples = cell.samples().context("the simulated cell")?;
     let mut frames = Vec::with_capacity(args.track_frames);
     for (k, s) in samples.iter().take(args.track_frames).enumerate() {
