@@ -8,6 +8,7 @@ use photopose_geometry::{Exterior, Vector3};
 use photopose_locate::track::{Motion, Prior, TrackLost, TrackOptions};
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
+use photopose_vision::{Detector, DetectorOptions};
 
 fn poses() -> [Exterior; 3] {
     [
@@ -160,7 +161,15 @@ fn tracked_poses_along_a_moving_circle_equal_the_whole_frame_within_a_tenth_of_s
     let camera = photopose_formats::default_camera();
     let field = default_plate();
     let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
-    let mut locator = Locator::new(camera, field, LocateOptions::default()).unwrap();
+    // The detector holds its threshold level, as the daemon's do with
+    // tracking on.
+    let options = DetectorOptions {
+        threshold_hold: 1.0,
+        ..DetectorOptions::for_field(&field)
+    };
+    let detector = Detector::new(camera.sensor.width, camera.sensor.height, options).unwrap();
+    let mut locator =
+        Locator::with_detector(camera, field, LocateOptions::default(), detector).unwrap();
     let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
     let at = |k: u64| {
         let phi = 0.005 * k as f64;

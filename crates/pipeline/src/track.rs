@@ -21,10 +21,12 @@
 
 use crate::config::ConfigError;
 use crate::source::Bad;
+use photopose_field::Field;
+use photopose_geometry::Camera;
 use photopose_geometry::{Exterior, Matrix6, ResectionReport};
 use photopose_locate::track::{Motion, Prior, TrackOptions};
-use photopose_locate::{LocateError, Locator, PoseStatus};
-use photopose_vision::ThresholdResult;
+use photopose_locate::{LocateError, LocateOptions, Locator, PoseStatus};
+use photopose_vision::{Detector, DetectorOptions, ThresholdResult};
 use serde::Deserialize;
 use std::sync::{Arc, Mutex, TryLockError};
 
@@ -175,6 +177,24 @@ pub enum Mode {
     Tracked,
 }
 
+/// The threshold hysteresis of a worker's detector with tracking on, noise
+/// σ (`photopose_vision::DetectorOptions::threshold_hold`).
+pub const THRESHOLD_HOLD: f64 = 1.0;
+
+/// A worker's locator for `camera` and `field`. With tracking on, its
+/// detector holds its threshold level within [`THRESHOLD_HOLD`] noise σ, so
+/// that whole-frame and tracked poses agree within a tenth of their σ; off,
+/// every frame gets its own level, and a replay gives the same output
+/// whichever worker locates which frame.
+pub fn locator(camera: Camera, field: Field, tracking: &Tracking) -> Result<Locator, LocateError> {
+    let mut options = DetectorOptions::for_field(&field);
+    if tracking.enabled {
+        options.threshold_hold = THRESHOLD_HOLD;
+    }
+    let detector = Detector::new(camera.sensor.width, camera.sensor.height, options)?;
+    Locator::with_detector(camera, field, LocateOptions::default(), detector)
+}
+
 /// One worker's side of tracking mode.
 #[derive(Debug)]
 pub struct Tracker {
@@ -254,7 +274,6 @@ impl Tracker {
 mod tests {
     use super::*;
     use photopose_geometry::Vector3;
-    use photopose_locate::LocateOptions;
     use photopose_vision::{FrameStatus, Threshold};
 
     fn report(x: f64) -> ResectionReport {

@@ -158,7 +158,11 @@ pub struct DetectorOptions {
     /// each jump moves the binary shapes, hence the centroid windows, and
     /// the centres by a tenth of their σ. Held, the level is the same for
     /// every frame of a steady scene, and for tracking mode, which reuses
-    /// the level of the last whole frame. 0: a level per frame.
+    /// the level of the last whole frame. 0 (the default): a level per
+    /// frame, so that a frame's result never depends on the frames the
+    /// detector saw before (a replay over several workers gives the same
+    /// output whichever worker locates which frame); tracking mode turns it
+    /// on.
     pub threshold_hold: f64,
 }
 
@@ -184,7 +188,7 @@ impl Default for DetectorOptions {
             saturated_knee: 1.0,
             local_threshold: 0.3,
             local_noise_factor: 5.0,
-            threshold_hold: 1.0,
+            threshold_hold: 0.0,
         }
     }
 }
