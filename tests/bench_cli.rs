@@ -1,6 +1,7 @@
 //! `photopose bench --json`: the output ends with one JSON object holding
 //! the whole frame's and tracking mode's medians (`full_frame_median_us`,
-//! `tracking_median_us`) and every stage's median and 99th percentile.
+//! `tracking_median_us`), the targets per tracked frame (`tracking_targets_mean`,
+//! the whole default plate) and every stage's median and 99th percentile.
 //! Checks the shape of the output only, never the figures (the machine may
 //! be loaded).
 
@@ -38,6 +39,11 @@ fn bench_json_ends_with_one_object_with_the_headline_figures() {
         assert!(v[key].as_f64().is_some_and(|t| t > 0.0), "{key}: {v}");
     }
     assert!(v["tracking_frames"].as_u64().unwrap() > 0, "{v}");
+    // The bench's circle keeps the whole default plate (230 targets) in view.
+    let targets = v["tracking_targets_mean"]
+        .as_f64()
+        .expect("targets per frame");
+    assert!(targets >= 220.0, "{targets} targets per tracked frame");
     for stage in [
         "threshold",
         "labelling",

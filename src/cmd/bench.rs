@@ -7,15 +7,19 @@
 //! read per stage mark (a few µs per frame), so `total` is slightly above a
 //! plain run; the whole-frame figure (`full_frame`) is timed without it.
 //!
-//! Tracking mode is timed along the demo's moving circle (the simulated
-//! cell, its default feed, frames at `--track-rate`): each frame tracked from
-//! the pose predicted by the two before it, as the daemon does; a frame that
-//! cannot be tracked is located whole and counted.
+//! Tracking mode is timed along a moving circle of the simulated cell (its
+//! default robot, mount and feed, frames at `--track-rate`) on a circle of
+//! its own, [`track_path`]: 40 mm radius, the camera 1000 mm above the plate
+//! looking straight down, so that the whole default plate (230 targets) is
+//! in view all along it (the demo's circle at 600 mm sees about half of
+//! it). Each frame is tracked from the pose predicted by the two before it,
+//! as the daemon does; a frame that cannot be tracked is located whole and
+//! counted.
 
 use crate::cmd::defaults;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use photopose_circle::cell::Cell;
+use photopose_circle::cell::{Cell, CirclePath};
 use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::{Exterior, Vector3};
 use photopose_locate::track::{Motion, Prior, TrackOptions};
@@ -252,14 +256,30 @@ struct Tracking {
     targets_mean: f64,
 }
 
-/// Tracks frames rendered along the simulated cell's circle, each from the
+/// The bench's tracking circle: the cell's default path moved up to a
+/// 1000 mm standoff (the TCP 920 mm above the plate, the default mount 80 mm
+/// above it) with a 40 mm radius, frames at `rate_hz`. The default camera
+/// then sees 726 × 575 mm at the plate, the default plate (544 × 384 mm
+/// between its outer targets) whole from every point of the circle.
+pub fn track_path(rate_hz: f64) -> CirclePath {
+    CirclePath {
+        center_mm: [-60.0, 0.0, 920.0],
+        radius_mm: 40.0,
+        rate_hz,
+        ..CirclePath::default()
+    }
+}
+
+/// Tracks frames rendered along the bench's circle, each from the
 /// pose predicted by the two before it.
 fn track_circle(renderer: &mut Renderer, locator: &mut Locator, args: &Args) -> Result<Tracking> {
     if args.track_frames < 3 || !(args.track_rate.is_finite() && args.track_rate > 0.0) {
         bail!("--track-frames must be at least 3 and --track-rate positive");
     }
-    let mut cell = Cell::default();
-    cell.path.rate_hz = args.track_rate;
+    let cell = Cell {
+        path: track_path(args.track_rate),
+        ..Cell::default()
+    };
     let samples = cell.samples().context("the simulated cell")?;
     let mut frames = Vec::with_capacity(args.track_frames);
     for (k, s) in samples.iter().take(args.track_frames).enumerate() {

@@ -188,6 +188,14 @@ pub struct Locator {
     spacing: Vec<f64>,
     /// Tracking mode's measurer of one target in its window.
     window: WindowMeasurer,
+    /// Tracking mode's windows of one frame: field index, where to look,
+    /// spacing to the nearest neighbour in px, the ideal projection (mm).
+    windows: Vec<(
+        usize,
+        photopose_vision::Expected,
+        f64,
+        photopose_geometry::Vector2<f64>,
+    )>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -195,6 +203,8 @@ struct Projected {
     field_index: usize,
     col: f64,
     row: f64,
+    /// The projection in ideal image coordinates, mm.
+    ideal: photopose_geometry::Vector2<f64>,
     sigma_px: f64,
     spacing: f64,
 }
@@ -259,6 +269,7 @@ impl Locator {
             uncoded,
             spacing,
             window,
+            windows: Vec::with_capacity(n),
             field,
         })
     }
@@ -463,6 +474,7 @@ impl Locator {
                 field_index: fi,
                 col: p.x,
                 row: p.y,
+                ideal,
                 sigma_px: largest_sigma(&cov) / px,
                 spacing,
             });

@@ -96,7 +96,8 @@ pub struct Motion {
 }
 
 impl Motion {
-    /// The pose predicted for frame `seq` (constant motion per frame), and
+    /// The pose predicted for frame `seq` (constant motion per frame; `seq`
+    /// may also lie before the latest pose), and
     /// the change from the latest pose as an image motion estimate, px,
     /// for a camera of principal distance `c` and pixel size `pixel_size`
     /// looking at targets `distance` mm away.
@@ -105,8 +106,10 @@ impl Motion {
         let Some((s0, e0)) = self.before.filter(|(s0, _)| *s0 < s1) else {
             return (e1, 0.0);
         };
+        // Negative for a frame older than the latest pose (workers finish
+        // frames out of order): the same motion, backwards.
         let k = (seq as f64 - s1 as f64) / (s1 - s0) as f64;
-        if !(k.is_finite() && k > 0.0) {
+        if !k.is_finite() || k == 0.0 {
             return (e1, 0.0);
         }
         let step = Rotation3::from_matrix_unchecked(e1.rotation * e0.rotation.transpose());
@@ -138,6 +141,9 @@ impl Locator {
         let e = &prior.exterior;
         let gate_extra = options.motion_gate * prior.motion_px;
         let (mut confirmed, mut checked) = (0usize, 0usize);
+        // First every target's window (touching its pixels, so that the
+        // frame's lines come from memory together), then the measurements.
+        self.windows.clear();
         for (fi, t) in self.field.targets().iter().enumerate() {
             let Some((ideal, cov)) =
                 projection_with_covariance(c, e, &prior.covariance, &t.position)
@@ -159,15 +165,21 @@ impl Locator {
                 (self.options.gate_min_px + self.options.gate_sigmas * sigma_px + gate_extra)
                     .min(self.options.gate_spacing_ratio * spacing);
             let coded = t.kind == TargetKind::Coded;
-            let read_code = coded && checked < options.verify_codes;
             let expected = Expected {
                 col: p.x,
                 row: p.y,
                 gate_px: gate,
                 radius_px: t.radius * scale,
                 coded,
-                read_code,
+                read_code: false,
             };
+            self.window.warm(&image, &expected);
+            self.windows.push((fi, expected, spacing, ideal));
+        }
+        for &(fi, mut expected, spacing, ideal) in &self.windows {
+            let t = &self.field.targets()[fi];
+            expected.read_code = expected.coded && checked < options.verify_codes;
+            let gate = expected.gate_px;
             let WindowOutcome::Found(m) = self.window.measure(&image, &prior.threshold, &expected)
             else {
                 continue;
@@ -182,8 +194,9 @@ impl Locator {
             }
             self.projected.push(Projected {
                 field_index: fi,
-                col: p.x,
-                row: p.y,
+                col: expected.col,
+                row: expected.row,
+                ideal,
                 sigma_px: gate,
                 spacing,
             });
@@ -221,19 +234,19 @@ impl Locator {
             Err(_) => return Err(TrackLost::NoPose),
         };
         // Every target of the refined pose must lie within its gate of the
-        // prediction: a pose that moved a grid step is a wrong match.
+        // prediction: a pose that moved a grid step is a wrong match. The
+        // shift is measured in ideal image coordinates: the lens distortion
+        // changes a shift of a few pixels by a small fraction of it, and
+        // the gates are far from a grid step.
         for pr in &self.projected {
             let t = &self.field.targets()[pr.field_index];
-            let Some(q) = report
-                .exterior
-                .project_ideal(c, &t.position)
-                .and_then(|i| self.camera.distort(i))
-            else {
+            let Some(q) = report.exterior.project_ideal(c, &t.position) else {
                 return Err(TrackLost::Jump);
             };
-            let q = self.camera.image_to_pixel(q);
-            let shift = ((q.x - pr.col).powi(2) + (q.y - pr.row).powi(2)).sqrt();
-            if shift > options.max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px) {
+            let shift = (q - pr.ideal).norm() / px;
+            if shift.is_nan()
+                || shift > options.max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px)
+            {
                 return Err(TrackLost::Jump);
             }
         }

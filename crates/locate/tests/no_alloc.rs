@@ -1,6 +1,7 @@
 //! Once warm, locating a frame — detection, identification, both
-//! resections — allocates nothing, nor does tracking a frame from a pose: a
-//! counting global allocator watches.
+//! resections — allocates nothing, nor does tracking a frame from a pose,
+//! nor a lost track and its whole-frame fallback: a counting global
+//! allocator watches.
 
 use photopose_field::design::default_plate;
 use photopose_geometry::Exterior;
@@ -67,4 +68,34 @@ fn locating_allocates_nothing_once_warm() {
         }
     }
     assert_eq!(allocations() - before, 0, "allocations per tracked frame");
+    // A track lost (a prediction a grid step off: too few targets, a code
+    // mismatch or a jump) and the frame then located whole, as the pipeline
+    // falls back.
+    let lost: Vec<Prior> = priors
+        .iter()
+        .map(|p| Prior {
+            exterior: Exterior::new(
+                p.exterior.rotation,
+                p.exterior.center + photopose_geometry::Vector3::new(20.0, 0.0, 0.0),
+            ),
+            motion_px: 0.0,
+            ..*p
+        })
+        .collect();
+    for (img, prior) in frames.iter().zip(&lost) {
+        assert!(locator.track(img.view(), prior, &options).is_err());
+        assert_eq!(*locator.locate(img.view()).unwrap().status, PoseStatus::Ok);
+    }
+    let before = allocations();
+    for _ in 0..2 {
+        for (img, prior) in frames.iter().zip(&lost) {
+            assert!(locator.track(img.view(), prior, &options).is_err());
+            assert_eq!(*locator.locate(img.view()).unwrap().status, PoseStatus::Ok);
+        }
+    }
+    assert_eq!(
+        allocations() - before,
+        0,
+        "allocations per lost track and whole-frame fallback"
+    );
 }

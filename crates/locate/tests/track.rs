@@ -8,6 +8,7 @@ use photopose_geometry::{Exterior, Vector3};
 use photopose_locate::track::{Motion, Prior, TrackLost, TrackOptions};
 use photopose_locate::{LocateOptions, Locator, PoseStatus};
 use photopose_render::{RenderOptions, Renderer};
+use photopose_vision::{Detector, DetectorOptions};
 
 fn poses() -> [Exterior; 3] {
     [
@@ -117,9 +118,107 @@ fn motion_predicts_constant_velocity() {
     assert!((p.center - c.center).norm() < 1e-9);
     assert!((p.rotation - c.rotation).abs().max() < 1e-9);
     assert!(shift > 0.0);
+    // A frame between the two (finished after the later one): back along
+    // the same motion.
+    let (p, back) = m.predict(9, 12.0, 0.00645, 1000.0);
+    assert!((p.center - a.center).norm() < 1e-9);
+    assert!((p.rotation - a.rotation).abs().max() < 1e-9);
+    assert!((back - shift).abs() < 1e-9 * shift);
     let still = Motion {
         last: (10, b),
         before: None,
     };
     assert_eq!(still.predict(11, 12.0, 0.00645, 1000.0).0, b);
+}
+
+/// The differences of two poses in units of `full`'s σ: `Xc, Yc, Zc` and
+/// the small rotations `ω` (`R_t = R_f (I + [ω]ₓ)`, as in the covariance).
+fn sigma_units(
+    tracked: &photopose_geometry::ResectionReport,
+    full: &photopose_geometry::ResectionReport,
+) -> [f64; 6] {
+    let d = full.exterior.rotation.transpose() * tracked.exterior.rotation;
+    let omega = [
+        (d[(2, 1)] - d[(1, 2)]) / 2.0,
+        (d[(0, 2)] - d[(2, 0)]) / 2.0,
+        (d[(1, 0)] - d[(0, 1)]) / 2.0,
+    ];
+    let mut out = [0.0; 6];
+    for k in 0..3 {
+        out[k] =
+            (tracked.exterior.center[k] - full.exterior.center[k]) / full.covariance[(k, k)].sqrt();
+        out[3 + k] = omega[k] / full.covariance[(3 + k, 3 + k)].sqrt();
+    }
+    out
+}
+
+#[test]
+fn tracked_poses_along_a_moving_circle_equal_the_whole_frame_within_a_tenth_of_sigma() {
+    // The camera 1000 mm above the plate moving 0.2 mm per frame along a
+    // 40 mm circle, every frame with its own noise: each frame is tracked
+    // from the pose predicted by the two before it with the threshold of
+    // the first frame's whole-frame pass, and located whole on its own.
+    let camera = photopose_formats::default_camera();
+    let field = default_plate();
+    let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
+    // The detector holds its threshold level, as the daemon's do with
+    // tracking on.
+    let options = DetectorOptions {
+        threshold_hold: 1.0,
+        ..DetectorOptions::for_field(&field)
+    };
+    let detector = Detector::new(camera.sensor.width, camera.sensor.height, options).unwrap();
+    let mut locator =
+        Locator::with_detector(camera, field, LocateOptions::default(), detector).unwrap();
+    let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+    let at = |k: u64| {
+        let phi = 0.005 * k as f64;
+        Exterior::from_kuka_pose([40.0 * phi.cos(), 40.0 * phi.sin(), 1000.0, 0.0, 0.0, 0.0])
+    };
+    let mut img = renderer.new_image();
+    renderer.render(&at(0), &mut img).unwrap();
+    let whole = locator.locate(img.view()).unwrap();
+    let first = *whole.pose.unwrap();
+    let threshold = whole.detections.threshold;
+    let mut motion = Motion {
+        last: (0, first.exterior),
+        before: None,
+    };
+    let mut covariance = first.covariance;
+    let mut worst = [0.0f64; 6];
+    for k in 1..=6u64 {
+        renderer
+            .set_options(RenderOptions {
+                seed: 100 + k,
+                ..RenderOptions::default()
+            })
+            .unwrap();
+        renderer.render(&at(k), &mut img).unwrap();
+        let (exterior, motion_px) = motion.predict(k, c, px, 1000.0);
+        let prior = Prior {
+            exterior,
+            covariance,
+            motion_px,
+            threshold,
+        };
+        let tracked = *locator
+            .track(img.view(), &prior, &TrackOptions::default())
+            .unwrap_or_else(|e| panic!("frame {k}: {e:?}"));
+        let whole = locator.locate(img.view()).unwrap();
+        assert_eq!(*whole.status, PoseStatus::Ok);
+        let full = *whole.pose.unwrap();
+        assert_eq!(tracked.n_points, full.n_points, "frame {k}");
+        for (w, d) in worst.iter_mut().zip(sigma_units(&tracked, &full)) {
+            *w = w.max(d.abs());
+        }
+        covariance = tracked.covariance;
+        motion = Motion {
+            last: (k, tracked.exterior),
+            before: Some(motion.last),
+        };
+    }
+    assert!(
+        worst.iter().all(|&w| w <= 0.1),
+        "largest differences (Xc, Yc, Zc, ωX, ωY, ωZ) in σ: {worst:?}"
+    );
 }

@@ -11,7 +11,7 @@ use photopose_acquire::ring::RecvError;
 use photopose_acquire::{spawn_grabber_counted, FrameSource, Published, Ring, Slot};
 use photopose_field::Field;
 use photopose_geometry::Camera;
-use photopose_locate::{LocateOptions, Locator};
+use photopose_locate::Locator;
 use photopose_stream::{Edge, PoseMessage};
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -300,7 +300,7 @@ impl Pipeline {
         // stage; dropping the frame handle returns its slot to the ring.
         let track_slot = crate::track::TrackSlot::default();
         for k in 0..config.workers {
-            let mut locator = Locator::new(camera, field.clone(), LocateOptions::default())?;
+            let mut locator = crate::track::locator(camera, field.clone(), &config.tracking)?;
             let tracker = crate::track::Tracker::new(config.tracking, track_slot.clone());
             let (consumer, out_tx) = (consumer.clone(), out_tx.clone());
             let counters = counters.clone();

@@ -13,16 +13,20 @@
 //! The latest pose of the camera lives in one [`TrackSlot`] shared by the
 //! workers. Workers finish frames out of order: a pose replaces the slot's
 //! only when its frame is newer, and the one it replaces becomes the
-//! "before" of the motion prediction. Hand-over never waits: a worker that
+//! "before" of the motion prediction; a frame older than the slot's pose
+//! is tracked from it all the same (predicted back along the motion), not
+//! located whole. Hand-over never waits: a worker that
 //! finds the slot busy (another worker is publishing) locates the frame
 //! whole, and a publication that finds it busy is skipped.
 
 use crate::config::ConfigError;
 use crate::source::Bad;
+use photopose_field::Field;
+use photopose_geometry::Camera;
 use photopose_geometry::{Exterior, Matrix6, ResectionReport};
 use photopose_locate::track::{Motion, Prior, TrackOptions};
-use photopose_locate::{LocateError, Locator, PoseStatus};
-use photopose_vision::ThresholdResult;
+use photopose_locate::{LocateError, LocateOptions, Locator, PoseStatus};
+use photopose_vision::{Detector, DetectorOptions, ThresholdResult};
 use serde::Deserialize;
 use std::sync::{Arc, Mutex, TryLockError};
 
@@ -173,6 +177,24 @@ pub enum Mode {
     Tracked,
 }
 
+/// The threshold hysteresis of a worker's detector with tracking on, noise
+/// σ (`photopose_vision::DetectorOptions::threshold_hold`).
+pub const THRESHOLD_HOLD: f64 = 1.0;
+
+/// A worker's locator for `camera` and `field`. With tracking on, its
+/// detector holds its threshold level within [`THRESHOLD_HOLD`] noise σ, so
+/// that whole-frame and tracked poses agree within a tenth of their σ; off,
+/// every frame gets its own level, and a replay gives the same output
+/// whichever worker locates which frame.
+pub fn locator(camera: Camera, field: Field, tracking: &Tracking) -> Result<Locator, LocateError> {
+    let mut options = DetectorOptions::for_field(&field);
+    if tracking.enabled {
+        options.threshold_hold = THRESHOLD_HOLD;
+    }
+    let detector = Detector::new(camera.sensor.width, camera.sensor.height, options)?;
+    Locator::with_detector(camera, field, LocateOptions::default(), detector)
+}
+
 /// One worker's side of tracking mode.
 #[derive(Debug)]
 pub struct Tracker {
@@ -226,7 +248,9 @@ impl Tracker {
             return None;
         }
         let latest = self.slot.latest()?;
-        if seq <= latest.seq || seq - latest.seq > u64::from(self.config.max_gap) {
+        // A frame older than the latest pose (another worker finished a
+        // later one first) is predicted back along the same motion.
+        if seq == latest.seq || seq.abs_diff(latest.seq) > u64::from(self.config.max_gap) {
             return None;
         }
         let camera = locator.camera();
@@ -243,5 +267,65 @@ impl Tracker {
             motion_px,
             threshold: latest.threshold,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photopose_geometry::Vector3;
+    use photopose_vision::{FrameStatus, Threshold};
+
+    fn report(x: f64) -> ResectionReport {
+        ResectionReport {
+            exterior: Exterior::from_kuka_pose([x, 0.0, 1000.0, 0.0, 0.0, 0.0]),
+            covariance: Matrix6::identity() * 1e-4,
+            sigma0: 1e-4,
+            sigma0_px: 0.02,
+            rms_px: 0.02,
+            n_points: 200,
+            n_rejected: 0,
+            iterations: 2,
+            hypotheses: 0,
+        }
+    }
+
+    #[test]
+    fn a_frame_older_than_the_latest_pose_is_tracked_from_it() {
+        let slot = TrackSlot::default();
+        let config = Tracking {
+            enabled: true,
+            ..Tracking::default()
+        };
+        let tracker = Tracker::new(config, slot.clone());
+        let locator = Locator::new(
+            photopose_formats::default_camera(),
+            photopose_field::design::default_plate(),
+            LocateOptions::default(),
+        )
+        .unwrap();
+        let threshold = ThresholdResult {
+            threshold: Threshold::global(90),
+            otsu: 90,
+            floor: 40,
+            background: 13.0,
+            noise: 2.0,
+            max_sampled: 220,
+            status: FrameStatus::Normal,
+        };
+        slot.publish(10, &report(0.0), Some(threshold));
+        slot.publish(12, &report(2.0), None);
+        // Frame 11 went to a worker that started it after frame 12's pose
+        // was published.
+        let prior = tracker.prior(&locator, 11).expect("a prior for frame 11");
+        let want = Vector3::new(1.0, 0.0, 1000.0);
+        let got = prior.exterior.center;
+        assert!((got - want).norm() < 1e-9, "{got:?}");
+        assert!(prior.motion_px > 0.0);
+        assert!(tracker.prior(&locator, 13).is_some());
+        // The latest pose's own frame, and frames too far either side.
+        assert!(tracker.prior(&locator, 12).is_none());
+        assert!(tracker.prior(&locator, 12 + 9).is_none());
+        assert!(tracker.prior(&locator, 3).is_none());
     }
 }

@@ -63,6 +63,9 @@ pub struct Detector {
     /// The window's local levels (all at the global level unless
     /// [`DetectorOptions::local_threshold`] found dim surroundings).
     levels: LocalLevels,
+    /// The level held by [`DetectorOptions::threshold_hold`] and the
+    /// saturation level of the frames it was found on.
+    held: Option<(u32, Threshold)>,
     out: Detections,
 }
 
@@ -103,6 +106,7 @@ impl Detector {
             order: Vec::with_capacity(options.max_targets),
             tables: RingTables::default(),
             levels: LocalLevels::new(max_width as usize, max_height as usize),
+            held: None,
             out: Detections::with_capacity(options.max_targets),
         })
     }
@@ -222,7 +226,10 @@ impl Detector {
         // 1. Threshold.
         let t = match given {
             Some(t) => *t,
-            None => self.find_threshold(plane, max_value),
+            None => {
+                let t = self.find_threshold(plane, max_value);
+                self.hold(t, max_value)
+            }
         };
         self.out.threshold = t;
         self.out.status = t.status;
@@ -253,6 +260,27 @@ impl Detector {
         // Parts of rings, then the output.
         self.suppress_ring_parts();
         self.emit();
+    }
+
+    /// The threshold hysteresis ([`DetectorOptions::threshold_hold`]): `t`
+    /// with the held level while it lies within the band, else `t`, whose
+    /// level is then held.
+    fn hold(&mut self, mut t: ThresholdResult, max_value: u32) -> ThresholdResult {
+        let hold = self.options.threshold_hold;
+        if t.status != FrameStatus::Normal || hold.is_nan() || hold <= 0.0 {
+            return t;
+        }
+        let band = (hold * t.noise).max((1u32 << threshold::bin_shift(max_value)) as f64);
+        match self.held {
+            Some((m, h))
+                if m == max_value
+                    && (h.level() as f64 - t.threshold.level() as f64).abs() <= band =>
+            {
+                t.threshold = h;
+            }
+            _ => self.held = Some((max_value, t.threshold)),
+        }
+        t
     }
 
     /// Stage 1: the sub-sampled histogram of the window and its threshold.

@@ -151,6 +151,19 @@ pub struct DetectorOptions {
     /// `noise_factor`, as a tile is lowered only where its surroundings
     /// peak above it.
     pub local_noise_factor: f64,
+    /// Threshold hysteresis, noise σ: a detector keeps the level it found
+    /// on an earlier frame while the new frame's level lies within this
+    /// many noise σ (at least one histogram bin) of it. Otsu's level
+    /// jitters by a grey value or two from frame to frame with the noise;
+    /// each jump moves the binary shapes, hence the centroid windows, and
+    /// the centres by a tenth of their σ. Held, the level is the same for
+    /// every frame of a steady scene, and for tracking mode, which reuses
+    /// the level of the last whole frame. 0 (the default): a level per
+    /// frame, so that a frame's result never depends on the frames the
+    /// detector saw before (a replay over several workers gives the same
+    /// output whichever worker locates which frame); tracking mode turns it
+    /// on.
+    pub threshold_hold: f64,
 }
 
 impl Default for DetectorOptions {
@@ -175,6 +188,7 @@ impl Default for DetectorOptions {
             saturated_knee: 1.0,
             local_threshold: 0.3,
             local_noise_factor: 5.0,
+            threshold_hold: 0.0,
         }
     }
 }

@@ -396,3 +396,44 @@ fn over_exposed_dots_are_measured_without_bias() {
         }
     }
 }
+
+#[test]
+fn a_held_threshold_level_is_kept_within_its_band_and_replaced_beyond() {
+    let mut s = Scene::new(200, 160, 15.0);
+    for (c, r) in [(50.3, 40.7), (120.6, 90.2), (160.1, 50.5)] {
+        s.draw(&dot(c, r, 5.0), 190.0);
+    }
+    s.blur(0.6);
+    s.noise(2.0, &mut Rng::new(3));
+    let base = s.to_mono8();
+    // The same frame brighter by `by` grey values.
+    let brighter = |by: u8| {
+        let mut img = base.clone();
+        if let photopose_frame::Pixels::Mono8(px) = img.pixels_mut() {
+            for p in px.iter_mut() {
+                *p = p.saturating_add(by);
+            }
+        }
+        img
+    };
+    let level = |det: &mut Detector, img: &photopose_frame::Image| {
+        det.detect(img.view()).unwrap().threshold.threshold.level()
+    };
+    let mut plain = Detector::new(200, 160, DetectorOptions::default()).unwrap();
+    let held_options = DetectorOptions {
+        threshold_hold: 1.0,
+        ..DetectorOptions::default()
+    };
+    let mut held = Detector::new(200, 160, held_options).unwrap();
+    let first = level(&mut held, &base);
+    assert_eq!(first, level(&mut plain, &base));
+    // One grey value brighter: Otsu moves, the held level stays.
+    let one = brighter(1);
+    assert_ne!(level(&mut plain, &one), first);
+    assert_eq!(level(&mut held, &one), first);
+    // Far brighter: a new level, held from then on.
+    let far = brighter(30);
+    let new = level(&mut plain, &far);
+    assert_eq!(level(&mut held, &far), new);
+    assert_ne!(new, first);
+}
