@@ -115,15 +115,9 @@ fn monte_carlo_agrees_with_predicted_precision() {
     for _ in 0..trials {
         let obs = observe(&cam, &truth, sigma, &mut rng);
         let r = rs.solve(&obs).unwrap();
-        let d = r.exterior.center - truth.center;
-        // Small rotation of the camera about the field axes: R = R_true (I + [ω]x).
-        let dr = truth.rotation.transpose() * r.exterior.rotation;
-        let w = [
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        ];
-        let e = [d.x, d.y, d.z, w[0], w[1], w[2]];
+        // Centre offset and small rotation of the camera about the field
+        // axes: R = R_true (I + [ω]x).
+        let e = r.exterior.deviation_from(&truth);
         for k in 0..6 {
             sum[k] += e[k];
             sum2[k] += e[k] * e[k];
