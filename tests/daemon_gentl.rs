@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::{bin, scratch};
+use common::{bin, scratch, UdpMessages};
 use std::net::UdpSocket;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Output, Stdio};
@@ -65,15 +65,18 @@ fn write_config(dir: &Path, gentl: &str, udp: &UdpSocket) -> PathBuf {
     config
 }
 
-fn messages(rx: &UdpSocket) -> Vec<serde_json::Value> {
-    rx.set_read_timeout(Some(Duration::from_millis(300)))
+/// Runs `photopose run --frames <frames>` on `config` with `env` set,
+/// killed after `limit`; its output.
+fn run_frames(config: &Path, frames: u32, env: &[(&str, &str)], limit: Duration) -> Output {
+    let child = bin()
+        .args(["run", "--frames", &frames.to_string(), "--config"])
+        .arg(config)
+        .envs(env.iter().copied())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .unwrap();
-    let mut buf = [0u8; 8192];
-    let mut out = Vec::new();
-    while let Ok(n) = rx.recv(&mut buf) {
-        out.push(serde_json::from_slice(&buf[..n]).expect("a JSON pose message"));
-    }
-    out
+    finish(child, limit)
 }
 
 #[test]
@@ -89,14 +92,8 @@ fn poses_from_the_test_producer_agree_with_the_render_truth() {
         ),
         &rx,
     );
-    let child = bin()
-        .args(["run", "--frames", "20", "--config"])
-        .arg(&config)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let out = finish(child, Duration::from_secs(300));
+    let collected = UdpMessages::collect(&rx);
+    let out = run_frames(&config, 20, &[], Duration::from_secs(300));
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");
@@ -104,7 +101,7 @@ fn poses_from_the_test_producer_agree_with_the_render_truth() {
         stdout.contains("20 frames in, 0 dropped"),
         "{stdout}\n{stderr}"
     );
-    let msgs = messages(&rx);
+    let msgs = collected.finish();
     let frames: Vec<_> = msgs.iter().filter(|v| v["status"] != "stale").collect();
     assert_eq!(frames.len(), 20, "{msgs:?}");
     let mut ok = 0;
@@ -143,16 +140,9 @@ fn an_unsupported_pixel_format_is_refused_naming_its_value() {
         &format!("producer = \"{}\"\n", test_producer().display()),
         &rx,
     );
-    let child = bin()
-        .args(["run", "--frames", "5", "--config"])
-        .arg(&config)
-        // BayerRG8: the device now says it sends that.
-        .env(photopose_gentl_producer::PFNC_VAR, "0x01080009")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let out = finish(child, Duration::from_secs(120));
+    // BayerRG8: the device now says it sends that.
+    let bayer = [(photopose_gentl_producer::PFNC_VAR, "0x01080009")];
+    let out = run_frames(&config, 5, &bayer, Duration::from_secs(120));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains("0x01080009") && stderr.contains("not supported"),
@@ -183,14 +173,7 @@ fn a_missing_or_invalid_producer_is_named() {
     let text = dir.join("text.cti");
     std::fs::write(&text, "no producer\n").unwrap();
     let config = write_config(&dir, &format!("producer = \"{}\"\n", text.display()), &rx);
-    let child = bin()
-        .args(["run", "--frames", "5", "--config"])
-        .arg(&config)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let out = finish(child, Duration::from_secs(60));
+    let out = run_frames(&config, 5, &[], Duration::from_secs(60));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{stderr}");
     assert!(
@@ -221,16 +204,9 @@ fn run_on_viky_ends_with_its_twenty_frames() {
         format!("[camera]\ncamera_file = \"{}\"\n{text}", camera.display()),
     )
     .unwrap();
-    let child = bin()
-        .args(["run", "--frames", "20", "--config"])
-        .arg(&config)
-        // No `producer` key: the one .cti of this directory.
-        .env("GENICAM_GENTL64_PATH", VIKY_DIR)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let out = finish(child, Duration::from_secs(120));
+    // No `producer` key: the one .cti of this directory.
+    let search = [("GENICAM_GENTL64_PATH", VIKY_DIR)];
+    let out = run_frames(&config, 20, &search, Duration::from_secs(120));
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stdout}\n{stderr}");

@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{bin, free_udp_port, root, scratch, Killed};
+use common::{bin, free_udp_port, root, scratch, Killed, UdpMessages};
 use std::collections::BTreeMap;
 use std::net::UdpSocket;
 use std::path::Path;
@@ -35,34 +35,15 @@ fn run(args: &[&str], config: Option<&Path>) -> String {
 }
 
 fn poses(config: &Path, rx: &UdpSocket) -> (Vec<String>, String) {
-    // Read while the daemon runs: 50 messages of about 2 kB each would
-    // overflow the socket's default receive buffer if left queued.
-    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let reader = {
-        let rx = rx.try_clone().unwrap();
-        let done = std::sync::Arc::clone(&done);
-        std::thread::spawn(move || {
-            rx.set_read_timeout(Some(Duration::from_millis(300)))
-                .unwrap();
-            let mut buf = [0u8; 8192];
-            let mut lines = Vec::new();
-            loop {
-                match rx.recv(&mut buf) {
-                    Ok(n) => {
-                        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
-                        common::check_pose_message(&v);
-                        lines.push(common::without_run_times(v).to_string());
-                    }
-                    Err(_) if done.load(std::sync::atomic::Ordering::Acquire) => break,
-                    Err(_) => {}
-                }
-            }
-            lines
-        })
-    };
+    let messages = UdpMessages::collect(rx);
     let summary = run(&[], Some(config));
-    done.store(true, std::sync::atomic::Ordering::Release);
-    (reader.join().unwrap(), summary)
+    let lines = messages.finish().into_iter();
+    (
+        lines
+            .map(|v| common::without_run_times(v).to_string())
+            .collect(),
+        summary,
+    )
 }
 
 /// The built-in configuration with RSI on at `port` on 127.0.0.1 (the

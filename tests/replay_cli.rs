@@ -4,10 +4,9 @@
 
 mod common;
 
-use common::{bin, scratch};
+use common::{bin, scratch, UdpMessages};
 use std::net::UdpSocket;
 use std::path::Path;
-use std::time::Duration;
 
 /// Runs `photopose run` on `config` (plus `args`), collecting the UDP
 /// messages while it runs (about 2 kB each: left queued, a few dozen would
@@ -15,37 +14,16 @@ use std::time::Duration;
 /// their run-dependent times (sending, monotonic stamps) and the run's
 /// summary.
 fn replay(config: &Path, rx: &UdpSocket, args: &[&str]) -> (Vec<String>, String) {
-    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let reader = {
-        let rx = rx.try_clone().unwrap();
-        let done = std::sync::Arc::clone(&done);
-        std::thread::spawn(move || {
-            rx.set_read_timeout(Some(Duration::from_millis(300)))
-                .unwrap();
-            let mut buf = [0u8; 8192];
-            let mut lines = Vec::new();
-            loop {
-                match rx.recv(&mut buf) {
-                    Ok(n) => {
-                        let v: serde_json::Value = serde_json::from_slice(&buf[..n]).unwrap();
-                        common::check_pose_message(&v);
-                        lines.push(common::without_run_times(v).to_string());
-                    }
-                    Err(_) if done.load(std::sync::atomic::Ordering::Acquire) => break,
-                    Err(_) => {}
-                }
-            }
-            lines
-        })
-    };
+    let messages = UdpMessages::collect(rx);
     let out = bin()
         .args(["run", "--config"])
         .arg(config)
         .args(args)
         .output()
         .unwrap();
-    done.store(true, std::sync::atomic::Ordering::Release);
-    let lines = reader.join().unwrap();
+    let lines: Vec<String> = (messages.finish().into_iter())
+        .map(|v| common::without_run_times(v).to_string())
+        .collect();
     let summary = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),

@@ -7,7 +7,7 @@
 //! every frame or `--frames`).
 
 use crate::cmd::defaults;
-use crate::cmd::input::{for_each_frame, FrameSelection};
+use crate::cmd::input::{for_each_frame_hashed, FrameSelection};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use photopose_calibrate::{
@@ -124,22 +124,14 @@ pub fn run(mut args: Args) -> Result<ExitCode> {
             hashes.push(hash_file(p, kind)?);
         }
     }
-    for path in &args.images {
-        let kind = if path.extension().is_some_and(|e| e == "mcap") {
-            FileKind::Recording
-        } else {
-            FileKind::Image
-        };
-        if let Ok(h) = hash_file(path, kind) {
-            hashes.push(h);
-        }
-    }
     let bar = crate::cmd::progress::bar(None, "images detected");
     let mut n_images = 0;
-    for_each_frame(
+    // Each image file is read once: hashed and decoded from the same bytes.
+    for_each_frame_hashed(
         &args.images,
         &initial,
         args.frames.as_ref(),
+        &mut hashes,
         |name, image| -> Result<()> {
             n_images += 1;
             bar.inc(1);

@@ -207,3 +207,49 @@ pub fn without_run_times(mut v: serde_json::Value) -> serde_json::Value {
     }
     v
 }
+
+/// The JSON messages arriving at a UDP socket, collected on a thread while
+/// a daemon runs: left queued, a few dozen pose messages of about 2 kB each
+/// would overflow the socket's default receive buffer. Each is checked
+/// against the pose message schema.
+pub struct UdpMessages {
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    reader: std::thread::JoinHandle<Vec<serde_json::Value>>,
+}
+
+impl UdpMessages {
+    /// Starts collecting what arrives at `rx`.
+    pub fn collect(rx: &std::net::UdpSocket) -> UdpMessages {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let done = std::sync::Arc::new(AtomicBool::new(false));
+        let rx = rx.try_clone().unwrap();
+        let stop = std::sync::Arc::clone(&done);
+        let reader = std::thread::spawn(move || {
+            rx.set_read_timeout(Some(Duration::from_millis(300)))
+                .unwrap();
+            let mut buf = [0u8; 8192];
+            let mut messages = Vec::new();
+            loop {
+                match rx.recv(&mut buf) {
+                    Ok(n) => {
+                        let v: serde_json::Value =
+                            serde_json::from_slice(&buf[..n]).expect("a JSON pose message");
+                        check_pose_message(&v);
+                        messages.push(v);
+                    }
+                    Err(_) if stop.load(Ordering::Acquire) => break,
+                    Err(_) => {}
+                }
+            }
+            messages
+        });
+        UdpMessages { done, reader }
+    }
+
+    /// The messages in arrival order, once the socket has been quiet for
+    /// 300 ms after this call.
+    pub fn finish(self) -> Vec<serde_json::Value> {
+        self.done.store(true, std::sync::atomic::Ordering::Release);
+        self.reader.join().unwrap()
+    }
+}

@@ -5,6 +5,8 @@
 //!   and detection workers, with an explicit overflow policy;
 //! - [`source`]: the [`FrameSource`] seam and its error;
 //! - [`gige`]: the GigE Vision source over aravis, reconnecting with back-off;
+//! - [`reopen`]: keeping a device open with back-off on helper threads
+//!   (opener, reaper), shared by the camera sources;
 //! - [`grabber`]: the grabber thread that runs a source into a ring;
 //! - [`clock_map`]: the camera-clock → host-clock estimate (pure: pairs
 //!   passed in);
@@ -28,6 +30,7 @@ mod ffi;
 pub mod gige;
 pub mod grabber;
 pub mod mono;
+pub mod reopen;
 pub mod ring;
 pub mod source;
 

@@ -307,24 +307,11 @@ pub fn radial_plot(camera: &Camera, images: &[AdjustedImage], labels: &PlotLabel
 mod tests {
     use super::*;
     use crate::calibrate::Residual;
-    use photopose_geometry::{Distortion, Exterior, Interior, Sensor};
+    use photopose_geometry::Exterior;
 
     #[test]
     fn plots_draw_every_residual_and_mark_rejected_ones_red() {
-        let camera = Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.0,
-                y0: 0.0,
-            },
-            Distortion::default(),
-        )
-        .unwrap();
+        let camera = Camera::reference_ideal();
         let residual = |col: f64, used| Residual {
             id: 1,
             col,
@@ -355,20 +342,7 @@ mod tests {
     }
 
     fn camera() -> Camera {
-        Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.0,
-                y0: 0.0,
-            },
-            Distortion::default(),
-        )
-        .unwrap()
+        Camera::reference_ideal()
     }
 
     fn image(name: &str) -> AdjustedImage {

@@ -448,6 +448,14 @@ mod tests {
     fn the_shipped_default_camera_is_valid() {
         let cam = default_camera();
         assert_eq!((cam.sensor.width, cam.sensor.height), (1300, 1030));
+        // The reference camera of the examples and tests is this one.
+        assert_eq!(cam, photopose_geometry::Camera::reference());
+        let ideal = photopose_geometry::Camera::reference_ideal();
+        assert_eq!(
+            (ideal.sensor, ideal.interior.c),
+            (cam.sensor, cam.interior.c)
+        );
+        assert!(ideal.distortion.is_zero());
     }
 
     #[test]

@@ -625,7 +625,6 @@ pub fn encode_png(image: &Image, origin: &str, out: &mut Vec<u8>) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use photopose_geometry::{Distortion, Interior, Sensor};
 
     fn ramp8(w: u32, h: u32) -> Image {
         let v = (0..w * h).map(|i| (i * 7 % 256) as u8).collect();
@@ -795,20 +794,7 @@ mod tests {
         assert!(e.contains("extension .tif (use .pgm or .png)"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
 
-        let cam = Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.0,
-                y0: 0.0,
-            },
-            Distortion::default(),
-        )
-        .unwrap();
+        let cam = Camera::reference_ideal();
         let e = check_size(&Image::new_mono8(640, 480), &cam, "f.pgm")
             .unwrap_err()
             .to_string();
@@ -849,20 +835,7 @@ mod tests {
     }
 
     fn camera_1300() -> Camera {
-        Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.0,
-                y0: 0.0,
-            },
-            Distortion::default(),
-        )
-        .unwrap()
+        Camera::reference_ideal()
     }
 
     #[test]

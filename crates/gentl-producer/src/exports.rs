@@ -164,6 +164,163 @@ unsafe fn put<T>(p: *mut T, v: T) -> GC_ERROR {
     GC_ERR_SUCCESS
 }
 
+/// The modules of the GenTL chain; each has exactly one child (the system
+/// one interface, the interface one device, the device one data stream).
+#[derive(Clone, Copy)]
+enum Module {
+    System,
+    Interface,
+    Device,
+    Stream,
+}
+
+impl Module {
+    fn token(self) -> &'static u8 {
+        match self {
+            Module::System => &TL,
+            Module::Interface => &IF,
+            Module::Device => &DEV,
+            Module::Stream => &DS,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Module::System => "system",
+            Module::Interface => "interface",
+            Module::Device => "device",
+            Module::Stream => "data stream",
+        }
+    }
+
+    fn open_flag(self, s: &mut State) -> &mut bool {
+        match self {
+            Module::System => &mut s.tl_open,
+            Module::Interface => &mut s.if_open,
+            Module::Device => &mut s.dev_open,
+            Module::Stream => &mut s.ds_open,
+        }
+    }
+
+    /// The one child and its id (the stream has none: buffers instead).
+    fn child(self) -> Option<(Module, &'static str)> {
+        match self {
+            Module::System => Some((Module::Interface, crate::INTERFACE_ID)),
+            Module::Interface => Some((Module::Device, crate::DEVICE_ID)),
+            Module::Device => Some((Module::Stream, STREAM_ID)),
+            Module::Stream => None,
+        }
+    }
+}
+
+/// The id of the device's one data stream.
+const STREAM_ID: &str = "stream0";
+
+/// Runs `f` on the state if `h` is `module`'s handle and it is open.
+fn with_open(module: Module, h: *mut c_void, f: impl FnOnce(&mut State) -> GC_ERROR) -> GC_ERROR {
+    with(|s| {
+        if h != handle(module.token()) || !*module.open_flag(s) {
+            let text = format!("not the open {}", module.name());
+            return fail(s, GC_ERR_INVALID_HANDLE, &text);
+        }
+        f(s)
+    })
+}
+
+/// `XXClose` of a module with a child: refused while the child is open.
+fn close_module(module: Module, h: *mut c_void) -> GC_ERROR {
+    with_open(module, h, |s| {
+        if let Some((child, _)) = module.child() {
+            if *child.open_flag(s) {
+                let text = format!("{} still open", child.name());
+                return fail(s, GC_ERR_RESOURCE_IN_USE, &text);
+            }
+        }
+        *module.open_flag(s) = false;
+        GC_ERR_SUCCESS
+    })
+}
+
+/// `XXUpdateYYList`: the one child never changes.
+///
+/// # Safety
+/// `changed` is null or writable.
+unsafe fn update_child_list(module: Module, h: *mut c_void, changed: *mut bool8_t) -> GC_ERROR {
+    with_open(module, h, |_| {
+        if !changed.is_null() {
+            // SAFETY: non-null, the consumer's flag.
+            unsafe { *changed = 0 };
+        }
+        GC_ERR_SUCCESS
+    })
+}
+
+/// `XXGetNumYYs`: one.
+///
+/// # Safety
+/// `n` is null or writable.
+unsafe fn count_children(module: Module, h: *mut c_void, n: *mut u32) -> GC_ERROR {
+    // SAFETY: the consumer passes a writable count.
+    with_open(module, h, |_| unsafe { put(n, 1) })
+}
+
+/// `XXGetYYID`: the one child's id at index 0.
+///
+/// # Safety
+/// `size` is null or writable; `id` is null or writable for `*size` bytes.
+unsafe fn child_id(
+    module: Module,
+    h: *mut c_void,
+    index: u32,
+    id: *mut c_char,
+    size: *mut usize,
+) -> GC_ERROR {
+    with_open(module, h, |s| {
+        let Some((child, child_id)) = module.child() else {
+            return fail(s, GC_ERR_NOT_IMPLEMENTED, "no children");
+        };
+        if index != 0 {
+            let text = format!("one {}", child.name());
+            return fail(s, GC_ERR_INVALID_INDEX, &text);
+        }
+        // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
+        unsafe { write_string(child_id, std::ptr::null_mut(), id.cast(), size) }
+    })
+}
+
+/// `XXOpenYY`: opens the one child named `id` (once), after `prepare`.
+///
+/// # Safety
+/// `id` is null or NUL-terminated; `out` is null or writable.
+unsafe fn open_child(
+    module: Module,
+    h: *mut c_void,
+    id: *const c_char,
+    out: *mut *mut c_void,
+    prepare: impl FnOnce(&mut State) -> Result<(), GC_ERROR>,
+) -> GC_ERROR {
+    with_open(module, h, |s| {
+        let Some((child, child_id)) = module.child() else {
+            return fail(s, GC_ERR_NOT_IMPLEMENTED, "no children");
+        };
+        // SAFETY: the consumer passes a NUL-terminated id.
+        if !unsafe { id_is(id, child_id) } {
+            let text = format!("no such {}", child.name());
+            return fail(s, GC_ERR_INVALID_ID, &text);
+        }
+        if *child.open_flag(s) {
+            let text = format!("{} already open", child.name());
+            return fail(s, GC_ERR_RESOURCE_IN_USE, &text);
+        }
+        if let Err(e) = prepare(s) {
+            return e;
+        }
+        *child.open_flag(s) = true;
+        // SAFETY: the consumer passes a writable handle.
+        unsafe { put(out, handle(child.token())) }
+    })
+}
+
 #[no_mangle]
 unsafe extern "C" fn GCInitLib() -> GC_ERROR {
     let mut guard = lock();
@@ -235,16 +392,7 @@ unsafe extern "C" fn TLOpen(tl: *mut TL_HANDLE) -> GC_ERROR {
 
 #[no_mangle]
 unsafe extern "C" fn TLClose(tl: TL_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if tl != handle(&TL) || !s.tl_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
-        }
-        if s.if_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "interface still open");
-        }
-        s.tl_open = false;
-        GC_ERR_SUCCESS
-    })
+    close_module(Module::System, tl)
 }
 
 #[no_mangle]
@@ -253,27 +401,14 @@ unsafe extern "C" fn TLUpdateInterfaceList(
     changed: *mut bool8_t,
     _timeout: u64,
 ) -> GC_ERROR {
-    with(|s| {
-        if tl != handle(&TL) || !s.tl_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
-        }
-        if !changed.is_null() {
-            // SAFETY: non-null, the consumer's flag.
-            unsafe { *changed = 0 };
-        }
-        GC_ERR_SUCCESS
-    })
+    // SAFETY: the consumer passes a writable flag (or null).
+    unsafe { update_child_list(Module::System, tl, changed) }
 }
 
 #[no_mangle]
 unsafe extern "C" fn TLGetNumInterfaces(tl: TL_HANDLE, n: *mut u32) -> GC_ERROR {
-    with(|s| {
-        if tl != handle(&TL) || !s.tl_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
-        }
-        // SAFETY: the consumer passes a writable count.
-        unsafe { put(n, 1) }
-    })
+    // SAFETY: the consumer passes a writable count.
+    unsafe { count_children(Module::System, tl, n) }
 }
 
 #[no_mangle]
@@ -283,16 +418,8 @@ unsafe extern "C" fn TLGetInterfaceID(
     id: *mut c_char,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if tl != handle(&TL) || !s.tl_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
-        }
-        if index != 0 {
-            return fail(s, GC_ERR_INVALID_INDEX, "one interface");
-        }
-        // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
-        unsafe { write_string(crate::INTERFACE_ID, std::ptr::null_mut(), id.cast(), size) }
-    })
+    // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
+    unsafe { child_id(Module::System, tl, index, id, size) }
 }
 
 #[no_mangle]
@@ -301,35 +428,13 @@ unsafe extern "C" fn TLOpenInterface(
     id: *const c_char,
     iface: *mut IF_HANDLE,
 ) -> GC_ERROR {
-    with(|s| {
-        if tl != handle(&TL) || !s.tl_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open system");
-        }
-        // SAFETY: the consumer passes a NUL-terminated id.
-        if !unsafe { id_is(id, crate::INTERFACE_ID) } {
-            return fail(s, GC_ERR_INVALID_ID, "no such interface");
-        }
-        if s.if_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "interface already open");
-        }
-        s.if_open = true;
-        // SAFETY: the consumer passes a writable handle.
-        unsafe { put(iface, handle(&IF)) }
-    })
+    // SAFETY: the consumer passes a NUL-terminated id and a writable handle.
+    unsafe { open_child(Module::System, tl, id, iface, |_| Ok(())) }
 }
 
 #[no_mangle]
 unsafe extern "C" fn IFClose(iface: IF_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
-        if s.dev_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "device still open");
-        }
-        s.if_open = false;
-        GC_ERR_SUCCESS
-    })
+    close_module(Module::Interface, iface)
 }
 
 #[no_mangle]
@@ -338,27 +443,14 @@ unsafe extern "C" fn IFUpdateDeviceList(
     changed: *mut bool8_t,
     _timeout: u64,
 ) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
-        if !changed.is_null() {
-            // SAFETY: non-null, the consumer's flag.
-            unsafe { *changed = 0 };
-        }
-        GC_ERR_SUCCESS
-    })
+    // SAFETY: the consumer passes a writable flag (or null).
+    unsafe { update_child_list(Module::Interface, iface, changed) }
 }
 
 #[no_mangle]
 unsafe extern "C" fn IFGetNumDevices(iface: IF_HANDLE, n: *mut u32) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
-        // SAFETY: the consumer passes a writable count.
-        unsafe { put(n, 1) }
-    })
+    // SAFETY: the consumer passes a writable count.
+    unsafe { count_children(Module::Interface, iface, n) }
 }
 
 #[no_mangle]
@@ -368,16 +460,8 @@ unsafe extern "C" fn IFGetDeviceID(
     id: *mut c_char,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
-        if index != 0 {
-            return fail(s, GC_ERR_INVALID_INDEX, "one device");
-        }
-        // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
-        unsafe { write_string(crate::DEVICE_ID, std::ptr::null_mut(), id.cast(), size) }
-    })
+    // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
+    unsafe { child_id(Module::Interface, iface, index, id, size) }
 }
 
 #[no_mangle]
@@ -389,10 +473,7 @@ unsafe extern "C" fn IFGetDeviceInfo(
     out: *mut c_void,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
+    with_open(Module::Interface, iface, |s| {
         // SAFETY: the consumer passes a NUL-terminated id.
         if !unsafe { id_is(id, crate::DEVICE_ID) } {
             return fail(s, GC_ERR_INVALID_ID, "no such device");
@@ -431,17 +512,7 @@ unsafe extern "C" fn IFOpenDevice(
     _flags: DEVICE_ACCESS_FLAGS,
     dev: *mut DEV_HANDLE,
 ) -> GC_ERROR {
-    with(|s| {
-        if iface != handle(&IF) || !s.if_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open interface");
-        }
-        // SAFETY: the consumer passes a NUL-terminated id.
-        if !unsafe { id_is(id, crate::DEVICE_ID) } {
-            return fail(s, GC_ERR_INVALID_ID, "no such device");
-        }
-        if s.dev_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "device already open");
-        }
+    let prepare = |s: &mut State| {
         if s.renderer.is_none() {
             let camera = photopose_formats::default_camera();
             let field = photopose_field::design::default_plate();
@@ -456,40 +527,26 @@ unsafe extern "C" fn IFOpenDevice(
                     let image = r.new_image();
                     s.renderer = Some((r, image));
                 }
-                Err(e) => return fail(s, GC_ERR_ERROR, &e.to_string()),
+                Err(e) => return Err(fail(s, GC_ERR_ERROR, &e.to_string())),
             }
         }
-        s.dev_open = true;
         // Plugged in again.
         s.gone = false;
-        // SAFETY: the consumer passes a writable handle.
-        unsafe { put(dev, handle(&DEV)) }
-    })
+        Ok(())
+    };
+    // SAFETY: the consumer passes a NUL-terminated id and a writable handle.
+    unsafe { open_child(Module::Interface, iface, id, dev, prepare) }
 }
 
 #[no_mangle]
 unsafe extern "C" fn DevClose(dev: DEV_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if dev != handle(&DEV) || !s.dev_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
-        }
-        if s.ds_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "data stream still open");
-        }
-        s.dev_open = false;
-        GC_ERR_SUCCESS
-    })
+    close_module(Module::Device, dev)
 }
 
 #[no_mangle]
 unsafe extern "C" fn DevGetNumDataStreams(dev: DEV_HANDLE, n: *mut u32) -> GC_ERROR {
-    with(|s| {
-        if dev != handle(&DEV) || !s.dev_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
-        }
-        // SAFETY: the consumer passes a writable count.
-        unsafe { put(n, 1) }
-    })
+    // SAFETY: the consumer passes a writable count.
+    unsafe { count_children(Module::Device, dev, n) }
 }
 
 #[no_mangle]
@@ -499,16 +556,8 @@ unsafe extern "C" fn DevGetDataStreamID(
     id: *mut c_char,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if dev != handle(&DEV) || !s.dev_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
-        }
-        if index != 0 {
-            return fail(s, GC_ERR_INVALID_INDEX, "one data stream");
-        }
-        // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
-        unsafe { write_string("stream0", std::ptr::null_mut(), id.cast(), size) }
-    })
+    // SAFETY: the consumer passes a buffer of `*size` bytes (or null).
+    unsafe { child_id(Module::Device, dev, index, id, size) }
 }
 
 #[no_mangle]
@@ -517,36 +566,13 @@ unsafe extern "C" fn DevOpenDataStream(
     id: *const c_char,
     ds: *mut DS_HANDLE,
 ) -> GC_ERROR {
-    with(|s| {
-        if dev != handle(&DEV) || !s.dev_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
-        }
-        // SAFETY: the consumer passes a NUL-terminated id.
-        if !unsafe { id_is(id, "stream0") } {
-            return fail(s, GC_ERR_INVALID_ID, "no such data stream");
-        }
-        if s.ds_open {
-            return fail(s, GC_ERR_RESOURCE_IN_USE, "data stream already open");
-        }
-        s.ds_open = true;
-        // SAFETY: the consumer passes a writable handle.
-        unsafe { put(ds, handle(&DS)) }
-    })
-}
-
-fn check_ds(s: &mut State, ds: DS_HANDLE) -> Result<(), GC_ERROR> {
-    if ds != handle(&DS) || !s.ds_open {
-        return Err(fail(s, GC_ERR_INVALID_HANDLE, "not the open data stream"));
-    }
-    Ok(())
+    // SAFETY: the consumer passes a NUL-terminated id and a writable handle.
+    unsafe { open_child(Module::Device, dev, id, ds, |_| Ok(())) }
 }
 
 #[no_mangle]
 unsafe extern "C" fn DSClose(ds: DS_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         if s.buffers.iter().any(Option::is_some) {
             return fail(s, GC_ERR_RESOURCE_IN_USE, "buffers still announced");
         }
@@ -568,10 +594,7 @@ unsafe extern "C" fn DSGetInfo(
     out: *mut c_void,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         let (w, h) = frame_size(s);
         let announced = s.buffers.iter().filter(|b| b.is_some()).count();
         let (t, v): (INFO_DATATYPE, u64) = match cmd {
@@ -609,10 +632,7 @@ unsafe extern "C" fn DSAnnounceBuffer(
     user: *mut c_void,
     buffer: *mut BUFFER_HANDLE,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         if memory.is_null() || buffer.is_null() {
             return fail(s, GC_ERR_INVALID_PARAMETER, "null buffer");
         }
@@ -636,10 +656,7 @@ unsafe extern "C" fn DSRevokeBuffer(
     memory: *mut *mut c_void,
     user: *mut *mut c_void,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         let Some(i) =
             buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
         else {
@@ -666,10 +683,7 @@ unsafe extern "C" fn DSRevokeBuffer(
 
 #[no_mangle]
 unsafe extern "C" fn DSQueueBuffer(ds: DS_HANDLE, buffer: BUFFER_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         let Some(i) =
             buffer_index(buffer).filter(|&i| s.buffers.get(i).is_some_and(Option::is_some))
         else {
@@ -685,10 +699,7 @@ unsafe extern "C" fn DSQueueBuffer(ds: DS_HANDLE, buffer: BUFFER_HANDLE) -> GC_E
 
 #[no_mangle]
 unsafe extern "C" fn DSFlushQueue(ds: DS_HANDLE, op: ACQ_QUEUE_TYPE) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         match op {
             // Frames are delivered as they are rendered: the output queue
             // is always empty.
@@ -713,10 +724,7 @@ unsafe extern "C" fn DSStartAcquisition(
     _flags: ACQ_START_FLAGS,
     _count: u64,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         if s.acquiring {
             return fail(s, GC_ERR_RESOURCE_IN_USE, "already acquiring");
         }
@@ -727,10 +735,7 @@ unsafe extern "C" fn DSStartAcquisition(
 
 #[no_mangle]
 unsafe extern "C" fn DSStopAcquisition(ds: DS_HANDLE, _flags: ACQ_STOP_FLAGS) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         if !s.acquiring {
             return fail(s, GC_ERR_RESOURCE_IN_USE, "not acquiring");
         }
@@ -748,10 +753,7 @@ unsafe extern "C" fn DSGetBufferInfo(
     out: *mut c_void,
     size: *mut usize,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, ds) {
-            return e;
-        }
+    with_open(Module::Stream, ds, |s| {
         let (w, h) = frame_size(s);
         let pfnc = s.pfnc;
         let Some(b) = buffer_index(buffer)
@@ -793,10 +795,7 @@ unsafe extern "C" fn GCRegisterEvent(
     kind: EVENT_TYPE,
     event: *mut EVENT_HANDLE,
 ) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, source) {
-            return e;
-        }
+    with_open(Module::Stream, source, |s| {
         if kind != EVENT_NEW_BUFFER {
             return fail(s, GC_ERR_NOT_IMPLEMENTED, "only NEW_BUFFER events");
         }
@@ -811,10 +810,7 @@ unsafe extern "C" fn GCRegisterEvent(
 
 #[no_mangle]
 unsafe extern "C" fn GCUnregisterEvent(source: EVENTSRC_HANDLE, kind: EVENT_TYPE) -> GC_ERROR {
-    with(|s| {
-        if let Err(e) = check_ds(s, source) {
-            return e;
-        }
+    with_open(Module::Stream, source, |s| {
         if kind != EVENT_NEW_BUFFER || !s.event {
             return fail(s, GC_ERR_NOT_AVAILABLE, "not registered");
         }
@@ -926,10 +922,7 @@ unsafe extern "C" fn EventGetData(
 
 #[no_mangle]
 unsafe extern "C" fn DevGetPort(dev: DEV_HANDLE, _port: *mut PORT_HANDLE) -> GC_ERROR {
-    with(|s| {
-        if dev != handle(&DEV) || !s.dev_open {
-            return fail(s, GC_ERR_INVALID_HANDLE, "not the open device");
-        }
+    with_open(Module::Device, dev, |s| {
         fail(s, GC_ERR_NOT_IMPLEMENTED, "no remote device port")
     })
 }

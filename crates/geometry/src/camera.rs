@@ -101,6 +101,46 @@ impl Distortion {
 }
 
 impl Camera {
+    /// The reference camera: a 1300 × 1030 px sensor of 6.7 µm pixels
+    /// behind a 12 mm lens, with the principal point and distortion of the
+    /// shipped `config/camera.toml` (the camera of the examples, benchmarks
+    /// and tests).
+    pub fn reference() -> Camera {
+        Camera {
+            distortion: Distortion {
+                k1: -1.2e-4,
+                k2: 3.0e-7,
+                p1: 5.0e-6,
+                p2: -3.0e-6,
+                ..Distortion::default()
+            },
+            interior: Interior {
+                c: 12.0,
+                x0: 0.021,
+                y0: -0.014,
+            },
+            ..Camera::reference_ideal()
+        }
+    }
+
+    /// The reference camera's sensor and lens, ideal: the principal point
+    /// in the image centre, no distortion.
+    pub fn reference_ideal() -> Camera {
+        Camera {
+            sensor: Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            interior: Interior {
+                c: 12.0,
+                x0: 0.0,
+                y0: 0.0,
+            },
+            distortion: Distortion::default(),
+        }
+    }
+
     /// Builds a camera, checking every parameter (the key names are those of
     /// the camera file).
     pub fn new(
@@ -326,6 +366,18 @@ mod tests {
         let cy = (f(x, y + h) - f(x, y - h)) / (2.0 * h);
         assert!((j.column(0) - cx).norm() < 1e-8);
         assert!((j.column(1) - cy).norm() < 1e-8);
+    }
+
+    #[test]
+    fn the_reference_cameras_are_valid() {
+        for cam in [Camera::reference(), Camera::reference_ideal()] {
+            assert_eq!(
+                Camera::new(cam.sensor, cam.interior, cam.distortion).unwrap(),
+                cam
+            );
+        }
+        assert!(Camera::reference_ideal().distortion.is_zero());
+        assert!(!Camera::reference().distortion.is_zero());
     }
 
     #[test]

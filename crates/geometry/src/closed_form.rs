@@ -297,6 +297,16 @@ mod tests {
         e.project_ideal(c, p).unwrap()
     }
 
+    /// A camera about 1 m from the origin, looking at it obliquely.
+    fn oblique_view() -> Exterior {
+        Exterior::look_at(
+            Vector3::new(-300.0, 200.0, 900.0),
+            Vector3::zeros(),
+            Vector3::y(),
+        )
+        .unwrap()
+    }
+
     #[test]
     fn four_coplanar_points_give_the_exact_pose() {
         let c = 12.0;
@@ -366,12 +376,7 @@ mod tests {
     #[test]
     fn dlt_recovers_a_pose_from_non_coplanar_points() {
         let c = 12.0;
-        let truth = Exterior::look_at(
-            Vector3::new(-300.0, 200.0, 900.0),
-            Vector3::zeros(),
-            Vector3::y(),
-        )
-        .unwrap();
+        let truth = oblique_view();
         let obj = [
             Vector3::new(-200.0, -150.0, 0.0),
             Vector3::new(210.0, -140.0, 50.0),
@@ -393,12 +398,7 @@ mod tests {
     #[test]
     fn dlt_rejects_coplanar_points() {
         let c = 12.0;
-        let truth = Exterior::look_at(
-            Vector3::new(-300.0, 200.0, 900.0),
-            Vector3::zeros(),
-            Vector3::y(),
-        )
-        .unwrap();
+        let truth = oblique_view();
         let obj = [
             Vector3::new(-200.0, -150.0, 0.0),
             Vector3::new(210.0, -140.0, 0.0),

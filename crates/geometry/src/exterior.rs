@@ -3,7 +3,7 @@
 
 use crate::camera::Camera;
 use crate::rotation;
-use nalgebra::{Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix3, Vector2, Vector3, Vector6};
 
 /// Exterior orientation of a camera.
 ///
@@ -20,6 +20,23 @@ pub struct Exterior {
 }
 
 impl Exterior {
+    /// How far this pose is from `truth`: the centre's offset `X, Y, Z`
+    /// (mm) and the small rotation `ωX, ωY, ωZ` (rad) about the field axes
+    /// that takes `truth`'s rotation to this one (the skew part of
+    /// `R_truthᵀ·R`), in the order of a resection's covariance.
+    pub fn deviation_from(&self, truth: &Exterior) -> Vector6<f64> {
+        let d = self.center - truth.center;
+        let dr = truth.rotation.transpose() * self.rotation;
+        Vector6::new(
+            d.x,
+            d.y,
+            d.z,
+            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
+            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
+            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
+        )
+    }
+
     /// From `R` and the projection centre.
     pub fn new(rotation: Matrix3<f64>, center: Vector3<f64>) -> Self {
         Exterior { rotation, center }
@@ -74,5 +91,26 @@ impl Exterior {
     pub fn project_pixel(&self, camera: &Camera, p: &Vector3<f64>) -> Option<Vector2<f64>> {
         let m = camera.project_camera_point(&self.to_camera(p))?;
         Some(camera.image_to_pixel(m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn deviation_is_the_centre_offset_and_the_small_rotation() {
+        let truth = Exterior::from_kuka_pose([10.0, -20.0, 900.0, 30.0, -5.0, 170.0]);
+        assert_eq!(truth.deviation_from(&truth), Vector6::zeros());
+        // Turned by 1 µrad about the field's Y axis and moved 0.5 mm along Z.
+        let w: f64 = 1e-6;
+        let turn = Matrix3::new(w.cos(), 0.0, w.sin(), 0.0, 1.0, 0.0, -w.sin(), 0.0, w.cos());
+        let moved = Exterior::new(
+            truth.rotation * turn,
+            truth.center + Vector3::new(0.0, 0.0, 0.5),
+        );
+        let d = moved.deviation_from(&truth);
+        let want = Vector6::new(0.0, 0.0, 0.5, 0.0, w, 0.0);
+        assert!((d - want).norm() < 1e-12, "{d}");
     }
 }

@@ -91,6 +91,18 @@ pub struct ResectionReport {
 }
 
 impl ResectionReport {
+    /// The squared Mahalanobis distance of this pose from `truth` under
+    /// its covariance ([`Exterior::deviation_from`]); infinite when the
+    /// covariance is not positive definite. χ²(6)-distributed for a
+    /// consistent estimate.
+    pub fn mahalanobis_sq(&self, truth: &Exterior) -> f64 {
+        let err = self.exterior.deviation_from(truth);
+        self.covariance
+            .cholesky()
+            .map(|ch| err.dot(&ch.solve(&err)))
+            .unwrap_or(f64::INFINITY)
+    }
+
     /// Standard deviations of `Xc, Yc, Zc`, mm.
     pub fn std_center(&self) -> Vector3<f64> {
         std_center(&self.covariance)

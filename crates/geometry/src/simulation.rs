@@ -60,16 +60,7 @@ pub fn monte_carlo(
         }
         let Ok(r) = rs.solve(&obs) else { continue };
         ok += 1;
-        let d = r.exterior.center - truth.center;
-        // The small rotation about the field axes that takes the truth to
-        // the estimate (the skew part of Rtᵀ·R).
-        let dr = truth.rotation.transpose() * r.exterior.rotation;
-        let w = [
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        ];
-        let e = [d.x, d.y, d.z, w[0], w[1], w[2]];
+        let e = r.exterior.deviation_from(truth);
         for k in 0..6 {
             sum[k] += e[k];
             sum2[k] += e[k] * e[k];

@@ -7,8 +7,7 @@ use photopose_geometry::precision::{predict, visible_points};
 use photopose_geometry::rng::SplitMix64;
 use photopose_geometry::rotation::angle_between;
 use photopose_geometry::{
-    Camera, Distortion, Exterior, GeometryError, Interior, Observation, Resection,
-    ResectionOptions, Sensor, Vector3,
+    Camera, Exterior, GeometryError, Observation, Resection, ResectionOptions, Vector3,
 };
 
 fn plate() -> &'static photopose_field::Field {
@@ -17,26 +16,7 @@ fn plate() -> &'static photopose_field::Field {
 }
 
 fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .unwrap()
+    Camera::reference()
 }
 
 /// Observations of the default plate from `e`, with Gaussian noise `sigma_px`.
@@ -135,15 +115,9 @@ fn monte_carlo_agrees_with_predicted_precision() {
     for _ in 0..trials {
         let obs = observe(&cam, &truth, sigma, &mut rng);
         let r = rs.solve(&obs).unwrap();
-        let d = r.exterior.center - truth.center;
-        // Small rotation of the camera about the field axes: R = R_true (I + [ω]x).
-        let dr = truth.rotation.transpose() * r.exterior.rotation;
-        let w = [
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        ];
-        let e = [d.x, d.y, d.z, w[0], w[1], w[2]];
+        // Centre offset and small rotation of the camera about the field
+        // axes: R = R_true (I + [ω]x).
+        let e = r.exterior.deviation_from(&truth);
         for k in 0..6 {
             sum[k] += e[k];
             sum2[k] += e[k] * e[k];

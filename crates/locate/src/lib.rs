@@ -601,20 +601,7 @@ mod tests {
 
     #[test]
     fn saturated_observations_are_weighted_down() {
-        let camera = photopose_geometry::Camera::new(
-            photopose_geometry::Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            photopose_geometry::Interior {
-                c: 12.0,
-                x0: 0.0,
-                y0: 0.0,
-            },
-            photopose_geometry::Distortion::default(),
-        )
-        .unwrap();
+        let camera = photopose_geometry::Camera::reference_ideal();
         let p = Vector3::new(1.0, 2.0, 0.0);
         let plain = observation(&camera, 7, p, &detection(false), 2.0);
         let clipped = observation(&camera, 7, p, &detection(true), 2.0);

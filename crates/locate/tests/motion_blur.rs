@@ -175,21 +175,7 @@ fn sweep(blur_px: f64, frames: usize) -> Tally {
             continue;
         };
         t.posed += 1;
-        let dc = p.exterior.center - mid.center;
-        let dr = mid.rotation.transpose() * p.exterior.rotation;
-        let err = nalgebra::Vector6::new(
-            dc.x,
-            dc.y,
-            dc.z,
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        );
-        let m2 = p
-            .covariance
-            .cholesky()
-            .map(|ch| err.dot(&ch.solve(&err)))
-            .unwrap_or(f64::INFINITY);
+        let m2 = p.mahalanobis_sq(&mid);
         t.within_3_sigma += (m2 <= CHI2_6_3SIGMA) as usize;
         if m2 > CHI2_6_3SIGMA {
             eprintln!("frame {f}: pose off, d² {m2:.1}, σ0 {:.3} px", p.sigma0_px);

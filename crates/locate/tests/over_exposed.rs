@@ -117,20 +117,8 @@ fn run(camera: Camera, image: &mut Image, noise_dn: f64, locator: &mut Locator) 
         };
         t.posed += 1;
         let dc = p.exterior.center - truth_pose.center;
-        let dr = truth_pose.rotation.transpose() * p.exterior.rotation;
-        let err = nalgebra::Vector6::new(
-            dc.x,
-            dc.y,
-            dc.z,
-            (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-            (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-            (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-        );
-        let m2 = p
-            .covariance
-            .cholesky()
-            .map(|ch| err.dot(&ch.solve(&err)))
-            .unwrap_or(f64::INFINITY);
+        let err = p.exterior.deviation_from(&truth_pose);
+        let m2 = p.mahalanobis_sq(&truth_pose);
         eprintln!(
             "frame {k}: {} targets ({} saturated), σ0 {:.3} px, centre error {:.4} mm (σ {:?}), d² {m2:.2}, error / σ {:?}",
             loc.targets.len(),

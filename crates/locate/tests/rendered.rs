@@ -177,20 +177,10 @@ fn sweep(frames: usize, seed: u64) -> Tally {
             let s = p.std_center();
             let sr = p.std_rotation_deg();
             let dc = p.exterior.center - truth_pose.center;
-            let dr = truth_pose.rotation.transpose() * p.exterior.rotation;
-            let w = [
-                (dr[(2, 1)] - dr[(1, 2)]) / 2.0,
-                (dr[(0, 2)] - dr[(2, 0)]) / 2.0,
-                (dr[(1, 0)] - dr[(0, 1)]) / 2.0,
-            ];
+            let err = p.exterior.deviation_from(&truth_pose);
             // Jointly: the Mahalanobis distance of the six errors under the
             // reported covariance, against the χ²(6) quantile of 3σ (99.73 %).
-            let err = nalgebra::Vector6::new(dc.x, dc.y, dc.z, w[0], w[1], w[2]);
-            let m2 = p
-                .covariance
-                .cholesky()
-                .map(|ch| err.dot(&ch.solve(&err)))
-                .unwrap_or(f64::INFINITY);
+            let m2 = p.mahalanobis_sq(&truth_pose);
             let ok = m2 <= CHI2_6_3SIGMA;
             tally.mahalanobis.push(m2);
             for k in 0..6 {

@@ -6,13 +6,12 @@
 //! allocates, so this test's allocator counts every thread but that one;
 //! the client drains its socket raw, into a fixed buffer.
 
-use photopose_field::design::default_plate;
-use photopose_pipeline::config::Source;
-use photopose_pipeline::source::SyntheticSource;
-use photopose_pipeline::{Config, Pipeline, Supervision};
+mod common;
+use common::{synthetic_source, Poses};
+use photopose_pipeline::{Pipeline, Supervision};
 use photopose_testkit::{allocations_outside, exclude_thread, CountingAllocator};
 use std::io::Read;
-use std::net::{TcpStream, UdpSocket};
+use std::net::TcpStream;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -25,42 +24,18 @@ static GLOBAL: CountingAllocator = CountingAllocator;
 #[test]
 fn the_frame_path_does_not_allocate_while_a_client_watches_the_live_view() {
     exclude_thread("edge-0");
-    let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
-    rx.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-    let cfg = Config::parse(
-        &format!(
-            r#"
-[source]
-kind = "synthetic"
-[source.synthetic]
-rate_hz = 20.0
-frames = 0
-radius_mm = 40.0
-period_s = 2.0
-[pipeline]
-workers = 2
-slots = 6
-overflow = "block"
-max_age_ms = 5000.0
-[output]
-udp = ["{}"]
+    let mut udp = Poses::bind();
+    let cfg = udp.config(
+        20.0,
+        r#"
 [live]
 enabled = true
 address = "127.0.0.1:0"
 image_hz = 10.0
 pose_hz = 20.0
 "#,
-            rx.local_addr().unwrap()
-        ),
-        "test",
-    )
-    .unwrap();
-    let Source::Synthetic(syn) = cfg.source.clone() else {
-        panic!("synthetic source expected")
-    };
-    let camera = photopose_formats::default_camera();
-    let field = default_plate();
-    let source = SyntheticSource::new(camera, &field, syn).unwrap();
+    );
+    let (camera, field, source) = synthetic_source(&cfg);
     let pipeline =
         Pipeline::start_supervised(&cfg, camera, field, Box::new(source), Supervision::none())
             .unwrap();
@@ -128,17 +103,6 @@ pose_hz = 20.0
         })
     };
 
-    let mut buf = [0u8; 8192];
-    let mut receive = |n: usize| {
-        let mut got = 0;
-        let t0 = Instant::now();
-        while got < n {
-            assert!(t0.elapsed() < Duration::from_secs(60), "poses stopped");
-            if rx.recv(&mut buf).is_ok() {
-                got += 1;
-            }
-        }
-    };
     // Warm: several images (325 × 257 bytes each) have reached the client.
     let t0 = Instant::now();
     while received.load(Ordering::Relaxed) < 4 * 325 * 257 {
@@ -146,11 +110,11 @@ pose_hz = 20.0
             t0.elapsed() < Duration::from_secs(60),
             "no images reach the client"
         );
-        receive(1);
+        udp.receive(1);
     }
-    receive(10);
+    udp.receive(10);
     let (before, bytes_before) = (allocations_outside(), received.load(Ordering::Relaxed));
-    receive(40);
+    udp.receive(40);
     let allocated = allocations_outside() - before;
     let bytes = received.load(Ordering::Relaxed) - bytes_before;
     done.store(true, Ordering::Relaxed);

@@ -5,15 +5,12 @@
 //! (`record`: protobuf encoding, MCAP chunks, compression) allocates, so
 //! this test's allocator counts every thread but that one.
 
-use photopose_field::design::default_plate;
-use photopose_pipeline::config::Source;
+mod common;
+use common::{synthetic_source, Poses};
 use photopose_pipeline::sink::record::RecordLink;
-use photopose_pipeline::source::SyntheticSource;
-use photopose_pipeline::{Config, Pipeline, Supervision};
+use photopose_pipeline::{Pipeline, Supervision};
 use photopose_testkit::{allocations_outside, exclude_thread, CountingAllocator};
-use std::net::UdpSocket;
 use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
@@ -26,61 +23,28 @@ fn the_frame_path_does_not_allocate_while_recording() {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rec.mcap");
-    let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
-    rx.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-    let mut cfg = Config::parse(
+    let mut udp = Poses::bind();
+    let mut cfg = udp.config(
+        20.0,
         &format!(
             r#"
-[source]
-kind = "synthetic"
-[source.synthetic]
-rate_hz = 20.0
-frames = 0
-radius_mm = 40.0
-period_s = 2.0
-[pipeline]
-workers = 2
-slots = 6
-overflow = "block"
-max_age_ms = 5000.0
-[output]
-udp = ["{}"]
 [record]
 path = "{}"
 compression = "lz4"
 "#,
-            rx.local_addr().unwrap(),
             path.display()
         ),
-        "test",
-    )
-    .unwrap();
-    let Source::Synthetic(syn) = cfg.source.clone() else {
-        panic!("synthetic source expected")
-    };
-    let camera = photopose_formats::default_camera();
-    let field = default_plate();
-    let source = SyntheticSource::new(camera, &field, syn).unwrap();
+    );
+    let (camera, field, source) = synthetic_source(&cfg);
     let bytes = camera.sensor.width as usize * camera.sensor.height as usize;
     let link = RecordLink::start(&cfg.record, Default::default(), bytes).unwrap();
     let source = link.tap(Box::new(source), &cfg.record);
     cfg.record.link = Some(link.clone());
     let pipeline =
         Pipeline::start_supervised(&cfg, camera, field, source, Supervision::none()).unwrap();
-    let mut buf = [0u8; 8192];
-    let mut receive = |n: usize| {
-        let mut got = 0;
-        let t0 = Instant::now();
-        while got < n {
-            assert!(t0.elapsed() < Duration::from_secs(60), "poses stopped");
-            if rx.recv(&mut buf).is_ok() {
-                got += 1;
-            }
-        }
-    };
-    receive(30);
+    udp.receive(30);
     let before = allocations_outside();
-    receive(40);
+    udp.receive(40);
     let allocated = allocations_outside() - before;
     pipeline.stop();
     pipeline.join();

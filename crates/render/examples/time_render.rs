@@ -6,31 +6,12 @@
 #![allow(clippy::disallowed_types, clippy::disallowed_methods)]
 
 use photopose_field::design::default_plate;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
+use photopose_geometry::{Camera, Exterior};
 use photopose_render::{RenderOptions, Renderer};
 use std::time::Instant;
 
 fn main() {
-    let camera = Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .expect("valid camera");
+    let camera = Camera::reference();
     let poses = [
         ("frontal 1000 mm", [0.0, 0.0, 1000.0, 0.0, 0.0, 0.0]),
         ("oblique 30°", [0.0, -500.0, 870.0, 0.0, 0.0, 30.0]),

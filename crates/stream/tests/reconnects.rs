@@ -4,29 +4,12 @@
 //! within 5 % of where they were (alone in its test binary so no other test
 //! moves the figures).
 
+mod common;
+use common::pose;
 use photopose_stream::{Edge, PoseMessage, PoseStatus, TcpLimits, TcpServer, TcpStats};
 use std::net::{SocketAddr, TcpStream};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-
-/// A pose at `x` mm along the field's X axis, as a message carries it.
-fn pose(x: f64) -> photopose_stream::PoseEstimate {
-    let mut covariance = [0.0; 36];
-    for k in 0..6 {
-        covariance[k * 7] = 1e-4;
-    }
-    photopose_stream::PoseEstimate {
-        position_mm: [x, 0.0, 1000.0],
-        quaternion_xyzw: [1.0, 0.0, 0.0, 0.0],
-        rotation_field_to_camera: [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
-        covariance,
-        covariance_order: photopose_stream::message::COVARIANCE_ORDER,
-        std_position_mm: [0.01; 3],
-        std_rotation_deg: [0.001; 3],
-        sigma0_px: 0.02,
-        n_targets: 230,
-    }
-}
 
 /// (VmRSS kB, VmSize kB, threads) of this process.
 fn footprint() -> (u64, u64, u64) {

@@ -10,32 +10,13 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use photopose_field::design::default_plate;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_vision::{Detector, DetectorOptions};
 
 /// The camera of `config/camera.toml`.
 fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .expect("camera")
+    Camera::reference()
 }
 
 fn benches(cr: &mut Criterion) {

@@ -8,7 +8,7 @@
 #![allow(clippy::disallowed_types, clippy::disallowed_methods)]
 
 use photopose_field::design::default_plate;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_vision::{Detector, DetectorOptions};
 use std::time::Instant;
@@ -21,26 +21,7 @@ fn main() {
     let only: Option<usize> = std::env::args()
         .nth(2)
         .map(|a| a.parse().expect("pose index"));
-    let cam = Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .expect("camera");
+    let cam = Camera::reference();
     let field = default_plate();
     let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).expect("renderer");
     let mut det = Detector::new(1300, 1030, DetectorOptions::for_field(&field)).expect("detector");

@@ -8,31 +8,12 @@ mod common;
 
 use common::{render, Look};
 use photopose_field::{design::default_plate, TargetKind};
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_vision::{Detector, DetectorOptions};
 
 /// The camera of `config/camera.toml`.
 fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .unwrap()
+    Camera::reference()
 }
 
 /// A camera at `distance` from the plate centre, tilted by `tilt_deg`

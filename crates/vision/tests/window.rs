@@ -5,7 +5,7 @@
 
 use photopose_field::design::default_plate;
 use photopose_frame::{Image, ImageView, Pixels};
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor};
+use photopose_geometry::{Camera, Exterior};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_vision::{Detection, Detections, Detector, DetectorOptions, VisionError};
 
@@ -14,26 +14,7 @@ const H: u32 = 1030;
 
 /// The camera of `config/camera.toml`.
 fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: W,
-            height: H,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .unwrap()
+    Camera::reference()
 }
 
 /// The default plate from 1.5 m, slightly oblique: it fills the middle of

@@ -14,7 +14,7 @@
 //! touches a lost camera on the acquisition path: the camera and its stream
 //! are handed to a *reaper* thread that stops and drops them, and opening
 //! (which fails only after about 1 s while the camera is absent) happens on
-//! an *opener* thread. The source retries with exponential back-off and
+//! an *opener* thread (both threads are a [`Reopener`]). The source retries with exponential back-off and
 //! reports [`SourceError::Lost`] once, then [`SourceError::Unavailable`]
 //! until frames flow again. A stale handle is never reused: a returning
 //! camera is always opened afresh.
@@ -57,34 +57,16 @@ pub use config::{FeatureValue, GigeConfig, PixelDepth, Roi};
 pub use copy::id_gap;
 
 use crate::clock_map::{ClockMap, ClockMapConfig};
+use crate::reopen::{Backoff, Device, OpenFailure, Ready, Reopener};
 use crate::ring::Slot;
 use crate::source::{Clock, FrameSource, SourceCounters, SourceError, SourceStats, SystemClock};
 use aravis::prelude::*;
 use aravis::BufferStatus;
 use camera::{close, open, OpenError, Opened};
 use copy::{copy_frame, Copy};
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-struct Live {
-    opened: Opened,
-    last_buffer: Instant,
-    last_frame_id: Option<u64>,
-}
-
-enum Link {
-    /// Not started.
-    Idle,
-    /// An opening is under way on the opener thread.
-    Opening,
-    /// Waiting to try again.
-    Waiting { until: Instant, reason: String },
-    /// Frames flowing.
-    Streaming(Box<Live>),
-}
 
 /// A GigE Vision camera as a [`FrameSource`] (see the module docs).
 pub struct GigeSource {
@@ -92,15 +74,9 @@ pub struct GigeSource {
     config: GigeConfig,
     clock: Box<dyn Clock>,
     counters: Arc<SourceCounters>,
-    link: Link,
-    open_tx: Option<Sender<()>>,
-    opened_rx: Receiver<Result<Opened, OpenError>>,
-    reap_tx: Option<Sender<(Opened, bool)>>,
-    threads: Vec<JoinHandle<()>>,
-    backoff: Duration,
+    link: Reopener<Opened>,
     lost_after: Duration,
     next_seq: u64,
-    failures_logged: bool,
     resized_logged: bool,
     clock_map: ClockMap,
 }
@@ -112,6 +88,15 @@ impl std::fmt::Debug for GigeSource {
             .field("config", &self.config)
             .field("stats", &self.counters.snapshot())
             .finish()
+    }
+}
+
+impl Device for Opened {
+    fn id(&self) -> &str {
+        &self.id
+    }
+    fn close(self, lost: bool) {
+        close(self, lost);
     }
 }
 
@@ -131,47 +116,33 @@ impl GigeSource {
         clock: Box<dyn Clock>,
     ) -> Result<Self, SourceError> {
         config.validate()?;
-        let spawn_err = |e: std::io::Error| SourceError::Config {
+        let counters = Arc::new(SourceCounters::default());
+        let cfg = config.clone();
+        let mut resolved = None;
+        let link = Reopener::spawn(
+            name,
+            "camera",
+            Backoff::new(config.backoff_initial, config.backoff_max),
+            Arc::clone(&counters),
+            move || {
+                open(&cfg, &mut resolved).map_err(|e| match e {
+                    OpenError::Absent(reason) => OpenFailure::Absent(reason),
+                    OpenError::Config { what, reason } => OpenFailure::Refused { what, reason },
+                })
+            },
+        )
+        .map_err(|e| SourceError::Config {
             what: "thread".into(),
             reason: e.to_string(),
-        };
-        let (open_tx, open_rx) = crossbeam_channel::unbounded::<()>();
-        let (opened_tx, opened_rx) = crossbeam_channel::unbounded();
-        let (reap_tx, reap_rx) = crossbeam_channel::unbounded::<(Opened, bool)>();
-        let cfg = config.clone();
-        let opener = std::thread::Builder::new()
-            .name(format!("{name}-open"))
-            .spawn(move || {
-                let mut resolved = None;
-                for () in open_rx {
-                    if opened_tx.send(open(&cfg, &mut resolved)).is_err() {
-                        break;
-                    }
-                }
-            })
-            .map_err(spawn_err)?;
-        let reaper = std::thread::Builder::new()
-            .name(format!("{name}-reap"))
-            .spawn(move || {
-                for (o, lost) in reap_rx {
-                    close(o, lost);
-                }
-            })
-            .map_err(spawn_err)?;
+        })?;
         Ok(GigeSource {
             name: name.to_string(),
-            backoff: config.backoff_initial,
             lost_after: config.effective_lost_after(),
             config,
             clock,
-            counters: Arc::new(SourceCounters::default()),
-            link: Link::Idle,
-            open_tx: Some(open_tx),
-            opened_rx,
-            reap_tx: Some(reap_tx),
-            threads: vec![opener, reaper],
+            counters,
+            link,
             next_seq: 0,
-            failures_logged: false,
             resized_logged: false,
             clock_map: ClockMap::new(ClockMapConfig::default()),
         })
@@ -182,99 +153,32 @@ impl GigeSource {
         Arc::clone(&self.counters)
     }
 
-    fn request_open(&mut self) -> Result<(), SourceError> {
-        match self.open_tx.as_ref().map(|tx| tx.send(())) {
-            Some(Ok(())) => {
-                self.link = Link::Opening;
-                Ok(())
-            }
-            _ => Err(SourceError::Config {
-                what: "opener thread".into(),
-                reason: "gone".into(),
-            }),
+    fn on_opened(&mut self) {
+        if let Some(live) = self.link.live() {
+            let opened = &live.device;
+            tracing::info!(source = %self.name, camera = %opened.id,
+                took_ms = opened.took.as_millis() as u64, "camera opened, streaming");
         }
-    }
-
-    fn reap(&mut self, o: Opened, lost: bool) {
-        self.counters.connected.store(false, Ordering::Relaxed);
-        if let Some(tx) = &self.reap_tx {
-            if let Err(e) = tx.send((o, lost)) {
-                // Reaper gone (cannot happen before drop): close here.
-                let (o, lost) = e.into_inner();
-                close(o, lost);
-            }
-        }
-    }
-
-    fn lose(&mut self, reason: String) -> SourceError {
-        if let Link::Streaming(live) = std::mem::replace(&mut self.link, Link::Idle) {
-            tracing::warn!(source = %self.name, camera = %live.opened.id, %reason, "camera lost");
-            self.reap(live.opened, true);
-        }
-        self.counters.losses.inc();
-        self.backoff = self.config.backoff_initial;
-        self.failures_logged = false;
-        self.link = Link::Waiting {
-            until: Instant::now() + self.backoff,
-            reason: reason.clone(),
-        };
-        SourceError::Lost { reason }
-    }
-
-    fn on_opened(&mut self, result: Result<Opened, OpenError>) -> Result<(), SourceError> {
-        match result {
-            Ok(opened) => {
-                tracing::info!(source = %self.name, camera = %opened.id,
-                    took_ms = opened.took.as_millis() as u64, "camera opened, streaming");
-                self.counters.opens.inc();
-                self.counters.connected.store(true, Ordering::Relaxed);
-                // A reopened camera may have restarted its clock.
-                self.clock_map.reset();
-                self.backoff = self.config.backoff_initial;
-                self.failures_logged = false;
-                self.link = Link::Streaming(Box::new(Live {
-                    opened,
-                    last_buffer: Instant::now(),
-                    last_frame_id: None,
-                }));
-                Ok(())
-            }
-            Err(OpenError::Config { what, reason }) => {
-                tracing::error!(source = %self.name, %what, %reason, "camera refuses the configuration");
-                self.link = Link::Idle;
-                Err(SourceError::Config { what, reason })
-            }
-            Err(OpenError::Absent(reason)) => {
-                if !self.failures_logged {
-                    tracing::warn!(source = %self.name, %reason, "camera not available; retrying with back-off");
-                    self.failures_logged = true;
-                } else {
-                    tracing::debug!(source = %self.name, %reason, backoff_ms = self.backoff.as_millis() as u64, "open failed");
-                }
-                self.link = Link::Waiting {
-                    until: Instant::now() + self.backoff,
-                    reason: reason.clone(),
-                };
-                self.backoff = (self.backoff * 2).min(self.config.backoff_max);
-                Err(SourceError::Unavailable { reason })
-            }
-        }
+        // A reopened camera may have restarted its clock.
+        self.clock_map.reset();
     }
 
     fn grab(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
-        let Link::Streaming(live) = &mut self.link else {
+        let Some(live) = self.link.live_mut() else {
             return Err(SourceError::Unavailable {
                 reason: "not streaming".into(),
             });
         };
-        if live.opened.control_lost.load(Ordering::Acquire) {
-            return Err(self.lose("control lost".into()));
+        if live.device.control_lost.load(Ordering::Acquire) {
+            return Err(self.link.lose("control lost".into()));
         }
         let timeout_us = timeout.as_micros().clamp(1, u64::MAX as u128) as u64;
-        let Some(buffer) = live.opened.stream.timeout_pop_buffer(timeout_us) else {
+        let Some(buffer) = live.device.stream.timeout_pop_buffer(timeout_us) else {
             let silent = live.last_buffer.elapsed();
             if silent >= self.lost_after {
-                return Err(self.lose(format!("no frame for {:.1} s", silent.as_secs_f64())));
+                return Err(self
+                    .link
+                    .lose(format!("no frame for {:.1} s", silent.as_secs_f64())));
             }
             return Err(SourceError::Timeout(timeout));
         };
@@ -295,8 +199,8 @@ impl GigeSource {
             }
             _ => (utc_now, mono_now),
         };
-        live.opened.stream.push_buffer(buffer);
-        let (exposure_ns, payload) = (live.opened.exposure_ns, live.opened.payload);
+        live.device.stream.push_buffer(buffer);
+        let (exposure_ns, payload) = (live.device.exposure_ns, live.device.payload);
         match copied {
             Ok(resized) => {
                 if resized && !self.resized_logged {
@@ -370,59 +274,19 @@ impl GigeSource {
 
 impl FrameSource for GigeSource {
     fn start(&mut self) -> Result<(), SourceError> {
-        if matches!(self.link, Link::Idle) {
-            self.backoff = self.config.backoff_initial;
-            self.request_open()?;
-        }
-        Ok(())
+        self.link.start()
     }
 
     fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
-        let deadline = Instant::now() + timeout;
-        match &self.link {
-            Link::Idle => Err(SourceError::Unavailable {
-                reason: "not started".into(),
-            }),
-            Link::Opening => match self.opened_rx.recv_timeout(timeout) {
-                Ok(result) => {
-                    self.on_opened(result)?;
-                    let left = deadline.saturating_duration_since(Instant::now());
-                    self.grab(slot, left.max(Duration::from_millis(1)))
-                }
-                // The opener is at work: alive, no frame yet.
-                Err(RecvTimeoutError::Timeout) => Err(SourceError::Timeout(timeout)),
-                Err(RecvTimeoutError::Disconnected) => Err(SourceError::Config {
-                    what: "opener thread".into(),
-                    reason: "gone".into(),
-                }),
-            },
-            Link::Waiting { until, reason } => {
-                let (until, reason) = (*until, reason.clone());
-                let now = Instant::now();
-                if now < until {
-                    std::thread::sleep((until - now).min(timeout));
-                }
-                if Instant::now() >= until {
-                    self.request_open()?;
-                }
-                Err(SourceError::Unavailable { reason })
-            }
-            Link::Streaming(_) => self.grab(slot, timeout),
+        let (ready, left) = self.link.ready(timeout)?;
+        if ready == Ready::Opened {
+            self.on_opened();
         }
+        self.grab(slot, left)
     }
 
     fn stop(&mut self) {
-        match std::mem::replace(&mut self.link, Link::Idle) {
-            Link::Streaming(live) => self.reap(live.opened, false),
-            Link::Opening => {
-                // Opening fails or succeeds within seconds; close what it gives.
-                if let Ok(Ok(o)) = self.opened_rx.recv_timeout(Duration::from_secs(30)) {
-                    self.reap(o, false);
-                }
-            }
-            Link::Idle | Link::Waiting { .. } => {}
-        }
-        self.counters.connected.store(false, Ordering::Relaxed);
+        self.link.stop();
     }
 
     fn describe(&self) -> String {
@@ -442,17 +306,6 @@ impl FrameSource for GigeSource {
 
     fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
         Some(self.counters())
-    }
-}
-
-impl Drop for GigeSource {
-    fn drop(&mut self) {
-        self.stop();
-        self.open_tx = None;
-        self.reap_tx = None;
-        for t in self.threads.drain(..) {
-            let _ = t.join();
-        }
     }
 }
 
