@@ -100,7 +100,7 @@ fn run_phase(
     law: Law,
     hand_eye: &Path,
     stream_path: &Path,
-    mut on_line: impl FnMut(&photopose_stream::PoseLine),
+    mut on_line: impl FnMut(&photopose_stream::PoseLine, &serde_json::Value),
 ) -> Result<PhaseRun> {
     let poses_rx = UdpSocket::bind("127.0.0.1:0").context("cannot bind the demo's UDP socket")?;
     poses_rx.set_read_timeout(Some(Duration::from_millis(100)))?;
@@ -150,13 +150,15 @@ fn run_phase(
                 if buf[n - 1] != b'\n' {
                     stream.write_all(b"\n")?;
                 }
-                let text = std::str::from_utf8(&buf[..n]).context("a pose line that is not UTF-8")?;
+                let text =
+                    std::str::from_utf8(&buf[..n]).context("a pose line that is not UTF-8")?;
                 let l = photopose_stream::PoseLine::parse(text.trim())
                     .context("a pose message that is not JSON")?;
+                let v: serde_json::Value = serde_json::from_str(text.trim())?;
                 if let (Some(seq), Some(cam)) = (l.seq, camera_of(&l)) {
                     poses.push((seq, cam));
                 }
-                on_line(&l);
+                on_line(&l, &v);
             }
             Err(_) if finished => break,
             Err(_) => {}
@@ -348,6 +350,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     });
     let mut stations = Vec::new();
     let mut rows = Vec::new();
+    let mut readings = std::collections::VecDeque::new();
     let a = run_phase(
         &args,
         "(a) hand-eye stations",
@@ -359,8 +362,27 @@ pub fn run(args: Args) -> Result<ExitCode> {
         },
         &nominal_he,
         &args.out.join("poses-stations.jsonl"),
-        |l| {
-            if let Some(row) = sample(l).and_then(|s| gatherer.push(s)) {
+        |l, v| {
+            // A message carries the newest RIst when it is sent, later than
+            // its frame's exposure: pair each frame with the robot's RIst
+            // read at or just before its exposure instead (the reading's
+            // instant is the sending time minus its age), so a frame taken
+            // while the robot still moved never joins a still station.
+            if let (Some(r), Some(sent)) = (&l.robot, v["time"]["sent_utc_ns"].as_f64()) {
+                let t = sent / 1e9 - r.age_ms / 1e3;
+                if readings.back().is_none_or(|b: &(f64, [f64; 6])| t > b.0) {
+                    readings.push_back((t, r.xyzabc_mm_deg));
+                }
+                while readings.len() > 4096 {
+                    readings.pop_front();
+                }
+            }
+            let Some(mut s) = sample(l) else { return };
+            let Some((_, robot)) = readings.iter().rev().find(|(t, _)| *t <= s.time_s) else {
+                return;
+            };
+            s.robot_xyzabc = *robot;
+            if let Some(row) = gatherer.push(s) {
                 if let Some(st) = row.to_station([0.01, 0.01, 0.01, 0.001, 0.001, 0.001]) {
                     stations.push(st);
                 }
@@ -443,7 +465,12 @@ pub fn run(args: Args) -> Result<ExitCode> {
     let phases = [
         ("(b) measure-only", "measure-only", true, true),
         ("(c) corrected", "corrected", false, true),
-        ("(d) corrected, no latency compensation", "uncompensated", false, false),
+        (
+            "(d) corrected, no latency compensation",
+            "uncompensated",
+            false,
+            false,
+        ),
     ];
     let mut figures = Vec::new();
     for (label, name, measure_only, compensate) in phases {
@@ -458,7 +485,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
             },
             &he_path,
             &args.out.join(format!("poses-{name}.jsonl")),
-            |_| {},
+            |_, _| {},
         )?;
         let f = circle_figures(&run, first, nominal, &he)
             .with_context(|| format!("{label}: {} poses of {} frames", run.ok, run.frames_in))?;

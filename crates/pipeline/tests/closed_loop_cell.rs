@@ -119,7 +119,10 @@ fn the_daemon_corrects_the_simulated_robot_onto_its_path() {
         "no correction: {:?}",
         report.max_total
     );
-    assert!(worst < 40.0, "true TCP error {worst:.1} µm in the second half");
+    assert!(
+        worst < 40.0,
+        "true TCP error {worst:.1} µm in the second half"
+    );
     for i in 0..6 {
         let (step, clamp) = if i < 3 {
             (law.max_step_mm, law.clamp_mm)

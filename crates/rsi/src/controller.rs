@@ -62,6 +62,11 @@ pub struct SimConfig {
     /// SCHED_FIFO priority of the controller thread (a real controller is
     /// hard real-time); failing to get it is a warning.
     pub realtime_priority: Option<u8>,
+    /// How long before sending its `<Rob>` datagram the controller sampled
+    /// `RIst`/`RSol` (the start of its cycle; about a millisecond on a KUKA
+    /// controller). Used by [`SimController::spawn_on_path`]: the robot is
+    /// sampled, and the cycle recorded, this long before the send.
+    pub sample_lead: Duration,
 }
 
 impl SimConfig {
@@ -85,6 +90,7 @@ impl SimConfig {
             rsol_includes_correction: false,
             krc2_first_packet: false,
             realtime_priority: None,
+            sample_lead: Duration::from_millis(1),
         }
     }
 }
@@ -510,11 +516,14 @@ fn run(
         // all sampled at the start of the cycle.
         let (programmed, believed, actual) = match truth {
             Some(path) => {
+                // Sampled at the start of the cycle, `sample_lead` before
+                // the datagram leaves.
+                let sampled_s = now_s - cfg.sample_lead.as_secs_f64();
                 let start = path.push(CycleTruth {
-                    time_s: now_s,
+                    time_s: sampled_s,
                     total,
                 });
-                let tcp = path.tcp(now_s - start, total);
+                let tcp = path.tcp(sampled_s - start, total);
                 (tcp.programmed, tcp.believed, tcp.actual)
             }
             None => {
@@ -631,4 +640,50 @@ fn run(
     report.delay = report.late + report.mismatched;
     report.total = total;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Along X at 10 mm/s; the true TCP 0.1 mm above the belief.
+    struct Line;
+
+    impl RobotPath for Line {
+        fn programmed(&self, t: f64) -> Isometry3<f64> {
+            pose_to_isometry(&[10.0 * t, 0.0, 500.0, 0.0, 0.0, 180.0])
+        }
+        fn actual(&self, _t: f64, believed: &Isometry3<f64>) -> Isometry3<f64> {
+            apply_correction(believed, &[0.0, 0.0, 0.1, 0.0, 0.0, 0.0], CorrFrame::Base)
+        }
+    }
+
+    #[test]
+    fn the_truth_holds_each_cycles_correction_until_the_next() {
+        let truth = PathTruth::new(Arc::new(Line), CorrFrame::Base, 3);
+        assert_eq!(truth.at(5.0), None);
+        assert_eq!(truth.known_until_s(), None);
+        for (k, x) in [(0, 0.0), (1, 0.01), (2, 0.02), (3, 0.03)] {
+            truth.push(CycleTruth {
+                time_s: 5.0 + 0.004 * k as f64,
+                total: [x, 0.0, 0.0, 0.0, 0.0, 0.0],
+            });
+        }
+        assert_eq!(truth.start_s(), Some(5.0));
+        assert_eq!(truth.known_until_s(), Some(5.012));
+        // Three cycles kept: the oldest one's total before them.
+        assert_eq!(truth.total_at(5.0061)[0], 0.01);
+        assert_eq!(truth.total_at(5.0081)[0], 0.02);
+        assert_eq!(truth.total_at(6.0)[0], 0.03);
+        let tcp = truth.at(5.0101).unwrap();
+        assert!((tcp.t - 0.0101).abs() < 1e-12);
+        let p = tcp.programmed.translation.vector;
+        let b = tcp.believed.translation.vector;
+        let a = tcp.actual.translation.vector;
+        assert!((p.x - 0.101).abs() < 1e-9);
+        assert!((b.x - p.x - 0.02).abs() < 1e-9);
+        assert!((a.z - b.z - 0.1).abs() < 1e-9);
+        truth.finish();
+        assert_eq!(truth.known_until_s(), Some(f64::INFINITY));
+    }
 }

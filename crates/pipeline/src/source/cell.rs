@@ -157,10 +157,7 @@ impl RobotPath for CellPath {
                 let s = f * f * (3.0 - 2.0 * f);
                 let (a, b) = (&poses[i], &poses[i + 1]);
                 Isometry3::from_parts(
-                    a.translation
-                        .vector
-                        .lerp(&b.translation.vector, s)
-                        .into(),
+                    a.translation.vector.lerp(&b.translation.vector, s).into(),
                     a.rotation.slerp(&b.rotation, s),
                 )
             }

@@ -24,11 +24,11 @@ pub mod replay;
 pub mod synthetic;
 
 use crate::config::ConfigError;
+pub use cell::{CellFrameTruth, CellHandle, CellPath, CellSettings, CellSource};
 pub use photopose_acquire::{FrameSource, Slot, SourceError};
 use photopose_field::Field;
 use photopose_frame::{Image, Pixels};
 use photopose_geometry::Camera;
-pub use cell::{CellFrameTruth, CellHandle, CellPath, CellSettings, CellSource};
 pub use replay::{Replay, ReplayError, ReplaySource, Speed};
 use serde::Deserialize;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
