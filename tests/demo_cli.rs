@@ -43,7 +43,6 @@ fn the_demo_runs_every_phase_and_ends_with_its_figures_as_json() {
         "stations.csv",
         "hand-eye.toml",
         "radial.svg",
-        "radial-truth.svg",
         "measure-only/report.txt",
         "corrected/report.txt",
         "uncompensated/report.txt",
@@ -87,7 +86,7 @@ fn the_demo_runs_every_phase_and_ends_with_its_figures_as_json() {
         assert!(x.is_finite() && x >= 0.0, "{key}: {}\n{stdout}", v[key]);
     }
     assert!(v["hand_eye_within_3sigma"].is_boolean(), "{v}");
-    assert!(v["stations"].as_u64().unwrap() >= 12, "{v}");
+    assert!(v["stations"].as_u64().unwrap() >= 3, "{v}");
     // Measure-only leaves the injected pattern (F ≈ 168 µm) in place.
     let f_b = v["f_true_measure_only_um"].as_f64().unwrap();
     assert!(f_b > 100.0, "{v}");
