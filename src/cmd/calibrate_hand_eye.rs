@@ -175,7 +175,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
 }
 
 /// The hand-eye file of a calibration.
-fn hand_eye_file(he: &HandEye) -> HandEyeFile {
+pub(crate) fn hand_eye_file(he: &HandEye) -> HandEyeFile {
     HandEyeFile {
         camera_in_tcp: Transform {
             xyzabc: he.camera_in_tcp_xyzabc(),

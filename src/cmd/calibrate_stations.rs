@@ -53,7 +53,7 @@ pub struct Args {
 }
 
 /// The camera pose of an `ok` pose-stream line that carries `RIst`.
-fn sample(l: &photopose_stream::PoseLine) -> Option<Sample> {
+pub(crate) fn sample(l: &photopose_stream::PoseLine) -> Option<Sample> {
     if l.has_pose() != Some(true) {
         return None;
     }

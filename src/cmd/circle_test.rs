@@ -169,18 +169,8 @@ pub fn run(args: Args) -> Result<ExitCode> {
 }
 
 /// The circular test of camera poses (time order, plate frame) and, with a
-/// hand-eye transform, of the TCP: reports and plots (of the TCP if given).
-pub fn evaluate(
-    poses: &[Isometry3<f64>],
-    inputs: &[InputSummary],
-    hand_eye: Option<&HandEye>,
-    harmonics: u32,
-    magnify: f64,
-) -> Result<Outputs> {
-    evaluate_against(poses, inputs, hand_eye, None, harmonics, magnify)
-}
-
-/// [`evaluate`] with the nominal circle of the subject (the TCP with a
+/// hand-eye transform, of the TCP (reports and plots of the TCP if given),
+/// with the nominal circle of the subject (the TCP with a
 /// hand-eye transform, else the projection centre), for ISO 230-4's `F`.
 pub fn evaluate_against(
     poses: &[Isometry3<f64>],

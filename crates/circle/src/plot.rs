@@ -449,6 +449,56 @@ pub fn radial_svg(test: &CircleTest, title: &str) -> String {
     s
 }
 
+/// Several circular tests of the same circle overlaid (e.g. measure-only
+/// and corrected): the radial deviation of each from its least-squares
+/// circle (µm) against the phase angle, in its own colour, with a legend
+/// giving each one's `G` and `F`.
+pub fn radial_overlay_svg(tests: &[(&CircleTest, &str)], title: &str) -> String {
+    let (w, h) = (860.0, 440.0);
+    let deviation = |_: &CircleTest, p: &crate::SampleDeviation| p.radial_mm;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (t, _) in tests {
+        for p in &t.samples {
+            let v = deviation(t, p) * 1e3;
+            if v.is_finite() {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        (lo, hi) = (-1.0, 1.0);
+    }
+    let chart = Chart::new(lo, hi, w - 110.0, h - 150.0);
+    let mut s = String::new();
+    open(&mut s, w, h);
+    text(&mut s, w / 2.0, 28.0, 17.0, "middle", title);
+    for (k, (t, name)) in tests.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        text(
+            &mut s,
+            w / 2.0,
+            46.0 + 13.0 * k as f64,
+            12.0,
+            "middle",
+            &format!("{name} ({color}): G = {:.2} µm{}", t.g_um, f_text(t)),
+        );
+    }
+    chart.axes(&mut s, "radial deviation [µm]");
+    for (k, (t, _)) in tests.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        chart.samples(
+            &mut s,
+            t.samples
+                .iter()
+                .map(|p| (p.phase_deg, deviation(t, p) * 1e3)),
+            color,
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
 /// Orientation deviations from the mean orientation (small rotations about
 /// the field's `X`, `Y`, `Z` axes, degrees) against the phase angle.
 pub fn angular_svg(test: &CircleTest, title: &str) -> String {

@@ -143,6 +143,11 @@ pub struct RsiConfig {
     /// Feed-forward of the error's rate over the measurement's age (off
     /// by default; see docs/rsi.md).
     pub feed_forward: bool,
+    /// Compare each measurement with the programmed pose at its exposure
+    /// instant (default); `false` compares it with the newest cycle's, as a
+    /// system that ignores the frame's age would (a contrast for demos and
+    /// commissioning; see docs/rsi.md).
+    pub compensate_latency: bool,
     /// SCHED_FIFO priority (1–99) of the RSI thread; failing to get it is a
     /// warning.
     pub realtime_priority: Option<u8>,
@@ -184,6 +189,7 @@ impl Default for RsiConfig {
             session_idle_ms: 100.0,
             controller_latency_ms: law.controller_latency_s * 1e3,
             feed_forward: law.feed_forward,
+            compensate_latency: law.compensate_latency,
             realtime_priority: None,
             cpu: None,
             hand_eye: None,
@@ -529,6 +535,7 @@ impl RsiConfig {
                 cycle_s: cycle_ms * 1e-3,
                 controller_latency_s: self.controller_latency_ms * 1e-3,
                 feed_forward: self.feed_forward,
+                compensate_latency: self.compensate_latency,
             },
             cycle: Duration::from_secs_f64(cycle_ms * 1e-3),
             session_idle: Duration::from_secs_f64(session_idle_ms * 1e-3),

@@ -5,11 +5,20 @@
 //! the commanded one by a known error (offset plus a slow drift),
 //! integrating the received corrections (relative or absolute, in the Base
 //! or Tool frame, HOLDON as the mode needs) into the commanded pose.
+//!
+//! [`SimController::spawn_on_path`] runs the same controller along a
+//! programmed path given as a function of time ([`RobotPath`]: a circle, or
+//! still stations with moves between them) with the path's own kinematic
+//! error, and keeps the truth of every cycle ([`PathTruth`]: when it began
+//! and the total correction in effect from then on, bounded) so that a
+//! simulated camera can render the robot's true pose at any instant of the
+//! recent past.
 
 use crate::codec::{parse_sen, Pose6, SenFormat};
 use crate::law::{apply_correction, isometry_to_pose, pose_to_isometry, CorrFrame, CorrectionMode};
 use crate::server::RsiClock;
 use nalgebra::Isometry3;
+use std::collections::VecDeque;
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -53,6 +62,11 @@ pub struct SimConfig {
     /// SCHED_FIFO priority of the controller thread (a real controller is
     /// hard real-time); failing to get it is a warning.
     pub realtime_priority: Option<u8>,
+    /// How long before sending its `<Rob>` datagram the controller sampled
+    /// `RIst`/`RSol` (the start of its cycle; about a millisecond on a KUKA
+    /// controller). Used by [`SimController::spawn_on_path`]: the robot is
+    /// sampled, and the cycle recorded, this long before the send.
+    pub sample_lead: Duration,
 }
 
 impl SimConfig {
@@ -76,6 +90,7 @@ impl SimConfig {
             rsol_includes_correction: false,
             krc2_first_packet: false,
             realtime_priority: None,
+            sample_lead: Duration::from_millis(1),
         }
     }
 }
@@ -150,6 +165,165 @@ impl SimProbe {
     }
 }
 
+/// A programmed robot motion with its kinematic error: what
+/// [`SimController::spawn_on_path`] moves the robot along.
+pub trait RobotPath: Send + Sync {
+    /// The programmed TCP pose in the base frame `t` seconds after the
+    /// run's first cycle.
+    fn programmed(&self, t: f64) -> Isometry3<f64>;
+    /// The true TCP when the robot, running its program at `t`, believes
+    /// it is at `believed` (the programmed pose with the RSI correction):
+    /// the robot's kinematic error.
+    fn actual(&self, t: f64, believed: &Isometry3<f64>) -> Isometry3<f64>;
+}
+
+/// One controller cycle of a path run: when it began and the total
+/// correction in effect from then until the next cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleTruth {
+    /// The cycle's start (where `RIst`/`RSol` are sampled), s on the
+    /// shared clock.
+    pub time_s: f64,
+    /// The total RSI correction in effect during the cycle.
+    pub total: Pose6,
+}
+
+/// The robot's poses at one instant of a path run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TcpTruth {
+    /// Seconds since the run's first cycle.
+    pub t: f64,
+    /// The programmed TCP pose.
+    pub programmed: Isometry3<f64>,
+    /// What the robot believes (`RIst`): programmed with the correction.
+    pub believed: Isometry3<f64>,
+    /// The true TCP.
+    pub actual: Isometry3<f64>,
+    /// The total correction in effect.
+    pub total: Pose6,
+}
+
+#[derive(Debug)]
+struct TruthCycles {
+    /// The first cycle's start, s on the shared clock.
+    start_s: Option<f64>,
+    cycles: VecDeque<CycleTruth>,
+    finished: bool,
+}
+
+/// The shared truth of a path run (test support: a mutex is fine here,
+/// never in the daemon's RSI thread): the path, the correction frame and
+/// the last `capacity` cycles, written by the controller, read by a
+/// simulated camera.
+pub struct PathTruth {
+    path: Arc<dyn RobotPath>,
+    frame: CorrFrame,
+    capacity: usize,
+    cycles: Mutex<TruthCycles>,
+}
+
+impl std::fmt::Debug for PathTruth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PathTruth")
+            .field("frame", &self.frame)
+            .field("capacity", &self.capacity)
+            .finish_non_exhaustive()
+    }
+}
+
+impl PathTruth {
+    /// The truth of a run along `path`, corrections applied in `frame`,
+    /// keeping the last `capacity` cycles (at least 2).
+    pub fn new(path: Arc<dyn RobotPath>, frame: CorrFrame, capacity: usize) -> Arc<PathTruth> {
+        let capacity = capacity.max(2);
+        Arc::new(PathTruth {
+            path,
+            frame,
+            capacity,
+            cycles: Mutex::new(TruthCycles {
+                start_s: None,
+                cycles: VecDeque::with_capacity(capacity),
+                finished: false,
+            }),
+        })
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, TruthCycles> {
+        self.cycles.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Records a cycle; returns the run's start.
+    fn push(&self, c: CycleTruth) -> f64 {
+        let mut g = self.lock();
+        let start = *g.start_s.get_or_insert(c.time_s);
+        if g.cycles.len() == self.capacity {
+            g.cycles.pop_front();
+        }
+        g.cycles.push_back(c);
+        start
+    }
+
+    /// The robot `t` s into the run with the correction `total`.
+    pub fn tcp(&self, t: f64, total: Pose6) -> TcpTruth {
+        let programmed = self.path.programmed(t);
+        let believed = apply_correction(&programmed, &total, self.frame);
+        TcpTruth {
+            t,
+            programmed,
+            believed,
+            actual: self.path.actual(t, &believed),
+            total,
+        }
+    }
+
+    fn finish(&self) {
+        self.lock().finished = true;
+    }
+
+    /// The path.
+    pub fn path(&self) -> &Arc<dyn RobotPath> {
+        &self.path
+    }
+
+    /// The run's first cycle, s on the shared clock (`None` before it).
+    pub fn start_s(&self) -> Option<f64> {
+        self.lock().start_s
+    }
+
+    /// The newest cycle's start: the truth is known up to here (and on,
+    /// once the run has finished: the robot then holds its correction).
+    pub fn known_until_s(&self) -> Option<f64> {
+        let g = self.lock();
+        if g.finished {
+            return Some(f64::INFINITY);
+        }
+        g.cycles.back().map(|c| c.time_s)
+    }
+
+    /// The run has ended (cycles done, timeout or stop).
+    pub fn is_finished(&self) -> bool {
+        self.lock().finished
+    }
+
+    /// The total correction in effect at `time_s` (the newest cycle begun
+    /// by then; zero before the first; the oldest kept before that).
+    pub fn total_at(&self, time_s: f64) -> Pose6 {
+        let g = self.lock();
+        let i = g.cycles.partition_point(|c| c.time_s <= time_s);
+        match i {
+            0 => [0.0; 6],
+            i => g.cycles[i - 1].total,
+        }
+    }
+
+    /// The robot at `time_s` (s on the shared clock), or `None` before
+    /// the run's first cycle.
+    pub fn at(&self, time_s: f64) -> Option<TcpTruth> {
+        let t = time_s - self.start_s()?;
+        Some(self.tcp(t, self.total_at(time_s)))
+    }
+}
+
 /// A running simulated controller.
 #[derive(Debug)]
 pub struct SimController {
@@ -158,6 +332,7 @@ pub struct SimController {
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<io::Result<SimReport>>>,
     local: SocketAddr,
+    truth: Option<Arc<PathTruth>>,
 }
 
 fn robot_error(cfg: &SimConfig, t: f64) -> Pose6 {
@@ -181,6 +356,35 @@ fn fmt_pose(out: &mut String, name: &str, p: &Pose6) {
 impl SimController {
     /// Binds the controller's socket and starts sending.
     pub fn spawn(cfg: SimConfig, clock: RsiClock) -> io::Result<SimController> {
+        Self::spawn_inner(cfg, clock, None)
+    }
+
+    /// Like [`SimController::spawn`], but the robot follows `truth`'s
+    /// programmed path (`cfg.nominal` and the error fields are not used):
+    /// each cycle samples, at its start, `RSol` = the programmed pose (with
+    /// the correction when `rsol_includes_correction`) and `RIst` = the
+    /// robot's belief, programmed ∘ correction; the true TCP is the path's
+    /// kinematic error applied to that belief. Every cycle is recorded in
+    /// `truth`; the report's `errors` are the true TCP against the
+    /// programmed pose.
+    pub fn spawn_on_path(
+        cfg: SimConfig,
+        clock: RsiClock,
+        truth: Arc<PathTruth>,
+    ) -> io::Result<SimController> {
+        Self::spawn_inner(cfg, clock, Some(truth))
+    }
+
+    /// The truth of a path run (`None` for a fixed nominal pose).
+    pub fn truth(&self) -> Option<&Arc<PathTruth>> {
+        self.truth.as_ref()
+    }
+
+    fn spawn_inner(
+        cfg: SimConfig,
+        clock: RsiClock,
+        truth: Option<Arc<PathTruth>>,
+    ) -> io::Result<SimController> {
         let socket = UdpSocket::bind(cfg.bind)?;
         let local = socket.local_addr()?;
         let start_s = clock.now_s();
@@ -193,10 +397,14 @@ impl SimController {
         let stop = Arc::new(AtomicBool::new(false));
         let finished = Arc::new(AtomicBool::new(false));
         let (st, sp, fin) = (state.clone(), stop.clone(), finished.clone());
+        let tr = truth.clone();
         let handle = std::thread::Builder::new()
             .name("rsi-sim-controller".into())
             .spawn(move || {
-                let r = run(cfg, clock, socket, st, sp);
+                let r = run(cfg, clock, socket, st, sp, tr.as_deref());
+                if let Some(t) = &tr {
+                    t.finish();
+                }
                 fin.store(true, Ordering::Relaxed);
                 r
             })?;
@@ -206,6 +414,7 @@ impl SimController {
             stop,
             handle: Some(handle),
             local,
+            truth,
         })
     }
 
@@ -263,6 +472,7 @@ fn run(
     socket: UdpSocket,
     state: Arc<Mutex<RobotState>>,
     stop: Arc<AtomicBool>,
+    truth: Option<&PathTruth>,
 ) -> io::Result<SimReport> {
     let mut report = SimReport::default();
     let start = Instant::now();
@@ -302,23 +512,41 @@ fn run(
         }
         let next = deadline + cfg.cycle;
         let now_s = clock.now_s();
-        let actual = actual_pose(&cfg, &total, now_s - t0);
-        let rsol = if cfg.rsol_includes_correction {
-            isometry_to_pose(&apply_correction(
-                &pose_to_isometry(&cfg.nominal),
-                &total,
-                cfg.frame,
-            ))
-        } else {
-            cfg.nominal
+        // The programmed pose, the robot's belief (RIst) and its true TCP,
+        // all sampled at the start of the cycle.
+        let (programmed, believed, actual) = match truth {
+            Some(path) => {
+                // Sampled at the start of the cycle, `sample_lead` before
+                // the datagram leaves.
+                let sampled_s = now_s - cfg.sample_lead.as_secs_f64();
+                let start = path.push(CycleTruth {
+                    time_s: sampled_s,
+                    total,
+                });
+                let tcp = path.tcp(sampled_s - start, total);
+                (tcp.programmed, tcp.believed, tcp.actual)
+            }
+            None => {
+                let programmed = pose_to_isometry(&cfg.nominal);
+                let believed = apply_correction(&programmed, &total, cfg.frame);
+                (programmed, believed, actual_pose(&cfg, &total, now_s - t0))
+            }
         };
+        let rsol = if cfg.rsol_includes_correction {
+            isometry_to_pose(&believed)
+        } else {
+            isometry_to_pose(&programmed)
+        };
+        // The fixed-pose robot reports its true TCP as RIst (as before);
+        // the path robot its belief.
+        let rist = if truth.is_some() { believed } else { actual };
         let ipoc = cfg.ipoc_start + k * cfg.ipoc_step;
         msg.clear();
         if k == 0 && cfg.krc2_first_packet {
             msg.push_str(&format!("<Rob Type=\"KUKA\"><IPOC>{ipoc}</IPOC></Rob>"));
         } else {
             msg.push_str("<Rob Type=\"KUKA\">");
-            fmt_pose(&mut msg, "RIst", &isometry_to_pose(&actual));
+            fmt_pose(&mut msg, "RIst", &isometry_to_pose(&rist));
             fmt_pose(&mut msg, "RSol", &rsol);
             msg.push_str(&format!(
                 "<Delay D=\"{}\"/><IPOC>{ipoc}</IPOC></Rob>",
@@ -334,7 +562,7 @@ fn run(
             s.actual = actual;
             s.time_s = now_s;
         }
-        let nominal = pose_to_isometry(&cfg.nominal);
+        let nominal = programmed;
         report.errors.push((
             (actual.translation.vector - nominal.translation.vector).norm(),
             actual.rotation.angle_to(&nominal.rotation).to_degrees(),
@@ -412,4 +640,50 @@ fn run(
     report.delay = report.late + report.mismatched;
     report.total = total;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Along X at 10 mm/s; the true TCP 0.1 mm above the belief.
+    struct Line;
+
+    impl RobotPath for Line {
+        fn programmed(&self, t: f64) -> Isometry3<f64> {
+            pose_to_isometry(&[10.0 * t, 0.0, 500.0, 0.0, 0.0, 180.0])
+        }
+        fn actual(&self, _t: f64, believed: &Isometry3<f64>) -> Isometry3<f64> {
+            apply_correction(believed, &[0.0, 0.0, 0.1, 0.0, 0.0, 0.0], CorrFrame::Base)
+        }
+    }
+
+    #[test]
+    fn the_truth_holds_each_cycles_correction_until_the_next() {
+        let truth = PathTruth::new(Arc::new(Line), CorrFrame::Base, 3);
+        assert_eq!(truth.at(5.0), None);
+        assert_eq!(truth.known_until_s(), None);
+        for (k, x) in [(0, 0.0), (1, 0.01), (2, 0.02), (3, 0.03)] {
+            truth.push(CycleTruth {
+                time_s: 5.0 + 0.004 * k as f64,
+                total: [x, 0.0, 0.0, 0.0, 0.0, 0.0],
+            });
+        }
+        assert_eq!(truth.start_s(), Some(5.0));
+        assert_eq!(truth.known_until_s(), Some(5.012));
+        // Three cycles kept: the oldest one's total before them.
+        assert_eq!(truth.total_at(5.0061)[0], 0.01);
+        assert_eq!(truth.total_at(5.0081)[0], 0.02);
+        assert_eq!(truth.total_at(6.0)[0], 0.03);
+        let tcp = truth.at(5.0101).unwrap();
+        assert!((tcp.t - 0.0101).abs() < 1e-12);
+        let p = tcp.programmed.translation.vector;
+        let b = tcp.believed.translation.vector;
+        let a = tcp.actual.translation.vector;
+        assert!((p.x - 0.101).abs() < 1e-9);
+        assert!((b.x - p.x - 0.02).abs() < 1e-9);
+        assert!((a.z - b.z - 0.1).abs() < 1e-9);
+        truth.finish();
+        assert_eq!(truth.known_until_s(), Some(f64::INFINITY));
+    }
 }

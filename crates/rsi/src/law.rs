@@ -125,6 +125,11 @@ pub struct LawConfig {
     /// exposure instant to this cycle's sample instant from the rate of
     /// the last two measurements (off by default; see `docs/rsi.md`).
     pub feed_forward: bool,
+    /// Compare a measurement with the programmed pose at its exposure
+    /// instant (on by default). Off, the law compares it with the newest
+    /// cycle's pose and total, as a system that ignores the frame's age
+    /// would: the contrast of `photopose demo` (see `docs/rsi.md`).
+    pub compensate_latency: bool,
 }
 
 impl Default for LawConfig {
@@ -147,6 +152,7 @@ impl Default for LawConfig {
             cycle_s: 0.004,
             controller_latency_s: 0.001,
             feed_forward: false,
+            compensate_latency: true,
         }
     }
 }
@@ -686,7 +692,7 @@ impl CorrectionLaw {
             out.status = LawStatus::MeasureOnly;
             if let (Some(m), Some(_)) = (latest, rsol) {
                 if self.last_seq != Some(m.seq) {
-                    if let Ok(then) = self.at(m.time_s) {
+                    if let Ok(then) = self.at(self.compared_instant(m.time_s)) {
                         self.last_seq = Some(m.seq);
                         let measured = self.hand_eye.tcp_in_base(&m.plate_from_camera);
                         out.commanded = Some(isometry_to_pose(&then.programmed));
@@ -710,7 +716,7 @@ impl CorrectionLaw {
             return self.freeze(out);
         };
         if self.last_seq != Some(m.seq) {
-            let then = match self.at(m.time_s) {
+            let then = match self.at(self.compared_instant(m.time_s)) {
                 Ok(then) => then,
                 Err(reason) => {
                     out.status = LawStatus::Stale(reason);
@@ -782,6 +788,16 @@ impl CorrectionLaw {
         out.total = total;
         out.send = send;
         out
+    }
+
+    /// The instant whose programmed pose a measurement exposed at `t` is
+    /// compared with: `t` itself, or without latency compensation the
+    /// newest cycle's sample instant (a naive system's "now").
+    fn compared_instant(&self, t: f64) -> f64 {
+        match self.past(0) {
+            Some(newest) if !self.cfg.compensate_latency => newest.time_s,
+            _ => t,
+        }
     }
 
     /// The feed-forward term: the change of the uncorrected error from the

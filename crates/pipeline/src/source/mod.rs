@@ -4,6 +4,8 @@
 //! choice and [`open`] builds the source it names.
 //!
 //! - [`synthetic`]: frames rendered of the plate (no hardware; the default);
+//! - [`cell`]: the closed-loop simulated cell (test and demo support:
+//!   built programmatically, it owns a simulated KUKA controller);
 //! - [`replay`]: recordings, as recorded or as fast as the workers take them;
 //! - `gige` (the `gige` feature): a GigE Vision camera through aravis;
 //! - `gentl` (the `gentl` feature): a frame grabber or camera through its
@@ -13,6 +15,7 @@
 //! and its `FrameSource`; one variant in `SourceKind`, `SourceSection`
 //! and [`Source`], one arm in `Source::from_section` and in [`open`].
 
+pub mod cell;
 #[cfg(feature = "gentl")]
 pub mod gentl;
 #[cfg(feature = "gige")]
@@ -21,6 +24,7 @@ pub mod replay;
 pub mod synthetic;
 
 use crate::config::ConfigError;
+pub use cell::{CellFrameTruth, CellHandle, CellPath, CellSettings, CellSource};
 pub use photopose_acquire::{FrameSource, Slot, SourceError};
 use photopose_field::Field;
 use photopose_frame::{Image, Pixels};
