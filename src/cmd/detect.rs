@@ -92,7 +92,13 @@ pub fn run(args: Args) -> Result<ExitCode> {
             &args.images,
             &camera,
             workers,
-            || Ok(Locator::new(camera, field.clone(), LocateOptions::default())?),
+            || {
+                Ok(Locator::new(
+                    camera,
+                    field.clone(),
+                    LocateOptions::default(),
+                )?)
+            },
             |locator, name, image| {
                 Ok(match image.and_then(|i| detect_one(locator, i, name)) {
                     Ok(l) => (serde_json::to_string(&l)?, false),

@@ -62,7 +62,7 @@ impl Pixel for u8 {
         let mut chunks = chunk.chunks_exact(16);
         let mut over = u8x16::splat(0);
         for c in &mut chunks {
-            over = over | u8x16::new(c.try_into().unwrap_or([0; 16])).saturating_sub(t);
+            over |= u8x16::new(c.try_into().unwrap_or([0; 16])).saturating_sub(t);
         }
         over.cmp_eq(u8x16::splat(0)).move_mask() & 0xffff == 0xffff
             && chunks.remainder().iter().all(|&p| p as u32 <= level)
