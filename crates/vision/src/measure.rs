@@ -185,75 +185,6 @@ fn sum_sq_to(m: i64) -> i64 {
     m * (m + 1) * (2 * m + 1) / 6
 }
 
-/// `Σ k^j`, `j = 0..=4`, over the foreground pixels of `px`, whose element
-/// `i` has `k = k0 + i`: run by run in closed form, the runs found from the
-/// foreground bit masks of blocks of 64 pixels (16 at a time for 8-bit
-/// frames), as the labeller finds them.
-#[inline]
-fn foreground_power_sums<P: Pixel>(px: &[P], threshold: Threshold, k0: i64) -> [i64; 5] {
-    let mut f = [0i64; 5];
-    let mut add_run = |start: usize, end: usize| {
-        let (hi, lo) = (
-            power_sums(k0 + end as i64 - 1),
-            power_sums(k0 + start as i64 - 1),
-        );
-        for j in 0..5 {
-            f[j] += hi[j] - lo[j];
-        }
-    };
-    let mut open = None;
-    let mut base = 0;
-    while base < px.len() {
-        let n = (px.len() - base).min(64);
-        let m = threshold.foreground_mask(&px[base..base + n]);
-        let valid = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
-        let mut pos = 0u32;
-        loop {
-            match open {
-                None => {
-                    let lit = m & (u64::MAX << pos);
-                    if lit == 0 {
-                        break;
-                    }
-                    pos = lit.trailing_zeros();
-                    open = Some(base + pos as usize);
-                }
-                Some(start) => {
-                    let dark = !m & valid & (u64::MAX << pos);
-                    if dark == 0 {
-                        break;
-                    }
-                    pos = dark.trailing_zeros();
-                    add_run(start, base + pos as usize);
-                    open = None;
-                }
-            }
-        }
-        base += n;
-    }
-    if let Some(start) = open {
-        add_run(start, px.len());
-    }
-    f
-}
-
-/// [`foreground_power_sums`] one pixel at a time (the reference of its
-/// tests).
-#[cfg(test)]
-fn foreground_power_sums_plain<P: Pixel>(px: &[P], threshold: Threshold, k0: i64) -> [i64; 5] {
-    let mut f = [0i64; 5];
-    for (k, p) in (k0..).zip(px) {
-        if threshold.is_foreground(p.value()) {
-            let mut kj = 1;
-            for fj in f.iter_mut() {
-                *fj += kj;
-                kj *= k;
-            }
-        }
-    }
-    f
-}
-
 /// The `k`-th smallest of `values` (all `≤ max`): by counting when the
 /// values are small (8-bit frames), else by selection (reorders `values`).
 #[inline]
@@ -507,7 +438,23 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             t2 += vi * k * k;
         }
         // Σ k^j, j = 0..4, over the foreground pixels, run by run.
-        let f = foreground_power_sums(px, threshold, a - cc);
+        let mut f = [0i64; 5];
+        let mut i = 0;
+        while i < px.len() {
+            if !threshold.is_foreground(px[i].value()) {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < px.len() && threshold.is_foreground(px[i].value()) {
+                i += 1;
+            }
+            let (ka, kb) = (a - cc + start as i64, a - cc + i as i64 - 1);
+            let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
+            for j in 0..5 {
+                f[j] += hi[j] - lo[j];
+            }
+        }
         if f[0] > 0 {
             // u = ux (k + d0) + uy dy = ux k + c: Σu² and Σu⁴ from the sums.
             let c = ux * d0 + uy * dy;
@@ -597,28 +544,6 @@ mod tests {
                     "j = {j}, {ka}..={kb}"
                 );
             }
-        }
-    }
-
-    proptest::proptest! {
-        /// The run sums from bit masks equal the sums pixel by pixel, for
-        /// 8- and 16-bit rows of any length (blocks and tails) and level.
-        #[test]
-        fn foreground_sums_from_masks_match_the_plain_sums(
-            v in proptest::collection::vec(0u16..=400, 0..200),
-            level in 0u32..=300,
-            k0 in -120i64..120,
-        ) {
-            let t = Threshold::global(level);
-            proptest::prop_assert_eq!(
-                foreground_power_sums(&v, t, k0),
-                foreground_power_sums_plain(&v, t, k0)
-            );
-            let v8: Vec<u8> = v.iter().map(|&x| (x % 256) as u8).collect();
-            proptest::prop_assert_eq!(
-                foreground_power_sums(&v8, t, k0),
-                foreground_power_sums_plain(&v8, t, k0)
-            );
         }
     }
 

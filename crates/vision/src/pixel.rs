@@ -15,12 +15,6 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn value(self) -> u32;
     /// Largest value of a slice (vectorises).
     fn max_of(chunk: &[Self]) -> u32;
-    /// Whether no value of a slice lies above `level` (the plain form:
-    /// [`Pixel::max_of`] compared once).
-    #[inline]
-    fn none_above(chunk: &[Self], level: u32) -> bool {
-        Self::max_of(chunk) <= level
-    }
     /// Bit `i` set if `block[i]` is foreground, for a block of at most 64
     /// pixels (see [`Threshold::foreground_mask`]).
     #[inline]
@@ -40,32 +34,9 @@ impl Pixel for u8 {
     fn value(self) -> u32 {
         self as u32
     }
-    /// Sixteen pixels at a time (SSE2 on x86-64), then the sixteen lanes.
-    #[inline]
+    #[inline(always)]
     fn max_of(chunk: &[Self]) -> u32 {
-        let mut chunks = chunk.chunks_exact(16);
-        let mut m = u8x16::splat(0);
-        for c in &mut chunks {
-            m = m.max(u8x16::new(c.try_into().unwrap_or([0; 16])));
-        }
-        let tail = chunks.remainder().iter().fold(0u8, |m, &p| m.max(p));
-        m.to_array().iter().fold(tail, |m, &p| m.max(p)) as u32
-    }
-    /// Sixteen pixels at a time: the lanes above `level` (saturating
-    /// `v − level` not 0), OR-ed over the slice, tested once at the end.
-    #[inline]
-    fn none_above(chunk: &[Self], level: u32) -> bool {
-        if level >= u8::MAX as u32 {
-            return true;
-        }
-        let t = u8x16::splat(level as u8);
-        let mut chunks = chunk.chunks_exact(16);
-        let mut over = u8x16::splat(0);
-        for c in &mut chunks {
-            over |= u8x16::new(c.try_into().unwrap_or([0; 16])).saturating_sub(t);
-        }
-        over.cmp_eq(u8x16::splat(0)).move_mask() & 0xffff == 0xffff
-            && chunks.remainder().iter().all(|&p| p as u32 <= level)
+        chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
     }
     /// Sixteen pixels at a time (SSE2 on x86-64): a pixel is foreground
     /// where it is not `≤ level`, i.e. where `v − level` (saturating) is not 0.
@@ -279,24 +250,6 @@ mod tests {
         assert_eq!(p.bilinear(2.1, 0.0), None);
         assert_eq!(p.bilinear(-0.1, 0.0), None);
         assert_eq!(u16::max_of(&[3, 900, 7]), 900);
-    }
-
-    proptest::proptest! {
-        /// The vectorised 8-bit maximum and dark test give what one value
-        /// at a time gives, for any length (tails included) and level.
-        #[test]
-        fn fast_maximum_and_dark_test_match_the_plain_ones(
-            v in proptest::collection::vec(0u8..=255, 0..300),
-            level in 0u32..=260,
-            start in 0usize..20,
-        ) {
-            let v = &v[start.min(v.len())..];
-            let plain = v.iter().map(|&p| p as u32).max().unwrap_or(0);
-            proptest::prop_assert_eq!(u8::max_of(v), plain);
-            proptest::prop_assert_eq!(u8::none_above(v, level), plain <= level);
-            let t = Threshold::global(level);
-            proptest::prop_assert_eq!(t.all_background(v), v.iter().all(|&p| !t.is_foreground(p as u32)));
-        }
     }
 
     #[test]

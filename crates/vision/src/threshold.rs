@@ -60,7 +60,7 @@ impl Threshold {
     /// Whether no pixel of a block of a row is foreground.
     #[inline(always)]
     pub fn all_background<P: Pixel>(self, block: &[P]) -> bool {
-        P::none_above(block, self.level)
+        !self.is_foreground(P::max_of(block))
     }
 }
 
