@@ -182,7 +182,7 @@ mod tests {
                         .parse()?;
                     std::thread::sleep(std::time::Duration::from_micros(300 * (i * 7 % 5)));
                     assert!(frame.unwrap_err().contains(name));
-                    Ok((name.to_string(), i % 4 == 0))
+                    Ok((name.to_string(), i.is_multiple_of(4)))
                 },
                 &mut out,
             )
