@@ -506,3 +506,46 @@ fn resect_reports_the_adjustments_covariance_and_the_cameras_quaternion() {
     assert!(view.z < -0.9, "viewing direction {view}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The batch of image files (on every core, buffers reused) gives the
+/// bytes that one image at a time gives, in input order, for `resect` and
+/// `detect`, with failures in between.
+#[test]
+fn a_batch_of_images_gives_the_lines_of_one_image_at_a_time() {
+    let dir = scratch("batch");
+    let a = dir.join("a.pgm");
+    let b = dir.join("b.pgm");
+    let c = dir.join("c.png");
+    render_to(&a, [15.0, -10.0, 950.0, 20.0, 4.0, -3.0], 1);
+    render_to(&b, [-40.0, 30.0, 1100.0, -60.0, -8.0, 5.0], 2);
+    render_to(&c, [5.0, 20.0, 1000.0, 10.0, -4.0, 2.0], 3);
+    let black = dir.join("black.pgm");
+    std::fs::write(
+        &black,
+        [b"P5\n1300 1030\n255\n".as_slice(), &vec![0u8; 1300 * 1030]].concat(),
+    )
+    .unwrap();
+    let small = dir.join("small.pgm");
+    std::fs::write(
+        &small,
+        [b"P5\n64 48\n255\n".as_slice(), &vec![0u8; 64 * 48]].concat(),
+    )
+    .unwrap();
+    let missing = dir.join("missing.pgm");
+    let inputs = [&a, &b, &black, &a, &c, &small, &b, &missing, &a, &c, &b, &a];
+    for command in ["resect", "detect"] {
+        let batch = bin().arg(command).args(inputs).output().unwrap();
+        assert_eq!(batch.status.code(), Some(1), "{command}");
+        let mut single = Vec::new();
+        for input in inputs {
+            let one = bin().arg(command).arg(input).output().unwrap();
+            single.extend_from_slice(&one.stdout);
+        }
+        assert_eq!(
+            String::from_utf8_lossy(&batch.stdout),
+            String::from_utf8_lossy(&single),
+            "{command}"
+        );
+        assert_eq!(lines(&batch).len(), inputs.len());
+    }
+}

@@ -4,9 +4,9 @@
 //! input may be a recording (`.mcap`): each of its frames, or those
 //! `--frames` selects, is one image (`FILE#SEQ`).
 
-use crate::cmd::batch::{exit_status, ErrorLine};
+use crate::cmd::batch::{exit_status, image_lines, workers_for, ErrorLine};
 use crate::cmd::defaults;
-use crate::cmd::input::{for_each_frame, FrameSelection};
+use crate::cmd::input::{for_each_frame, is_recording, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::TargetKind;
@@ -83,9 +83,33 @@ struct ImageLine<'a> {
 pub fn run(args: Args) -> Result<ExitCode> {
     let camera = defaults::camera(args.camera.as_deref())?;
     let field = defaults::field(args.field.as_deref())?;
-    let mut locator = Locator::new(camera, field, LocateOptions::default())?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
+    if !args.images.iter().any(|p| is_recording(p)) {
+        // Image files only: on every core, lines in input order.
+        let workers = workers_for(args.images.len());
+        let failed = image_lines(
+            &args.images,
+            &camera,
+            workers,
+            || {
+                Ok(Locator::new(
+                    camera,
+                    field.clone(),
+                    LocateOptions::default(),
+                )?)
+            },
+            |locator, name, image| {
+                Ok(match image.and_then(|i| detect_one(locator, i, name)) {
+                    Ok(l) => (serde_json::to_string(&l)?, false),
+                    Err(error) => (serde_json::to_string(&ErrorLine::new(name, error))?, true),
+                })
+            },
+            &mut out,
+        )?;
+        return Ok(exit_status(failed));
+    }
+    let mut locator = Locator::new(camera, field, LocateOptions::default())?;
     let mut failed = 0;
     for_each_frame(
         &args.images,

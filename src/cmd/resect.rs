@@ -1,9 +1,9 @@
 //! `photopose resect`: exterior orientation with precision from observation
 //! files (`id,col,row`), one JSON object per input per line, in input order.
 
-use crate::cmd::batch::{exit_status, ErrorLine};
+use crate::cmd::batch::{exit_status, image_lines, workers_for, ErrorLine};
 use crate::cmd::defaults;
-use crate::cmd::input::{for_each_frame, FrameSelection};
+use crate::cmd::input::{for_each_frame, is_recording, FrameSelection};
 use anyhow::Result;
 use clap::Parser;
 use photopose_field::Field;
@@ -165,6 +165,31 @@ pub fn run(args: Args) -> Result<ExitCode> {
         };
         writeln!(out, "{line}")?;
     }
+    let locate_options = LocateOptions {
+        resection: options,
+        ..LocateOptions::default()
+    };
+    if !args.images.iter().any(|p| is_recording(p)) {
+        // Image files only: on every core, lines in input order.
+        let workers = workers_for(args.images.len());
+        failed += image_lines(
+            &args.images,
+            &camera,
+            workers,
+            || Ok(Locator::new(camera, field.clone(), locate_options)?),
+            |locator, name, image| {
+                Ok(match image.and_then(|i| locate_image(locator, i, name)) {
+                    Ok((report, rejected)) => (
+                        serde_json::to_string(&PoseLine::new(name, &report, &rejected))?,
+                        false,
+                    ),
+                    Err(error) => (serde_json::to_string(&ErrorLine::new(name, error))?, true),
+                })
+            },
+            &mut out,
+        )?;
+        return Ok(exit_status(failed));
+    }
     for_each_frame(
         &args.images,
         &camera,
@@ -172,14 +197,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
         |name, image| -> Result<()> {
             let locator = match &mut locator {
                 Some(l) => l,
-                None => locator.insert(Locator::new(
-                    camera,
-                    field.clone(),
-                    LocateOptions {
-                        resection: options,
-                        ..LocateOptions::default()
-                    },
-                )?),
+                None => locator.insert(Locator::new(camera, field.clone(), locate_options)?),
             };
             let result = image.and_then(|i| locate_image(locator, &i, name));
             let line = match result {

@@ -233,6 +233,21 @@ pub fn read_bytes(path: &Path, kind: FileKind) -> Result<Vec<u8>, FileError> {
 /// Reads a whole regular file of `kind`, at most `limit` bytes (for callers
 /// that know a tighter or configured limit).
 pub fn read_bytes_limited(path: &Path, kind: FileKind, limit: u64) -> Result<Vec<u8>, FileError> {
+    let mut bytes = Vec::new();
+    read_bytes_into(path, kind, limit, &mut bytes)?;
+    Ok(bytes)
+}
+
+/// [`read_bytes_limited`] into a caller's buffer (cleared first): a batch
+/// that reads many files of one size reuses the buffer's memory instead of
+/// faulting in fresh pages for every file.
+pub fn read_bytes_into(
+    path: &Path,
+    kind: FileKind,
+    limit: u64,
+    bytes: &mut Vec<u8>,
+) -> Result<(), FileError> {
+    bytes.clear();
     let name = || path.display().to_string();
     let io = |source: std::io::Error| {
         if source.kind() == std::io::ErrorKind::NotFound {
@@ -269,7 +284,6 @@ pub fn read_bytes_limited(path: &Path, kind: FileKind, limit: u64) -> Result<Vec
     let file = open(path).map_err(io)?;
     // Through the handle: the file that is read is the one checked.
     let size = check(&file.metadata().map_err(io)?)?;
-    let mut bytes = Vec::new();
     bytes.try_reserve_exact(size as usize + 1).map_err(|_| {
         io(std::io::Error::new(
             std::io::ErrorKind::OutOfMemory,
@@ -277,7 +291,7 @@ pub fn read_bytes_limited(path: &Path, kind: FileKind, limit: u64) -> Result<Vec
         ))
     })?;
     file.take(limit.saturating_add(1))
-        .read_to_end(&mut bytes)
+        .read_to_end(bytes)
         .map_err(io)?;
     if bytes.len() as u64 > limit {
         return Err(FileError::TooLarge {
@@ -288,7 +302,7 @@ pub fn read_bytes_limited(path: &Path, kind: FileKind, limit: u64) -> Result<Vec
             limit,
         });
     }
-    Ok(bytes)
+    Ok(())
 }
 
 /// Reads a whole regular text file (UTF-8) of `kind`, at most the kind's

@@ -185,6 +185,49 @@ fn load_with(path: &Path, limits: ImageLimits) -> Result<Image, FormatError> {
     decode_image_for(&bytes, &path.display().to_string(), limits)
 }
 
+/// Reads many image files of one camera with reused buffers: the file's
+/// bytes go into one buffer kept from file to file, and a PGM's raster into
+/// the pixel buffer of an image handed back with [`ImageReader::recycle`],
+/// so that a batch of frames costs no fresh pages per frame. The checks
+/// and errors are those of [`load_image_for`].
+#[derive(Debug)]
+pub struct ImageReader {
+    limits: ImageLimits,
+    bytes: Vec<u8>,
+    spare: Option<Pixels>,
+}
+
+impl ImageReader {
+    /// A reader for images of `camera`'s sensor size.
+    pub fn for_camera(camera: &Camera) -> Self {
+        ImageReader {
+            limits: ImageLimits::of(camera),
+            bytes: Vec::new(),
+            spare: None,
+        }
+    }
+
+    /// Reads an image file (as [`load_image_for`] does).
+    pub fn load(&mut self, path: &Path) -> Result<Image, FormatError> {
+        crate::file::read_bytes_into(
+            path,
+            FileKind::Image,
+            self.limits.file_limit(),
+            &mut self.bytes,
+        )?;
+        let origin = path.display().to_string();
+        match ImageFormat::sniff(&self.bytes, &origin)? {
+            ImageFormat::Pgm => pgm_into(&self.bytes, &origin, self.limits, self.spare.take()),
+            ImageFormat::Png => png_with(&self.bytes, &origin, self.limits),
+        }
+    }
+
+    /// Hands an image's pixel buffer back for the next file.
+    pub fn recycle(&mut self, image: Image) {
+        self.spare = Some(image.into_pixels());
+    }
+}
+
 /// Writes an image file, PGM or PNG by the path's extension.
 pub fn save_image(path: &Path, image: &Image) -> Result<(), FormatError> {
     let name = path.display().to_string();
@@ -308,6 +351,17 @@ pub fn decode_pgm(bytes: &[u8], origin: &str) -> Result<Image, FormatError> {
 }
 
 fn pgm_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, FormatError> {
+    pgm_into(bytes, origin, limits, None)
+}
+
+/// [`pgm_with`] into the buffer of an earlier image (`reuse`) when there
+/// is one: one copy of the raster into memory that is already mapped.
+fn pgm_into(
+    bytes: &[u8],
+    origin: &str,
+    limits: ImageLimits,
+    reuse: Option<Pixels>,
+) -> Result<Image, FormatError> {
     if !bytes.starts_with(b"P5") {
         return ImageFormat::sniff(bytes, origin).and(Err(FormatError::UnsupportedImage {
             origin: origin.into(),
@@ -360,17 +414,30 @@ fn pgm_with(bytes: &[u8], origin: &str, limits: ImageLimits) -> Result<Image, Fo
             i / width as usize
         ),
     };
+    let (mut v8, mut v16) = match reuse {
+        Some(Pixels::Mono8(v)) => (v, Vec::new()),
+        Some(Pixels::Mono16(v)) => (Vec::new(), v),
+        None => (Vec::new(), Vec::new()),
+    };
     let pixels = if sample == 1 {
-        let v = data[..need].to_vec();
-        if let Some(i) = v.iter().position(|&p| p as u16 > maxval) {
-            return Err(over(i, v[i] as u16));
+        v8.clear();
+        v8.extend_from_slice(&data[..need]);
+        let v = v8;
+        // (Every byte is ≤ 255: only a lower maxval needs the scan.)
+        if maxval < 255 {
+            if let Some(i) = v.iter().position(|&p| p as u16 > maxval) {
+                return Err(over(i, v[i] as u16));
+            }
         }
         Pixels::Mono8(v)
     } else {
-        let v: Vec<u16> = data[..need]
-            .chunks_exact(2)
-            .map(|b| u16::from_be_bytes([b[0], b[1]]))
-            .collect();
+        v16.clear();
+        v16.extend(
+            data[..need]
+                .chunks_exact(2)
+                .map(|b| u16::from_be_bytes([b[0], b[1]])),
+        );
+        let v = v16;
         if let Some(i) = v.iter().position(|&p| p > maxval) {
             return Err(over(i, v[i]));
         }
@@ -836,6 +903,72 @@ mod tests {
 
     fn camera_1300() -> Camera {
         Camera::reference_ideal()
+    }
+
+    #[test]
+    fn the_reader_reuses_its_buffers_and_reads_as_load_image_for_does() {
+        let dir =
+            std::env::temp_dir().join(format!("photopose-formats-reader-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cam = camera_1300();
+        let mut a = Image::new_mono8(1300, 1030);
+        if let Pixels::Mono8(v) = a.pixels_mut() {
+            v.iter_mut()
+                .enumerate()
+                .for_each(|(i, p)| *p = (i * 7 % 251) as u8);
+        }
+        let mut b = ramp16(1300, 1030, 4095);
+        if let Pixels::Mono16(v) = b.pixels_mut() {
+            v[5] = 4095;
+        }
+        let low = Image::from_pixels(1300, 1030, 100, Pixels::Mono8(vec![3; 1300 * 1030])).unwrap();
+        let files = [
+            ("a.pgm", &a),
+            ("b.pgm", &b),
+            ("c.png", &a),
+            ("d.pgm", &ramp8(7, 5)),
+        ];
+        for (name, img) in files {
+            save_image(&dir.join(name), img).unwrap();
+        }
+        // A raster value above maxval is named as by load_image_for.
+        let mut bytes = Vec::new();
+        encode_pgm(&low, "e.pgm", &mut bytes).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] = 200;
+        std::fs::write(dir.join("e.pgm"), &bytes).unwrap();
+        let mut reader = ImageReader::for_camera(&cam);
+        // A batch of one kind: the second image lands in the first's memory.
+        let first = reader.load(&dir.join("a.pgm")).unwrap();
+        let at = |img: &Image| match img.pixels() {
+            Pixels::Mono8(v) => v.as_ptr() as usize,
+            Pixels::Mono16(v) => v.as_ptr() as usize,
+        };
+        let first_at = at(&first);
+        reader.recycle(first);
+        let second = reader.load(&dir.join("a.pgm")).unwrap();
+        assert_eq!(at(&second), first_at);
+        assert_eq!(second, a);
+        reader.recycle(second);
+        // Mixed kinds, sizes and failures: what load_image_for gives.
+        for _ in 0..2 {
+            for name in [
+                "a.pgm", "b.pgm", "c.png", "d.pgm", "e.pgm", "a.pgm", "nope.pgm",
+            ] {
+                let path = dir.join(name);
+                let want = load_image_for(&path, &cam).map_err(|e| e.to_string());
+                let got = reader.load(&path).map_err(|e| e.to_string());
+                assert_eq!(got, want, "{name}");
+                if let Ok(img) = got {
+                    reader.recycle(img);
+                }
+            }
+        }
+        assert!(matches!(
+            reader.load(&dir.join("e.pgm")),
+            Err(FormatError::ImageData { .. })
+        ));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -19,10 +19,10 @@ pub use camera::{
     camera_file_to_toml, camera_to_toml, default_camera, load_camera, load_camera_file,
     parse_camera, parse_camera_file, CalibrationRecord, CameraFile, ParameterStd,
 };
-pub use file::{read_bytes, read_bytes_limited, read_text, FileError, FileKind};
+pub use file::{read_bytes, read_bytes_into, read_bytes_limited, read_text, FileError, FileKind};
 pub use image::{
     check_size, decode_image, decode_image_for, decode_pgm, decode_png, encode_pgm, encode_png,
-    load_image, load_image_for, save_image, ImageFormat, ImageLimits,
+    load_image, load_image_for, save_image, ImageFormat, ImageLimits, ImageReader,
 };
 pub use observations::{load_observations, parse_observations, PixelObservation};
 

@@ -203,6 +203,12 @@ impl Image {
         &mut self.pixels
     }
 
+    /// The pixel storage, giving up the image (to reuse its buffer for
+    /// the next one without allocating).
+    pub fn into_pixels(self) -> Pixels {
+        self.pixels
+    }
+
     /// Grey value at `(col, row)` as `u16`.
     #[inline]
     pub fn get(&self, col: u32, row: u32) -> u16 {
