@@ -163,7 +163,7 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
                     .arg(&config)
                     .args(["--frames", &FRAMES.to_string()])
                     .stdout(Stdio::null())
-                    .stderr(Stdio::piped())
+                    .stderr(std::fs::File::create(dir.join(format!("{c}.log"))).unwrap())
                     .spawn()
                     .unwrap(),
             )
@@ -180,9 +180,17 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
         let done = cameras
             .iter()
             .all(|c| poses.get(*c).is_some_and(|v| fresh(v) >= FRAMES));
-        let exited = daemons
-            .iter_mut()
-            .all(|d| d.0.try_wait().unwrap().is_some());
+        let mut exited = true;
+        for (d, c) in daemons.iter_mut().zip(cameras) {
+            match d.0.try_wait().unwrap() {
+                Some(status) if !status.success() => {
+                    let log = std::fs::read_to_string(dir.join(format!("{c}.log")));
+                    panic!("daemon {c} failed: {}", log.unwrap_or_default());
+                }
+                Some(_) => {}
+                None => exited = false,
+            }
+        }
         if done && exited {
             break;
         }
@@ -270,14 +278,10 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
         }
     }
     assert!(queried, "the query ran while cell_a streamed");
-    for d in &mut daemons {
+    for (d, c) in daemons.iter_mut().zip(cameras) {
         let status = d.0.wait().unwrap();
-        let mut err = String::new();
-        if let Some(mut e) = d.0.stderr.take() {
-            use std::io::Read;
-            let _ = e.read_to_string(&mut err);
-        }
-        assert!(status.success(), "daemon failed: {err}");
+        let log = std::fs::read_to_string(dir.join(format!("{c}.log"))).unwrap_or_default();
+        assert!(status.success(), "daemon {c} failed: {log}");
     }
     // Samples in flight when the daemons ended are in the channel.
     while let Ok(seen) = rx.recv_timeout(Duration::from_millis(300)) {

@@ -96,7 +96,10 @@ pub fn ros2_gid(token: &str) -> [u8; 16] {
 /// sequence number (i64), the source timestamp (i64, ns since the Unix
 /// epoch) and the GID (16 bytes), in Zenoh's serialisation format
 /// (little-endian integers; the byte array with its length as a LEB128
-/// prefix, here one byte 16). Written by hand: 33 fixed bytes.
+/// prefix, here one byte 16). Written by hand: 33 fixed bytes. This is
+/// the positional layout of `rmw_zenoh` 0.2.4 and later on Jazzy (and of
+/// Kilted's); Jazzy releases before 0.2.4 wrote a key name before each
+/// field and do not read it.
 pub fn ros2_attachment(seq: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
     let mut a = [0u8; 33];
     a[..8].copy_from_slice(&seq.to_le_bytes());
