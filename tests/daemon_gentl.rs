@@ -258,7 +258,11 @@ fn camera_list_lists_the_devices_of_the_gentl_producer() {
         assert!(stdout.starts_with("transport\tid\tvendor\tmodel\tserial\taddress\n"));
         stdout
             .lines()
-            .filter(|l| l.split('\t').nth(5).is_some_and(|a| a.starts_with("viky.cti:")))
+            .filter(|l| {
+                l.split('\t')
+                    .nth(5)
+                    .is_some_and(|a| a.starts_with("viky.cti:"))
+            })
             .map(str::to_string)
             .collect::<Vec<String>>()
     };
@@ -278,9 +282,7 @@ fn camera_list_lists_the_devices_of_the_gentl_producer() {
     let config = dir.join("photopose.toml");
     std::fs::write(
         &config,
-        format!(
-            "[source]\nkind = \"gentl\"\n[source.gentl]\nproducer = \"{VIKY_DIR}/viky.cti\"\n"
-        ),
+        format!("[source]\nkind = \"gentl\"\n[source.gentl]\nproducer = \"{VIKY_DIR}/viky.cti\"\n"),
     )
     .unwrap();
     let out = bin()

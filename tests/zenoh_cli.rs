@@ -302,7 +302,9 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
             "{camera}: not consecutive: {seqs:?}"
         );
         let st = statuses.get(camera).expect("a status");
-        assert!(st.iter().all(|s| s["state"].is_string() && s["rsi"] == "off"));
+        assert!(st
+            .iter()
+            .all(|s| s["state"].is_string() && s["rsi"] == "off"));
         assert!(st.iter().any(|s| s["poses_ok"].as_u64() > Some(0)));
     }
 
@@ -316,7 +318,11 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
             .iter()
             .filter(|m| m["status"] == "ok")
             .collect();
-        assert_eq!(mine.len(), ok.len(), "{camera}: one ROS message per ok pose");
+        assert_eq!(
+            mine.len(),
+            ok.len(),
+            "{camera}: one ROS message per ok pose"
+        );
         let mut last = 0i64;
         for (k, (_, payload, attachment)) in mine.iter().enumerate() {
             assert_eq!(attachment.len(), 33, "sequence, timestamp, GID");
@@ -332,7 +338,9 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
             }
         }
     }
-    assert!(ros.iter().all(|(k, ..)| cameras.iter().any(|c| *k == key(c))));
+    assert!(ros
+        .iter()
+        .all(|(k, ..)| cameras.iter().any(|c| *k == key(c))));
     let Some((decoded, hash)) = decode_with_rosbags(&files) else {
         println!("skipped the CDR check: python3 with rosbags is missing (run .ci/deps.sh)");
         return;
@@ -379,7 +387,10 @@ fn check_config_names_the_zenoh_key_of_a_bad_value() {
         ("pose_key = \"photopose/*/pose\"", "zenoh.pose_key"),
         ("status_key = \"photopose//status\"", "zenoh.status_key"),
         ("query_key = \"photopose/{camera}/pose\"", "zenoh.query_key"),
-        ("ros2 = true\nros2_topic = \"no/leading/slash\"", "zenoh.ros2_topic"),
+        (
+            "ros2 = true\nros2_topic = \"no/leading/slash\"",
+            "zenoh.ros2_topic",
+        ),
         ("ros2_domain_id = 300", "zenoh.ros2_domain_id"),
         ("status_period_ms = 5", "zenoh.status_period_ms"),
         ("colour = \"red\"", "colour"),

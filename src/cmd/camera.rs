@@ -138,9 +138,10 @@ fn gentl_devices(config: Option<&std::path::Path>) -> Result<Option<(String, Vec
             Some(search) => photopose_gentl::find_producer(None, Some(&search), var)?,
         },
     };
-    let file = producer
-        .file_name()
-        .map_or_else(|| producer.display().to_string(), |f| f.to_string_lossy().into_owned());
+    let file = producer.file_name().map_or_else(
+        || producer.display().to_string(),
+        |f| f.to_string_lossy().into_owned(),
+    );
     let devices = photopose_gentl::list_devices(&producer)
         .with_context(|| format!("GenTL producer {}", producer.display()))?;
     let found = devices

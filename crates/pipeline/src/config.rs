@@ -744,9 +744,7 @@ fn zenoh_endpoint(text: &str, listen: bool) -> bool {
     let Some((host, port)) = rest.rsplit_once(':') else {
         return false;
     };
-    let port_ok = port
-        .parse::<u16>()
-        .is_ok_and(|p| listen || p != 0);
+    let port_ok = port.parse::<u16>().is_ok_and(|p| listen || p != 0);
     let host_ok = !host.is_empty()
         && host.len() <= 253
         && host.split('.').all(|label| {
@@ -791,7 +789,9 @@ fn ros2_topic(template: &str, camera: &str) -> Option<String> {
                 .bytes()
                 .next()
                 .is_some_and(|b| b.is_ascii_alphabetic() || b == b'_')
-                && token.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
+                && token
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b == b'_')
         });
     ok.then_some(topic)
 }
@@ -812,7 +812,13 @@ impl Zenoh {
         let mode = match z.mode.as_str() {
             "peer" => ZenohMode::Peer,
             "client" => ZenohMode::Client,
-            _ => return Err(bad("zenoh.mode", z.mode.clone(), "must be \"peer\" or \"client\"")),
+            _ => {
+                return Err(bad(
+                    "zenoh.mode",
+                    z.mode.clone(),
+                    "must be \"peer\" or \"client\"",
+                ))
+            }
         };
         const ENDPOINT_RULE: &str =
             "must be a TCP endpoint \"tcp/HOST:PORT\" (e.g. \"tcp/127.0.0.1:7447\")";
@@ -838,7 +844,8 @@ impl Zenoh {
              separated by '/', none empty, no '*', '$', '?', '#', no leading '@' \
              ({camera} is replaced by the camera id)";
         let key = |name: &'static str, template: &String| {
-            zenoh_key(template, camera).ok_or_else(|| bad(name, format!("\"{template}\""), KEY_RULE))
+            zenoh_key(template, camera)
+                .ok_or_else(|| bad(name, format!("\"{template}\""), KEY_RULE))
         };
         let pose_key = key("zenoh.pose_key", &z.pose_key)?;
         let status_key = key("zenoh.status_key", &z.status_key)?;
@@ -876,13 +883,15 @@ impl Zenoh {
         let ros2_topic = match ros2_topic(&z.ros2_topic, camera) {
             Some(t) => t,
             None if !z.ros2 => z.ros2_topic.replace("{camera}", camera),
-            None => return Err(bad(
-            "zenoh.ros2_topic",
-                format!("\"{}\"", z.ros2_topic),
-                "must be an absolute ROS 2 topic name: '/' then tokens of A-Z, a-z, 0-9 \
+            None => {
+                return Err(bad(
+                    "zenoh.ros2_topic",
+                    format!("\"{}\"", z.ros2_topic),
+                    "must be an absolute ROS 2 topic name: '/' then tokens of A-Z, a-z, 0-9 \
                  and '_' ({camera} is replaced by the camera id, which then must not \
                  contain '-')",
-            )),
+                ))
+            }
         };
         Ok(Zenoh {
             enabled: z.enabled,
@@ -1227,7 +1236,13 @@ mod tests {
                 assert!(cfg!(feature = "zenoh"));
                 assert!(c.zenoh.enabled);
                 let defaults = Config::parse("", "x").unwrap().zenoh;
-                assert_eq!(Zenoh { enabled: false, ..c.zenoh }, defaults);
+                assert_eq!(
+                    Zenoh {
+                        enabled: false,
+                        ..c.zenoh
+                    },
+                    defaults
+                );
                 assert_eq!(defaults, Zenoh::default());
             }
             Err(e) => {
@@ -1247,7 +1262,10 @@ mod tests {
             ("query_key = \"a/$b\"", "zenoh.query_key"),
             ("ros2 = true", "zenoh.ros2_topic"),
             ("ros2_domain_id = 233", "zenoh.ros2_domain_id"),
-            ("wait_for_subscriber_ms = 60001", "zenoh.wait_for_subscriber_ms"),
+            (
+                "wait_for_subscriber_ms = 60001",
+                "zenoh.wait_for_subscriber_ms",
+            ),
             ("status_period_ms = 99", "zenoh.status_period_ms"),
             ("mode = 3", "zenoh.mode"),
             ("topic = \"x\"", "topic"),

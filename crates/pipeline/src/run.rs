@@ -285,12 +285,14 @@ impl Pipeline {
         // may wait for a subscriber (`zenoh.wait_for_subscriber_ms`).
         #[cfg(feature = "zenoh")]
         if let (Some(stats), Some(edge)) = (&counters.zenoh, &edge) {
-            sinks.sinks.push(Box::new(crate::sink::zenoh::ZenohSink::start(
-                config,
-                edge.handle(),
-                Arc::clone(stats),
-                Arc::clone(&counters),
-            )?));
+            sinks
+                .sinks
+                .push(Box::new(crate::sink::zenoh::ZenohSink::start(
+                    config,
+                    edge.handle(),
+                    Arc::clone(stats),
+                    Arc::clone(&counters),
+                )?));
         }
         let metrics = match (config.metrics_listen, &edge) {
             (Some(a), Some(edge)) => Some(crate::metrics::MetricsServer::start(

@@ -124,7 +124,11 @@ pub fn encode_ros2_pose(message: &PoseMessage, buf: &mut Vec<u8>) -> bool {
     let (Some(pose), PoseStatus::Ok) = (&message.pose, message.status) else {
         return false;
     };
-    let Some(ns) = message.time.exposure_utc_ns.or(message.time.handover_utc_ns) else {
+    let Some(ns) = message
+        .time
+        .exposure_utc_ns
+        .or(message.time.handover_utc_ns)
+    else {
         return false;
     };
     // Encapsulation: CDR, little-endian; alignment counts from after it.
@@ -195,7 +199,10 @@ fn zenoh_config(s: &Settings) -> Result<zenoh::Config, String> {
         ("mode", format!("\"{}\"", s.mode.name())),
         ("connect/endpoints", list(&s.connect)),
         ("listen/endpoints", list(&s.listen)),
-        ("scouting/multicast/enabled", s.scouting_multicast.to_string()),
+        (
+            "scouting/multicast/enabled",
+            s.scouting_multicast.to_string(),
+        ),
     ] {
         c.insert_json5(key, &value)
             .map_err(|e| format!("zenoh configuration `{key}` = {value}: {e}"))?;
@@ -318,52 +325,50 @@ impl Session {
     ) {
         let s = &self.settings;
         let fail = |what: &str, e: zenoh::Error| format!("{what}: {e}");
-        let opened = async {
-            let session = zenoh::open(config)
-                .await
-                .map_err(|e| fail("cannot open the Zenoh session", e))?;
-            let poses = session
-                .declare_publisher(s.pose_key.clone())
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-                .await
-                .map_err(|e| fail("cannot declare the pose publisher", e))?;
-            let status = session
-                .declare_publisher(s.status_key.clone())
-                .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-                .await
-                .map_err(|e| fail("cannot declare the status publisher", e))?;
-            let queryable = session
-                .declare_queryable(s.query_key.clone())
-                .await
-                .map_err(|e| fail("cannot declare the queryable", e))?;
-            let ros2 = if s.ros2 {
-                let publisher = session
-                    .declare_publisher(ros2_key(s.ros2_domain_id, &s.ros2_topic))
-                    .congestion_control(zenoh::qos::CongestionControl::Block)
+        let opened =
+            async {
+                let session = zenoh::open(config)
                     .await
-                    .map_err(|e| fail("cannot declare the ROS 2 publisher", e))?;
-                let zid = session.zid().to_string();
-                let [node, pub_token] =
-                    ros2_tokens(s.ros2_domain_id, &zid, &self.camera, &s.ros2_topic);
-                let gid = ros2_gid(&pub_token);
-                let mut tokens = Vec::new();
-                for t in [node, pub_token] {
-                    tokens.push(
-                        session
-                            .liveliness()
-                            .declare_token(t)
+                    .map_err(|e| fail("cannot open the Zenoh session", e))?;
+                let poses = session
+                    .declare_publisher(s.pose_key.clone())
+                    .congestion_control(zenoh::qos::CongestionControl::Block)
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+                    .await
+                    .map_err(|e| fail("cannot declare the pose publisher", e))?;
+                let status = session
+                    .declare_publisher(s.status_key.clone())
+                    .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+                    .await
+                    .map_err(|e| fail("cannot declare the status publisher", e))?;
+                let queryable = session
+                    .declare_queryable(s.query_key.clone())
+                    .await
+                    .map_err(|e| fail("cannot declare the queryable", e))?;
+                let ros2 =
+                    if s.ros2 {
+                        let publisher = session
+                            .declare_publisher(ros2_key(s.ros2_domain_id, &s.ros2_topic))
+                            .congestion_control(zenoh::qos::CongestionControl::Block)
                             .await
-                            .map_err(|e| fail("cannot declare the ROS 2 liveliness token", e))?,
-                    );
-                }
-                Some((publisher, gid, tokens))
-            } else {
-                None
-            };
-            Ok::<_, String>((session, poses, status, queryable, ros2))
-        }
-        .await;
+                            .map_err(|e| fail("cannot declare the ROS 2 publisher", e))?;
+                        let zid = session.zid().to_string();
+                        let [node, pub_token] =
+                            ros2_tokens(s.ros2_domain_id, &zid, &self.camera, &s.ros2_topic);
+                        let gid = ros2_gid(&pub_token);
+                        let mut tokens = Vec::new();
+                        for t in [node, pub_token] {
+                            tokens.push(session.liveliness().declare_token(t).await.map_err(
+                                |e| fail("cannot declare the ROS 2 liveliness token", e),
+                            )?);
+                        }
+                        Some((publisher, gid, tokens))
+                    } else {
+                        None
+                    };
+                Ok::<_, String>((session, poses, status, queryable, ros2))
+            }
+            .await;
         let (session, poses, status, queryable, ros2) = match opened {
             Ok(o) => o,
             Err(why) => {
@@ -546,7 +551,10 @@ impl PoseSink for ZenohSink {
             }
         }
         if let Some(feed) = &self.ros2 {
-            if out.result.is_some() && encode_ros2_pose(out.message, &mut self.cdr) && !feed.send(&self.cdr) {
+            if out.result.is_some()
+                && encode_ros2_pose(out.message, &mut self.cdr)
+                && !feed.send(&self.cdr)
+            {
                 self.stats.ros2_dropped.inc();
             }
         }
@@ -599,8 +607,14 @@ mod tests {
         let mut buf = Vec::with_capacity(CDR_CAPACITY);
         assert!(encode_ros2_pose(&m, &mut buf));
         assert_eq!(&buf[..4], &[0, 1, 0, 0]);
-        assert_eq!(i32::from_le_bytes(buf[4..8].try_into().unwrap()), 1_700_000_000);
-        assert_eq!(u32::from_le_bytes(buf[8..12].try_into().unwrap()), 123_456_789);
+        assert_eq!(
+            i32::from_le_bytes(buf[4..8].try_into().unwrap()),
+            1_700_000_000
+        );
+        assert_eq!(
+            u32::from_le_bytes(buf[8..12].try_into().unwrap()),
+            123_456_789
+        );
         let n = u32::from_le_bytes(buf[12..16].try_into().unwrap()) as usize;
         assert_eq!(&buf[16..16 + n], b"field\0");
         // Doubles aligned on 8 from the end of the encapsulation header.
