@@ -144,7 +144,7 @@ pub fn encode_ros2_pose(message: &PoseMessage, buf: &mut Vec<u8>) -> bool {
     buf.extend_from_slice(&(frame.len() as u32 + 1).to_le_bytes());
     buf.extend_from_slice(frame);
     buf.push(0);
-    while (buf.len() - 4) % 8 != 0 {
+    while !(buf.len() - 4).is_multiple_of(8) {
         buf.push(0);
     }
     let mut f64s = |v: &[f64]| {
