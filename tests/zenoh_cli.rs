@@ -222,7 +222,7 @@ fn two_daemons_publish_complete_ordered_streams_to_one_subscriber() {
         // While cell_a streams: the query of its latest pose, and the ROS
         // graph's liveliness tokens.
         let seen_a = poses.get("cell_a").map_or(0, fresh);
-        if !queried && seen_a >= 20 && seen_a < FRAMES {
+        if !queried && (20..FRAMES).contains(&seen_a) {
             queried = true;
             let last_seq = poses["cell_a"]
                 .iter()
