@@ -42,3 +42,14 @@ if [ ! -f "$GENTL_DIR/viky.cti" ]; then
     rm -rf "$tmp"
 fi
 echo "deps: GenTL test producer at $GENTL_DIR/viky.cti"
+
+# rosbags (pure Python, PyPI): the Zenoh test decodes the ROS 2 CDR messages
+# with it, an implementation independent of the daemon's encoder
+# (tests/zenoh_cli.rs looks here and skips that check, saying so, without it).
+PYTHON_DIR=/opt/photopose-test/python
+ROSBAGS=rosbags==0.11.9
+if ! PYTHONPATH="$PYTHON_DIR" python3 -c "import rosbags" 2>/dev/null; then
+    pip=$(command -v pip3 || command -v pip)
+    "$pip" install --quiet --disable-pip-version-check --target "$PYTHON_DIR" "$ROSBAGS"
+fi
+echo "deps: rosbags at $PYTHON_DIR"

@@ -10,7 +10,9 @@
 //! - `viky.cti` (third-party, installed by `.ci/deps.sh`; skipped with a
 //!   printed reason when absent), found through `GENICAM_GENTL64_PATH`:
 //!   `run --frames 20` ends with 20 frames in (RGBa8 → grey; viky's
-//!   pattern holds no plate, so no poses are expected).
+//!   pattern holds no plate, so no poses are expected); `camera list`
+//!   lists its three devices (from `GENICAM_GENTL64_PATH` and from
+//!   `--config`'s `[source.gentl] producer`).
 
 mod common;
 
@@ -214,4 +216,56 @@ fn run_on_viky_ends_with_its_twenty_frames() {
         stdout.contains("20 frames in, 0 dropped"),
         "{stdout}\n{stderr}"
     );
+}
+
+#[test]
+fn camera_list_lists_the_devices_of_the_gentl_producer() {
+    if !Path::new(VIKY_DIR).join("viky.cti").is_file() {
+        eprintln!("skipped: {VIKY_DIR}/viky.cti is absent (installed by .ci/deps.sh)");
+        return;
+    }
+    let viky_lines = |out: &Output| {
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(stdout.starts_with("transport\tid\tvendor\tmodel\tserial\taddress\n"));
+        stdout
+            .lines()
+            .filter(|l| {
+                l.split('\t')
+                    .nth(5)
+                    .is_some_and(|a| a.starts_with("viky.cti:"))
+            })
+            .map(str::to_string)
+            .collect::<Vec<String>>()
+    };
+    // Through GENICAM_GENTL64_PATH.
+    let out = bin()
+        .args(["camera", "list"])
+        .env("GENICAM_GENTL64_PATH", VIKY_DIR)
+        .output()
+        .unwrap();
+    let lines = viky_lines(&out);
+    assert_eq!(lines.len(), 3, "viky's three devices: {lines:?}");
+    let ids: std::collections::BTreeSet<&str> =
+        lines.iter().filter_map(|l| l.split('\t').nth(1)).collect();
+    assert_eq!(ids.len(), 3, "distinct ids: {lines:?}");
+    // Through the daemon's configuration.
+    let dir = scratch("gentl-list");
+    let config = dir.join("photopose.toml");
+    std::fs::write(
+        &config,
+        format!("[source]\nkind = \"gentl\"\n[source.gentl]\nproducer = \"{VIKY_DIR}/viky.cti\"\n"),
+    )
+    .unwrap();
+    let out = bin()
+        .args(["camera", "list", "--config"])
+        .arg(&config)
+        .env_remove("GENICAM_GENTL64_PATH")
+        .output()
+        .unwrap();
+    assert_eq!(viky_lines(&out), lines);
 }

@@ -7,6 +7,7 @@
 //! - the GenTL loader (`libloading`) is reachable only through the `gentl`
 //!   feature: named in one module's code (`photopose-gentl`'s `ffi`), absent
 //!   from the binary's and the pipeline's trees without their features;
+//!   Zenoh likewise is in the binary's tree only with its `zenoh` feature;
 //! - `unsafe` is allowed in the quarantined modules only;
 //! - every module opens with a `//!` comment saying what it owns;
 //! - no document of the repository points outside it (`../shared`);
@@ -131,7 +132,7 @@ fn has(tree: &str, krate: &str) -> bool {
 fn pure_crates_depend_on_neither_tokio_nor_aravis() {
     for c in PURE {
         let t = tree(&format!("photopose-{c}"), &[]);
-        for bad in ["tokio", "aravis", "glib"] {
+        for bad in ["tokio", "aravis", "glib", "zenoh"] {
             assert!(!has(&t, bad), "photopose-{c} depends on {bad}:\n{t}");
         }
     }
@@ -146,6 +147,7 @@ fn the_binary_without_default_features_links_no_aravis_and_has_tokio() {
         "glib",
         "libloading",
         "photopose-gentl",
+        "zenoh",
     ] {
         assert!(!has(&lean, bad), "--no-default-features still has {bad}");
     }
@@ -153,6 +155,7 @@ fn the_binary_without_default_features_links_no_aravis_and_has_tokio() {
     assert!(has(&full, "tokio"), "tokio in the binary's tree");
     assert!(has(&full, "aravis"), "the default build has GigE");
     assert!(has(&full, "libloading"), "the default build has GenTL");
+    assert!(has(&full, "zenoh"), "the default build has Zenoh");
 }
 
 #[test]

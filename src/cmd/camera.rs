@@ -1,7 +1,7 @@
 //! `photopose camera list` and `photopose camera grab`: the real cell's
 //! camera tools. `list` names the cameras the transports find (aravis:
-//! GigE Vision and USB3 Vision; a GenTL producer would be one more entry in
-//! [`transports`]); `grab` takes stills for calibration and hand-eye work
+//! GigE Vision and USB3 Vision; the devices of a GenTL producer, the one of
+//! `--config`'s `[source.gentl]` or of `GENICAM_GENTL64_PATH`); `grab` takes stills for calibration and hand-eye work
 //! through the daemon's own GigE source (same settings, same
 //! `[source.gige.features]`) and says per still how well it is exposed:
 //! the peak grey value of the detected targets against full scale, and the
@@ -22,9 +22,19 @@ pub struct Args {
 #[derive(Subcommand, Debug)]
 enum What {
     /// The cameras found: transport, id, vendor, model, serial, address.
-    List,
+    List(ListArgs),
     /// Stills from the camera as PGM files, with the exposure aid per still.
     Grab(GrabArgs),
+}
+
+/// Arguments of `photopose camera list`.
+#[derive(Parser, Debug)]
+pub struct ListArgs {
+    /// The daemon's configuration: with `source.kind = "gentl"` the devices
+    /// of its producer are listed; without it (or another kind), those of
+    /// the producer in `GENICAM_GENTL64_PATH`, if one is there.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
 }
 
 /// Arguments of `photopose camera grab`.
@@ -101,19 +111,74 @@ fn aravis_cameras() -> Vec<Found> {
 /// Runs the command.
 pub fn run(args: Args) -> Result<ExitCode> {
     match args.what {
-        What::List => list(),
+        What::List(l) => list(l),
         What::Grab(g) => grab(g),
     }
 }
 
-fn list() -> Result<ExitCode> {
+/// The devices of the GenTL producer of `config` (`[source.gentl]`, when
+/// its source is GenTL) or of `GENICAM_GENTL64_PATH`; `None` when no
+/// producer is named or found.
+#[cfg(feature = "gentl")]
+fn gentl_devices(config: Option<&std::path::Path>) -> Result<Option<(String, Vec<Found>)>> {
+    use anyhow::Context;
+    use photopose_pipeline::config::Source;
+    let named = match config {
+        Some(path) => match crate::cmd::run::load(Some(path))?.source {
+            Source::Gentl(g) => Some(g.producer),
+            _ => None,
+        },
+        None => None,
+    };
+    let var = photopose_gentl::PRODUCER_PATH_VAR;
+    let producer = match named {
+        Some(p) => p,
+        None => match std::env::var_os(var) {
+            None => return Ok(None),
+            Some(search) => photopose_gentl::find_producer(None, Some(&search), var)?,
+        },
+    };
+    let file = producer.file_name().map_or_else(
+        || producer.display().to_string(),
+        |f| f.to_string_lossy().into_owned(),
+    );
+    let devices = photopose_gentl::list_devices(&producer)
+        .with_context(|| format!("GenTL producer {}", producer.display()))?;
+    let found = devices
+        .into_iter()
+        .map(|d| Found {
+            transport: d.transport.unwrap_or_else(|| "GenTL".into()),
+            id: d.id,
+            vendor: d.vendor.unwrap_or_default(),
+            model: d.model.unwrap_or_default(),
+            serial: d.serial.unwrap_or_default(),
+            address: format!("{file}:{}", d.interface),
+        })
+        .collect();
+    Ok(Some((format!("GenTL {file}"), found)))
+}
+
+#[cfg(not(feature = "gentl"))]
+fn gentl_devices(_: Option<&std::path::Path>) -> Result<Option<(String, Vec<Found>)>> {
+    Ok(None)
+}
+
+fn list(args: ListArgs) -> Result<ExitCode> {
     let transports = transports();
-    if transports.is_empty() {
-        anyhow::bail!("this build has no camera transport (cargo feature `gige`)");
+    let gentl = gentl_devices(args.config.as_deref())?;
+    if transports.is_empty() && gentl.is_none() {
+        anyhow::bail!(
+            "this build has no camera transport (cargo feature `gige`) and no GenTL producer \
+             is named (`--config` with a gentl source, or GENICAM_GENTL64_PATH; feature `gentl`)"
+        );
     }
-    let found: Vec<Found> = transports.iter().flat_map(|(_, list)| list()).collect();
+    let mut found: Vec<Found> = transports.iter().flat_map(|(_, list)| list()).collect();
+    let mut names: Vec<String> = transports.iter().map(|(n, _)| n.to_string()).collect();
+    if let Some((name, devices)) = gentl {
+        names.push(name);
+        found.extend(devices);
+    }
     if found.is_empty() {
-        let names: Vec<&str> = transports.iter().map(|(n, _)| *n).collect();
         eprintln!("photopose: no camera found ({})", names.join(", "));
         return Ok(ExitCode::from(1));
     }

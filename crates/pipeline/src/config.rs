@@ -87,6 +87,8 @@ struct File {
     tracking: crate::track::TrackingSection,
     #[serde(default)]
     live: LiveSection,
+    #[serde(default)]
+    zenoh: ZenohSection,
 }
 
 #[derive(Debug, Deserialize)]
@@ -378,6 +380,8 @@ pub struct Config {
     pub record: Record,
     /// The live view (`[live]`).
     pub live: Live,
+    /// The Zenoh publisher (`[zenoh]`, docs/zenoh.md).
+    pub zenoh: Zenoh,
 }
 
 /// The RSI server of the daemon: validated settings and the hand-eye file.
@@ -548,11 +552,14 @@ impl Config {
             link: None,
         };
         let live = Live::from_section(&f.live, &bad)?;
+        let camera_id = camera_id(f.camera.id, &bad)?;
+        let zenoh = Zenoh::from_section(&f.zenoh, &camera_id, &bad)?;
         Ok(Config {
             record,
             live,
+            zenoh,
             rsi,
-            camera_id: camera_id(f.camera.id, &bad)?,
+            camera_id,
             camera_file: f.camera.camera_file,
             field_file: f.camera.field_file,
             source,
@@ -628,6 +635,292 @@ fn key_at(text: &str, at: usize) -> Option<String> {
         Some(s) => format!("{}.{key}", s.trim()),
         None => key.to_string(),
     })
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ZenohSection {
+    enabled: bool,
+    mode: String,
+    connect: Vec<String>,
+    listen: Vec<String>,
+    scouting_multicast: bool,
+    pose_key: String,
+    status_key: String,
+    query_key: String,
+    status_period_ms: u64,
+    wait_for_subscriber_ms: u64,
+    ros2: bool,
+    ros2_domain_id: u32,
+    ros2_topic: String,
+}
+
+impl Default for ZenohSection {
+    fn default() -> Self {
+        ZenohSection {
+            enabled: false,
+            mode: "peer".into(),
+            connect: Vec::new(),
+            listen: Vec::new(),
+            scouting_multicast: false,
+            pose_key: "photopose/{camera}/pose".into(),
+            status_key: "photopose/{camera}/status".into(),
+            query_key: "photopose/{camera}/latest".into(),
+            status_period_ms: 1000,
+            wait_for_subscriber_ms: 0,
+            ros2: false,
+            ros2_domain_id: 0,
+            ros2_topic: "/photopose/{camera}/pose".into(),
+        }
+    }
+}
+
+/// How the Zenoh session is joined (`[zenoh] mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ZenohMode {
+    /// A peer: talks to other peers and routers directly.
+    Peer,
+    /// A client: talks through one router (`connect`).
+    Client,
+}
+
+impl ZenohMode {
+    /// The word Zenoh's configuration uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            ZenohMode::Peer => "peer",
+            ZenohMode::Client => "client",
+        }
+    }
+}
+
+/// The Zenoh publisher (`[zenoh]`, docs/zenoh.md): pose messages, a
+/// status and a queryable of the latest pose on a Zenoh session run from
+/// the edge runtime; optionally the pose as a ROS 2 message for
+/// `rmw_zenoh`. Key expressions are given with `{camera}` already
+/// replaced by the camera's id.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Zenoh {
+    /// Whether the daemon publishes on Zenoh (off by default).
+    pub enabled: bool,
+    /// Peer or client.
+    pub mode: ZenohMode,
+    /// Endpoints to connect to (`tcp/HOST:PORT`).
+    pub connect: Vec<String>,
+    /// Endpoints to listen on (`tcp/HOST:PORT`).
+    pub listen: Vec<String>,
+    /// Whether multicast scouting finds other peers and routers.
+    pub scouting_multicast: bool,
+    /// Where each pose message (v2 JSON) is put.
+    pub pose_key: String,
+    /// Where the status (JSON) is put.
+    pub status_key: String,
+    /// What the queryable of the latest pose answers.
+    pub query_key: String,
+    /// Time between two status messages.
+    pub status_period: std::time::Duration,
+    /// At start, how long to wait for a subscriber of `pose_key` before
+    /// frames are taken (zero: do not wait).
+    pub wait_for_subscriber: std::time::Duration,
+    /// Whether the pose also goes out as a ROS 2 message.
+    pub ros2: bool,
+    /// The ROS 2 domain id.
+    pub ros2_domain_id: u32,
+    /// The ROS 2 topic (absolute name).
+    pub ros2_topic: String,
+}
+
+impl Default for Zenoh {
+    fn default() -> Self {
+        let bad = |key: &'static str, value: String, why: &'static str| ConfigError::Value {
+            path: String::new(),
+            key,
+            value,
+            why,
+        };
+        // The defaults are valid for the default camera id.
+        Zenoh::from_section(&ZenohSection::default(), "camera", &bad)
+            .expect("the [zenoh] defaults are valid")
+    }
+}
+
+/// A Zenoh endpoint of the TCP transport (`tcp/HOST:PORT`): the only
+/// transport the daemon is built with. `listen`: port 0 (any) is allowed.
+fn zenoh_endpoint(text: &str, listen: bool) -> bool {
+    let Some(rest) = text.strip_prefix("tcp/") else {
+        return false;
+    };
+    if let Ok(a) = rest.parse::<SocketAddr>() {
+        return listen || a.port() != 0;
+    }
+    let Some((host, port)) = rest.rsplit_once(':') else {
+        return false;
+    };
+    let port_ok = port.parse::<u16>().is_ok_and(|p| listen || p != 0);
+    let host_ok = !host.is_empty()
+        && host.len() <= 253
+        && host.split('.').all(|label| {
+            !label.is_empty()
+                && label.len() <= 63
+                && !label.starts_with('-')
+                && label
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b == b'-')
+        });
+    port_ok && host_ok
+}
+
+/// `{camera}` replaced; `Some` when the result is a concrete Zenoh key
+/// expression (chunks separated by '/', none empty, no wildcard or
+/// reserved character).
+fn zenoh_key(template: &str, camera: &str) -> Option<String> {
+    let key = template.replace("{camera}", camera);
+    let ok = !key.is_empty()
+        && key.len() <= 512
+        && key.split('/').all(|chunk| {
+            !chunk.is_empty()
+                && chunk
+                    .bytes()
+                    .all(|b| b.is_ascii_graphic() && !b"*$?#{}".contains(&b))
+        })
+        && !key.starts_with('@');
+    ok.then_some(key)
+}
+
+/// `{camera}` replaced; `Some` when the result is a valid absolute ROS 2
+/// topic name (`/` then tokens of letters, digits and `_`, none starting
+/// with a digit, no `__`).
+fn ros2_topic(template: &str, camera: &str) -> Option<String> {
+    let topic = template.replace("{camera}", camera);
+    let rest = topic.strip_prefix('/')?;
+    let ok = !rest.is_empty()
+        && topic.len() <= 256
+        && !topic.contains("__")
+        && rest.split('/').all(|token| {
+            token
+                .bytes()
+                .next()
+                .is_some_and(|b| b.is_ascii_alphabetic() || b == b'_')
+                && token
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        });
+    ok.then_some(topic)
+}
+
+impl Zenoh {
+    fn from_section(
+        z: &ZenohSection,
+        camera: &str,
+        bad: &dyn Fn(&'static str, String, &'static str) -> ConfigError,
+    ) -> Result<Zenoh, ConfigError> {
+        if z.enabled && !cfg!(feature = "zenoh") {
+            return Err(bad(
+                "zenoh.enabled",
+                "true".into(),
+                "this build has no Zenoh (built without the cargo feature `zenoh`)",
+            ));
+        }
+        let mode = match z.mode.as_str() {
+            "peer" => ZenohMode::Peer,
+            "client" => ZenohMode::Client,
+            _ => {
+                return Err(bad(
+                    "zenoh.mode",
+                    z.mode.clone(),
+                    "must be \"peer\" or \"client\"",
+                ))
+            }
+        };
+        const ENDPOINT_RULE: &str =
+            "must be a TCP endpoint \"tcp/HOST:PORT\" (e.g. \"tcp/127.0.0.1:7447\")";
+        for (key, list, listen) in [
+            ("zenoh.connect", &z.connect, false),
+            ("zenoh.listen", &z.listen, true),
+        ] {
+            if list.len() > 64 {
+                return Err(bad(key, list.len().to_string(), "at most 64 endpoints"));
+            }
+            if let Some(e) = list.iter().find(|e| !zenoh_endpoint(e, listen)) {
+                return Err(bad(key, format!("\"{e}\""), ENDPOINT_RULE));
+            }
+        }
+        if mode == ZenohMode::Client && z.enabled && z.connect.is_empty() {
+            return Err(bad(
+                "zenoh.connect",
+                "[]".into(),
+                "a client needs the router to connect to (\"tcp/HOST:PORT\")",
+            ));
+        }
+        const KEY_RULE: &str = "must be a Zenoh key expression without wildcards: chunks \
+             separated by '/', none empty, no '*', '$', '?', '#', no leading '@' \
+             ({camera} is replaced by the camera id)";
+        let key = |name: &'static str, template: &String| {
+            zenoh_key(template, camera)
+                .ok_or_else(|| bad(name, format!("\"{template}\""), KEY_RULE))
+        };
+        let pose_key = key("zenoh.pose_key", &z.pose_key)?;
+        let status_key = key("zenoh.status_key", &z.status_key)?;
+        let query_key = key("zenoh.query_key", &z.query_key)?;
+        if status_key == pose_key || query_key == pose_key || query_key == status_key {
+            return Err(bad(
+                "zenoh.query_key",
+                format!("\"{}\"", z.query_key),
+                "pose_key, status_key and query_key must differ",
+            ));
+        }
+        if !(100..=60_000).contains(&z.status_period_ms) {
+            return Err(bad(
+                "zenoh.status_period_ms",
+                z.status_period_ms.to_string(),
+                "must be 100..=60000 ms",
+            ));
+        }
+        if z.wait_for_subscriber_ms > 60_000 {
+            return Err(bad(
+                "zenoh.wait_for_subscriber_ms",
+                z.wait_for_subscriber_ms.to_string(),
+                "must be 0..=60000 ms (0: do not wait)",
+            ));
+        }
+        // ROS 2 (DDS) domain ids are 0..=232; rmw_zenoh takes the same.
+        if z.ros2_domain_id > 232 {
+            return Err(bad(
+                "zenoh.ros2_domain_id",
+                z.ros2_domain_id.to_string(),
+                "must be 0..=232",
+            ));
+        }
+        // Checked when used: a camera id with '-' is fine without ROS 2.
+        let ros2_topic = match ros2_topic(&z.ros2_topic, camera) {
+            Some(t) => t,
+            None if !z.ros2 => z.ros2_topic.replace("{camera}", camera),
+            None => {
+                return Err(bad(
+                    "zenoh.ros2_topic",
+                    format!("\"{}\"", z.ros2_topic),
+                    "must be an absolute ROS 2 topic name: '/' then tokens of A-Z, a-z, 0-9 \
+                 and '_' ({camera} is replaced by the camera id, which then must not \
+                 contain '-')",
+                ))
+            }
+        };
+        Ok(Zenoh {
+            enabled: z.enabled,
+            mode,
+            connect: z.connect.clone(),
+            listen: z.listen.clone(),
+            scouting_multicast: z.scouting_multicast,
+            pose_key,
+            status_key,
+            query_key,
+            status_period: std::time::Duration::from_millis(z.status_period_ms),
+            wait_for_subscriber: std::time::Duration::from_millis(z.wait_for_subscriber_ms),
+            ros2: z.ros2,
+            ros2_domain_id: z.ros2_domain_id,
+            ros2_topic,
+        })
+    }
 }
 
 /// Validates `[camera] id`: 1–64 characters of `A–Z a–z 0–9 _ -` (it is
@@ -930,6 +1223,90 @@ mod tests {
                 "{line}: {e:?} lacks {want:?}"
             );
         }
+    }
+
+    fn built_with_zenoh() -> bool {
+        std::hint::black_box(cfg!(feature = "zenoh"))
+    }
+
+    #[test]
+    fn zenoh_is_off_by_default_documented_and_its_keys_are_checked() {
+        let d = Config::parse("[camera]\nid = \"cell-7\"\n", "x").unwrap();
+        assert!(!d.zenoh.enabled);
+        assert_eq!(d.zenoh.mode, ZenohMode::Peer);
+        assert!(!d.zenoh.scouting_multicast && d.zenoh.connect.is_empty());
+        assert_eq!(d.zenoh.pose_key, "photopose/cell-7/pose");
+        assert_eq!(d.zenoh.status_key, "photopose/cell-7/status");
+        assert_eq!(d.zenoh.query_key, "photopose/cell-7/latest");
+        let example = Config::parse(EXAMPLE, "config/photopose.toml").unwrap();
+        assert!(!example.zenoh.enabled, "the example leaves it off");
+        // The example's commented section, switched on, documents the
+        // defaults (and is refused by a build without Zenoh).
+        let mut on = false;
+        let mut text = String::new();
+        for line in EXAMPLE.lines() {
+            on = (on || line.starts_with("# [zenoh]")) && !line.trim().is_empty();
+            text.push_str(if on { &line[2..] } else { line });
+            text.push('\n');
+        }
+        match Config::parse(&text, "zenoh example") {
+            Ok(c) => {
+                assert!(built_with_zenoh());
+                assert!(c.zenoh.enabled);
+                let defaults = Config::parse("", "x").unwrap().zenoh;
+                assert_eq!(
+                    Zenoh {
+                        enabled: false,
+                        ..c.zenoh
+                    },
+                    defaults
+                );
+                assert_eq!(defaults, Zenoh::default());
+            }
+            Err(e) => {
+                assert!(!built_with_zenoh(), "{e}");
+                assert!(e.to_string().contains("zenoh.enabled"), "{e}");
+            }
+        }
+        let cases = [
+            ("connect = [\"tcp/127.0.0.1:0\"]", "zenoh.connect"),
+            ("connect = [\"quic/127.0.0.1:7447\"]", "zenoh.connect"),
+            ("connect = [\"tcp/bad host:7447\"]", "zenoh.connect"),
+            ("listen = [\"tcp/127.0.0.1:99999\"]", "zenoh.listen"),
+            ("mode = \"router\"", "zenoh.mode"),
+            ("pose_key = \"photopose/**\"", "zenoh.pose_key"),
+            ("pose_key = \"/photopose/{camera}\"", "zenoh.pose_key"),
+            ("status_key = \"@admin/x\"", "zenoh.status_key"),
+            ("query_key = \"a/$b\"", "zenoh.query_key"),
+            ("ros2 = true", "zenoh.ros2_topic"),
+            ("ros2_domain_id = 233", "zenoh.ros2_domain_id"),
+            (
+                "wait_for_subscriber_ms = 60001",
+                "zenoh.wait_for_subscriber_ms",
+            ),
+            ("status_period_ms = 99", "zenoh.status_period_ms"),
+            ("mode = 3", "zenoh.mode"),
+            ("topic = \"x\"", "topic"),
+        ];
+        for (line, want) in cases {
+            // cell-7: '-' is no ROS 2 name character.
+            let text = format!("[camera]\nid = \"cell-7\"\n[zenoh]\n{line}\n");
+            let e = Config::parse(&text, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(want),
+                "{line}: {e:?} lacks {want:?}"
+            );
+        }
+        let ok = Config::parse(
+            "[camera]\nid = \"cell_7\"\n[zenoh]\nmode = \"client\"\n\
+             connect = [\"tcp/router.local:7447\", \"tcp/[::1]:7447\"]\n\
+             listen = [\"tcp/0.0.0.0:0\"]\nros2 = true\nros2_domain_id = 42\n",
+            "x",
+        )
+        .unwrap()
+        .zenoh;
+        assert_eq!(ok.ros2_topic, "/photopose/cell_7/pose");
+        assert_eq!(ok.mode, ZenohMode::Client);
     }
 
     #[test]

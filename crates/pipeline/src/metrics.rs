@@ -63,6 +63,72 @@ pub struct Counters {
     pub udp: Option<Arc<photopose_stream::UdpStats>>,
     /// The RSI server's counters, when it runs.
     pub rsi: Option<Arc<photopose_rsi::monitor::Stats>>,
+    /// The Zenoh publisher's counters, when `[zenoh]` is enabled.
+    pub zenoh: Option<Arc<ZenohStats>>,
+}
+
+/// Counters of the Zenoh publisher (`[zenoh]`, `sink::zenoh`).
+#[derive(Debug, Default)]
+pub struct ZenohStats {
+    /// Pose messages put on Zenoh.
+    pub poses_published: Counter,
+    /// Pose messages dropped on the output thread: the edge was behind.
+    pub poses_dropped: Counter,
+    /// ROS 2 messages put on Zenoh.
+    pub ros2_published: Counter,
+    /// ROS 2 messages dropped on the output thread: the edge was behind.
+    pub ros2_dropped: Counter,
+    /// Puts Zenoh refused (pose, ROS 2 and status).
+    pub put_errors: Counter,
+    /// Status messages put.
+    pub statuses: Counter,
+    /// Queries of the latest pose answered.
+    pub queries: Counter,
+}
+
+impl Collect for ZenohStats {
+    fn collect(&self, out: &mut Scrape<'_>) -> std::fmt::Result {
+        for (name, help, c) in [
+            (
+                "photopose_zenoh_poses_published_total",
+                "Pose messages put on Zenoh.",
+                &self.poses_published,
+            ),
+            (
+                "photopose_zenoh_poses_dropped_total",
+                "Pose messages not put on Zenoh because the edge runtime was behind.",
+                &self.poses_dropped,
+            ),
+            (
+                "photopose_zenoh_ros2_published_total",
+                "ROS 2 PoseWithCovarianceStamped messages put on Zenoh.",
+                &self.ros2_published,
+            ),
+            (
+                "photopose_zenoh_ros2_dropped_total",
+                "ROS 2 messages not put on Zenoh because the edge runtime was behind.",
+                &self.ros2_dropped,
+            ),
+            (
+                "photopose_zenoh_put_errors_total",
+                "Puts refused by the Zenoh session.",
+                &self.put_errors,
+            ),
+            (
+                "photopose_zenoh_statuses_total",
+                "Status messages put on Zenoh.",
+                &self.statuses,
+            ),
+            (
+                "photopose_zenoh_queries_total",
+                "Queries of the latest pose answered.",
+                &self.queries,
+            ),
+        ] {
+            out.counter(name, help, c.get())?;
+        }
+        Ok(())
+    }
 }
 
 impl Default for Counters {
@@ -89,6 +155,7 @@ impl Default for Counters {
             tcp: None,
             udp: None,
             rsi: None,
+            zenoh: None,
         }
     }
 }
@@ -250,6 +317,9 @@ impl Collect for Counters {
         }
         if let Some(udp) = &self.udp {
             udp.collect(out)?;
+        }
+        if let Some(zenoh) = &self.zenoh {
+            zenoh.collect(out)?;
         }
         if let Some(rsi) = &self.rsi {
             rsi.collect(out)?;

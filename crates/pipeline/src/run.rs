@@ -36,6 +36,12 @@ pub enum PipelineError {
     /// The RSI server could not start.
     #[error("RSI server: {0}")]
     Rsi(#[from] photopose_rsi::server::ServerError),
+    /// The Zenoh session could not be opened or declared (`[zenoh]`).
+    #[error("zenoh: {why}")]
+    Zenoh {
+        /// What failed, with Zenoh's word.
+        why: String,
+    },
     /// A thread could not be started.
     #[error("cannot start thread {name}: {source}")]
     Thread {
@@ -203,6 +209,7 @@ impl Pipeline {
         let edge = if config.tcp_listen.is_some()
             || config.metrics_listen.is_some()
             || config.live.enabled
+            || config.zenoh.enabled
         {
             Some(Edge::start(EDGE_THREADS)?)
         } else {
@@ -268,8 +275,25 @@ impl Pipeline {
             udp: sinks.udp.clone(),
             rsi: sinks.rsi.clone(),
             ring: Some(consumer.shared_counters()),
+            zenoh: config
+                .zenoh
+                .enabled
+                .then(|| Arc::new(crate::metrics::ZenohStats::default())),
             ..Counters::default()
         });
+        // The Zenoh publisher (on the edge), before any frame is taken: it
+        // may wait for a subscriber (`zenoh.wait_for_subscriber_ms`).
+        #[cfg(feature = "zenoh")]
+        if let (Some(stats), Some(edge)) = (&counters.zenoh, &edge) {
+            sinks
+                .sinks
+                .push(Box::new(crate::sink::zenoh::ZenohSink::start(
+                    config,
+                    edge.handle(),
+                    Arc::clone(stats),
+                    Arc::clone(&counters),
+                )?));
+        }
         let metrics = match (config.metrics_listen, &edge) {
             (Some(a), Some(edge)) => Some(crate::metrics::MetricsServer::start(
                 edge.handle(),

@@ -13,6 +13,8 @@ pub mod record;
 pub mod rsi;
 pub mod tcp;
 pub mod udp;
+#[cfg(feature = "zenoh")]
+pub mod zenoh;
 
 use crate::config::Config;
 use crate::result::{PoseResult, ResultStatus};
