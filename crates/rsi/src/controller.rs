@@ -142,6 +142,30 @@ pub struct SimReport {
     pub total: Pose6,
 }
 
+impl SimReport {
+    /// The first component whose largest step per cycle exceeds the law's
+    /// slew limit, or whose largest total exceeds its clamp, named with its
+    /// value; `None` when the run kept both. Replies carry 4 decimals, so a
+    /// step may exceed its limit by the rounding of one value (5e-5) and a
+    /// total by 1e-3.
+    pub fn limits_broken(&self, law: &crate::law::LawConfig) -> Option<String> {
+        (0..6).find_map(|i| {
+            let (step, clamp) = if i < 3 {
+                (law.max_step_mm, law.clamp_mm)
+            } else {
+                (law.max_step_deg, law.clamp_deg)
+            };
+            if self.max_step[i] > step + 5e-5 {
+                Some(format!("step {i}: {} beyond {step}", self.max_step[i]))
+            } else if self.max_total[i] > clamp + 1e-3 {
+                Some(format!("total {i}: {} beyond {clamp}", self.max_total[i]))
+            } else {
+                None
+            }
+        })
+    }
+}
+
 /// A cheap, cloneable view of a running simulation for other threads (the
 /// test's camera).
 #[derive(Debug, Clone)]

@@ -70,6 +70,16 @@ fn protocol_line(head: &[u8]) -> Option<(std::ops::Range<usize>, &str)> {
     None
 }
 
+/// `head` with its `Sec-WebSocket-Protocol` line (at `line`) naming
+/// `protocol` instead.
+fn with_protocol(head: &[u8], line: std::ops::Range<usize>, protocol: &str) -> Vec<u8> {
+    let mut out = Vec::with_capacity(head.len() + 8);
+    out.extend_from_slice(&head[..line.start]);
+    out.extend_from_slice(format!("Sec-WebSocket-Protocol: {protocol}\r\n").as_bytes());
+    out.extend_from_slice(&head[line.end..]);
+    out
+}
+
 /// Looks at a client's request head: a client offering the legacy name and
 /// not the current one gets its offer renamed.
 pub(crate) fn rewrite_request(head: &[u8]) -> Request {
@@ -81,11 +91,7 @@ pub(crate) fn rewrite_request(head: &[u8]) -> Request {
     if current || !offers.contains(&LEGACY_SUBPROTOCOL) {
         return Request::Pass;
     }
-    let mut out = Vec::with_capacity(head.len() + 8);
-    out.extend_from_slice(&head[..range.start]);
-    out.extend_from_slice(format!("Sec-WebSocket-Protocol: {SDK_SUBPROTOCOL}\r\n").as_bytes());
-    out.extend_from_slice(&head[range.end..]);
-    Request::Renamed(out)
+    Request::Renamed(with_protocol(head, range, SDK_SUBPROTOCOL))
 }
 
 /// The server's answer to a renamed request, answered with the name the
@@ -93,13 +99,7 @@ pub(crate) fn rewrite_request(head: &[u8]) -> Request {
 pub(crate) fn rewrite_response(head: &[u8]) -> Vec<u8> {
     match protocol_line(head) {
         Some((range, value)) if value == SDK_SUBPROTOCOL => {
-            let mut out = Vec::with_capacity(head.len() + 8);
-            out.extend_from_slice(&head[..range.start]);
-            out.extend_from_slice(
-                format!("Sec-WebSocket-Protocol: {LEGACY_SUBPROTOCOL}\r\n").as_bytes(),
-            );
-            out.extend_from_slice(&head[range.end..]);
-            out
+            with_protocol(head, range, LEGACY_SUBPROTOCOL)
         }
         _ => head.to_vec(),
     }
