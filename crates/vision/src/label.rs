@@ -55,14 +55,45 @@ impl BlockLevels for TileRow<'_> {
 
 /// A horizontal run of foreground pixels.
 #[derive(Debug, Clone, Copy, Default)]
-struct Run {
-    row: u32,
-    start: u32,
+pub(crate) struct Run {
+    pub(crate) row: u32,
+    pub(crate) start: u32,
     /// One past the last column.
-    end: u32,
-    sum: u32,
-    max: u16,
-    saturated: u16,
+    pub(crate) end: u32,
+    pub(crate) sum: u32,
+    pub(crate) max: u16,
+    pub(crate) saturated: u16,
+}
+
+impl Run {
+    /// The run `line[start..end]` of row `row` (columns `col0 + start ..
+    /// col0 + end`) with its grey-value statistics; pixels at or above
+    /// `saturation` count as saturated.
+    #[inline]
+    pub(crate) fn of<P: Pixel>(
+        line: &[P],
+        row: u32,
+        col0: u32,
+        start: usize,
+        end: usize,
+        saturation: u32,
+    ) -> Run {
+        let (mut sum, mut max, mut sat) = (0u32, 0u32, 0u32);
+        for p in &line[start..end] {
+            let v = p.value();
+            sum += v;
+            max = max.max(v);
+            sat += (v >= saturation) as u32;
+        }
+        Run {
+            row,
+            start: col0 + start as u32,
+            end: col0 + end as u32,
+            sum,
+            max: max.min(u16::MAX as u32) as u16,
+            saturated: sat.min(u16::MAX as u32) as u16,
+        }
+    }
 }
 
 /// Statistics of one connected component.
@@ -91,7 +122,7 @@ pub struct Blob {
 }
 
 impl Blob {
-    fn empty() -> Self {
+    pub(crate) fn empty() -> Self {
         Blob {
             area: 0,
             col0: u32::MAX,
@@ -104,6 +135,38 @@ impl Blob {
             m: [0.0; 5],
             origin_col: 0,
         }
+    }
+
+    /// Adds a run's pixels to the blob's statistics (the blob's first run
+    /// fixes the moments' origin; runs come in row-major order).
+    #[inline]
+    pub(crate) fn add_run(&mut self, run: &Run) {
+        if self.area == 0 {
+            self.origin_col = run.start;
+            self.row0 = run.row;
+        }
+        // The moments' origin is fixed by the blob's first run (the
+        // bounding box may later extend to its left).
+        let ox = self.origin_col as f64;
+        let oy = self.row0 as f64;
+        let n = (run.end - run.start) as f64;
+        let a = run.start as f64 - ox;
+        let e = run.end as f64 - ox;
+        let sx = (a + e - 1.0) * n / 2.0;
+        let sxx = sum_sq_below(e) - sum_sq_below(a);
+        let y = run.row as f64 - oy;
+        self.m[0] += sx;
+        self.m[1] += n * y;
+        self.m[2] += sxx;
+        self.m[3] += n * y * y;
+        self.m[4] += sx * y;
+        self.area += run.end - run.start;
+        self.sum += run.sum as u64;
+        self.max = self.max.max(run.max as u32);
+        self.saturated += run.saturated as u32;
+        self.col0 = self.col0.min(run.start);
+        self.col1 = self.col1.max(run.end - 1);
+        self.row1 = self.row1.max(run.row);
     }
 
     /// Binary centroid `(col, row)`.
@@ -282,33 +345,7 @@ impl Labeller {
                 b
             };
             let run = self.runs[k];
-            let blob = &mut self.blobs[b as usize];
-            if blob.area == 0 {
-                blob.origin_col = run.start;
-                blob.row0 = run.row;
-            }
-            // The moments' origin is fixed by the blob's first run (the
-            // bounding box may later extend to its left).
-            let ox = blob.origin_col as f64;
-            let oy = blob.row0 as f64;
-            let n = (run.end - run.start) as f64;
-            let a = run.start as f64 - ox;
-            let e = run.end as f64 - ox;
-            let sx = (a + e - 1.0) * n / 2.0;
-            let sxx = sum_sq_below(e) - sum_sq_below(a);
-            let y = run.row as f64 - oy;
-            blob.m[0] += sx;
-            blob.m[1] += n * y;
-            blob.m[2] += sxx;
-            blob.m[3] += n * y * y;
-            blob.m[4] += sx * y;
-            blob.area += run.end - run.start;
-            blob.sum += run.sum as u64;
-            blob.max = blob.max.max(run.max as u32);
-            blob.saturated += run.saturated as u32;
-            blob.col0 = blob.col0.min(run.start);
-            blob.col1 = blob.col1.max(run.end - 1);
-            blob.row1 = blob.row1.max(run.row);
+            self.blobs[b as usize].add_run(&run);
         }
         LabelOutcome::Complete
     }
@@ -395,21 +432,8 @@ impl Labeller {
         if self.runs.len() >= self.max_runs {
             return false;
         }
-        let (mut sum, mut max, mut sat) = (0u32, 0u32, 0u32);
-        for p in &line[start..end] {
-            let v = p.value();
-            sum += v;
-            max = max.max(v);
-            sat += (v >= saturation) as u32;
-        }
-        self.runs.push(Run {
-            row,
-            start: col0 + start as u32,
-            end: col0 + end as u32,
-            sum,
-            max: max.min(u16::MAX as u32) as u16,
-            saturated: sat.min(u16::MAX as u32) as u16,
-        });
+        self.runs
+            .push(Run::of(line, row, col0, start, end, saturation));
         true
     }
 }
