@@ -69,6 +69,7 @@ fn main() {
     let threshold = first.detections.threshold;
     let options = TrackOptions::default();
     let (mut tracked, mut targets) = (0usize, 0usize);
+    let mut check = 0.0f64;
     for _ in 0..rounds {
         let mut motion = Motion {
             last: (0, pose.exterior),
@@ -85,6 +86,7 @@ fn main() {
             if let Ok(p) = locator.track(img.view(), &prior, &options) {
                 tracked += 1;
                 targets += p.n_points;
+                check += p.exterior.center.sum();
                 motion = Motion {
                     last: (k as u64, p.exterior),
                     before: Some(motion.last),
@@ -93,7 +95,7 @@ fn main() {
         }
     }
     println!(
-        "{frames} frames × {rounds} rounds: {tracked} tracked, {:.0} targets each",
+        "{frames} frames × {rounds} rounds: {tracked} tracked, {:.0} targets each, Σ centres {check:.12}",
         targets as f64 / tracked.max(1) as f64
     );
 }

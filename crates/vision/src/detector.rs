@@ -401,31 +401,9 @@ impl Detector {
                 continue;
             }
             let m = if ring.reading.ring_present {
-                // Measure again with a window that keeps clear of the ring.
-                let m2 = measure::measure(
-                    plane,
-                    blob,
-                    t.threshold,
-                    t.background,
-                    measure::CODED_GROW,
-                    measure::CODED_MAX_SCALE,
-                );
+                let m = coded_centre(plane, blob, t, o, max_value).unwrap_or(m);
                 probe(DetectStage::Measure);
-                m2.map_or(m, |mut m2| {
-                    if blob.saturated > 0 {
-                        saturated_centre(
-                            plane,
-                            blob,
-                            t,
-                            max_value,
-                            o.saturated_knee,
-                            measure::CODED_GROW,
-                            measure::CODED_MAX_SCALE,
-                            &mut m2,
-                        );
-                    }
-                    m2
-                })
+                m
             } else {
                 m
             };
@@ -586,15 +564,66 @@ pub(crate) fn centroid<P: Pixel>(
     o: &DetectorOptions,
     max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    let mut m = measure::measure(
+    let m = centre_in(
         plane,
         blob,
-        t.threshold,
-        t.background,
+        t,
+        o,
+        max_value,
         measure::GROW,
         measure::MAX_SCALE,
     )
     .ok_or(RejectReason::NoSignal)?;
+    shape_test(&m, blob, o)?;
+    Ok(m)
+}
+
+/// The fourth-moment test of stage 4: a filled ellipse's.
+pub(crate) fn shape_test(
+    m: &Measurement,
+    blob: &Blob,
+    o: &DetectorOptions,
+) -> Result<(), RejectReason> {
+    if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
+        return Err(RejectReason::Shape);
+    }
+    Ok(())
+}
+
+/// The centre of a coded target's dot, measured again in a window that
+/// keeps clear of its ring ([`measure::CODED_GROW`]); `None` if that
+/// window holds no signal.
+pub(crate) fn coded_centre<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    o: &DetectorOptions,
+    max_value: u32,
+) -> Option<Measurement> {
+    centre_in(
+        plane,
+        blob,
+        t,
+        o,
+        max_value,
+        measure::CODED_GROW,
+        measure::CODED_MAX_SCALE,
+    )
+}
+
+/// The centroid and moments of a blob in the window of `grow` and
+/// `max_scale`, its centre rolled off below saturation when most of it is
+/// saturated ([`saturated_centre`]).
+fn centre_in<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    o: &DetectorOptions,
+    max_value: u32,
+    grow: f64,
+    max_scale: f64,
+) -> Option<Measurement> {
+    let mut m = measure::measure(plane, blob, t.threshold, t.background, grow, max_scale)?;
     if blob.saturated > 0 {
         saturated_centre(
             plane,
@@ -602,15 +631,12 @@ pub(crate) fn centroid<P: Pixel>(
             t,
             max_value,
             o.saturated_knee,
-            measure::GROW,
-            measure::MAX_SCALE,
+            grow,
+            max_scale,
             &mut m,
         );
     }
-    if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
-        return Err(RejectReason::Shape);
-    }
-    Ok(m)
+    Some(m)
 }
 
 /// The centre of a blob at least half of whose pixels are saturated: the

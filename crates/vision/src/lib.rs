@@ -39,6 +39,7 @@ mod detector;
 pub mod label;
 pub mod measure;
 pub mod pixel;
+pub mod seed;
 pub mod threshold;
 pub mod window;
 

@@ -407,7 +407,21 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             if a > b {
                 continue;
             }
-            for p in &line[(a - first_col) as usize..=(b - first_col) as usize] {
+            let part = &line[(a - first_col) as usize..=(b - first_col) as usize];
+            if stride == 1 && bg_n + part.len() <= BG_SAMPLES {
+                // Every dark pixel kept (`seen == next` throughout): store
+                // each and count the dark ones, without a branch.
+                let before = bg_n;
+                for p in part {
+                    let v = p.value();
+                    bg_buf[bg_n] = v;
+                    bg_n += !threshold.is_foreground(v) as usize;
+                }
+                seen += bg_n - before;
+                next = seen;
+                continue;
+            }
+            for p in part {
                 let v = p.value();
                 if !threshold.is_foreground(v) {
                     if seen == next {

@@ -4,11 +4,14 @@
 //! a whole frame, and no code reading: the target's identity comes from the
 //! prediction, not from its ring.
 //!
-//! The blob is labelled in a small core window (the gate plus the dot), and
-//! measured in a larger one that holds the centroid's window and its dark
-//! surroundings: the blob tests and the centroid then see exactly the
-//! pixels they see in the whole frame, so a target measured here has the
-//! centre the whole-frame detector gives it with the same threshold.
+//! The blobs are grown ([`SeedLabeller`]) from the foreground pixels near
+//! the prediction (within the gate and one pixel more: every blob that is
+//! not hollow has a pixel there if its centre lies inside the gate),
+//! inside a small core window (the gate plus the dot), and measured in a
+//! larger one that holds the centroid's window and its dark surroundings:
+//! the blob tests and the centroid then see exactly the pixels they see in
+//! the whole frame, so a target measured here has the centre the
+//! whole-frame detector gives it with the same threshold.
 //!
 //! Identification by prediction is only as safe as the gate: exactly one
 //! blob whose binary centre lies inside the gate is taken, two are
@@ -16,18 +19,21 @@
 //! overlapping.
 
 use crate::code::{CodeParams, Gap, RingTables};
-use crate::detector::{blob_tests, centroid, read_ring};
-use crate::label::{LabelOutcome, Labeller};
+use crate::detector::{blob_tests, centroid, coded_centre, read_ring, shape_test};
+use crate::label::Blob;
 use crate::measure;
 use crate::pixel::{Pixel, Plane};
+use crate::seed::SeedLabeller;
 use crate::{CodeStatus, DetectorOptions, RejectReason, ThresholdResult, Uncertainty};
 use photopose_frame::{ImageView, ViewPixels};
 
-/// Runs a core window may hold (a dot and the parts of a ring or of a
-/// neighbour that reach into it).
+/// Runs the blobs grown in a core window may have (a dot and the parts of
+/// a ring or of a neighbour that reach into the gate).
 const MAX_RUNS: usize = 4096;
-/// Blobs a core window may hold.
+/// Blobs grown in a core window.
 const MAX_BLOBS: usize = 512;
+/// Rows of a core window served without growing a buffer.
+const MAX_ROWS: usize = 1024;
 
 /// Where to look for one target.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -85,7 +91,7 @@ pub enum WindowOutcome {
 #[derive(Debug)]
 pub struct WindowMeasurer {
     options: DetectorOptions,
-    labeller: Labeller,
+    seeds: SeedLabeller,
     tables: RingTables,
 }
 
@@ -94,7 +100,7 @@ impl WindowMeasurer {
     pub fn new(options: DetectorOptions) -> Self {
         WindowMeasurer {
             options,
-            labeller: Labeller::new(MAX_RUNS, MAX_BLOBS),
+            seeds: SeedLabeller::new(MAX_RUNS, MAX_BLOBS, MAX_ROWS),
             tables: RingTables::default(),
         }
     }
@@ -162,15 +168,40 @@ impl WindowMeasurer {
         let Some(core_plane) = sub_plane(image, data, e.col, e.row, core) else {
             return WindowOutcome::Missing;
         };
-        match self.labeller.label(&core_plane, t.threshold, max_value) {
-            LabelOutcome::Complete => {}
-            LabelOutcome::TooManyRuns | LabelOutcome::TooManyBlobs => {
+        // Every blob with a pixel within the gate and one pixel more: the
+        // pixel nearest the prediction first (it mostly lies in the
+        // target's blob, which then holds most of the others).
+        self.seeds.start(&core_plane);
+        let reach = e.gate_px + 1.0;
+        let (th, seeds) = (t.threshold, &mut self.seeds);
+        let nearest = (
+            e.col.round().max(0.0) as usize,
+            e.row.round().max(0.0) as usize,
+        );
+        if seeds
+            .grow(&core_plane, th, max_value, nearest.0, nearest.1)
+            .is_err()
+        {
+            return WindowOutcome::Ambiguous;
+        }
+        let mut row = (e.row - reach).ceil().max(0.0);
+        while row <= e.row + reach {
+            let dy = row - e.row;
+            let half = (reach * reach - dy * dy).max(0.0).sqrt();
+            let lo = (e.col - half).ceil().max(0.0) as usize;
+            let hi = (e.col + half).floor();
+            if hi >= 0.0
+                && seeds
+                    .grow_span(&core_plane, th, max_value, row as usize, lo, hi as usize)
+                    .is_err()
+            {
                 return WindowOutcome::Ambiguous;
             }
+            row += 1.0;
         }
         let gate2 = e.gate_px * e.gate_px;
         let mut found = None;
-        for blob in self.labeller.blobs() {
+        for blob in self.seeds.blobs() {
             if blob.area < self.options.min_area {
                 continue;
             }
@@ -213,10 +244,6 @@ impl WindowMeasurer {
         if let Err(reason) = blob_tests(&outer_plane, &blob, &self.options) {
             return WindowOutcome::Rejected(reason);
         }
-        let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
-            Ok(m) => m,
-            Err(reason) => return WindowOutcome::Rejected(reason),
-        };
         // Near the frame's edge the whole-frame detector keeps a target only
         // if its ring's samples (the ring's middle of an uncoded one, out
         // to the quiet zone of a coded one) lie inside: read the ring there
@@ -226,8 +253,28 @@ impl WindowMeasurer {
         let edge = 3.5 * radius * measure::MAX_SCALE + e.gate_px + 3.0;
         let near_edge =
             e.col - edge < fc0 || e.row - edge < fr0 || e.col + edge > fc1 || e.row + edge > fr1;
+        let read = near_edge || (e.coded && e.read_code);
+        if e.coded && !read {
+            // A coded target whose ring is not read: its centre is measured
+            // once, clear of the ring, where the whole frame measures it
+            // first with the plain window to read the ring (its fourth
+            // moment, tested here on this window, is the same but for the
+            // rare pixel the smaller window leaves out).
+            let m = match coded_centre(&outer_plane, &blob, t, &self.options, max_value) {
+                Some(m) => m,
+                None => return WindowOutcome::Rejected(RejectReason::NoSignal),
+            };
+            if let Err(reason) = shape_test(&m, &blob, &self.options) {
+                return WindowOutcome::Rejected(reason);
+            }
+            return WindowOutcome::Found(found_target(&m, &blob, None));
+        }
+        let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
+            Ok(m) => m,
+            Err(reason) => return WindowOutcome::Rejected(reason),
+        };
         let mut code = None;
-        if near_edge || (e.coded && e.read_code) {
+        if read {
             let min_read = (self.options.noise_factor * t.noise)
                 .max(self.options.min_contrast * max_value as f64);
             let params = CodeParams {
@@ -252,28 +299,25 @@ impl WindowMeasurer {
             }
         }
         let m = if e.coded {
-            measure::measure(
-                &outer_plane,
-                &blob,
-                t.threshold,
-                t.background,
-                measure::CODED_GROW,
-                measure::CODED_MAX_SCALE,
-            )
-            .unwrap_or(m)
+            coded_centre(&outer_plane, &blob, t, &self.options, max_value).unwrap_or(m)
         } else {
             m
         };
-        WindowOutcome::Found(WindowTarget {
-            col: m.col,
-            row: m.row,
-            area: blob.area,
-            peak: blob.max,
-            signal: m.signal,
-            background: m.background,
-            code,
-            saturated: blob.saturated > 0,
-        })
+        WindowOutcome::Found(found_target(&m, &blob, code))
+    }
+}
+
+/// The target measured in a window.
+fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>) -> WindowTarget {
+    WindowTarget {
+        col: m.col,
+        row: m.row,
+        area: blob.area,
+        peak: blob.max,
+        signal: m.signal,
+        background: m.background,
+        code,
+        saturated: blob.saturated > 0,
     }
 }
 

@@ -1,0 +1,397 @@
+//! Seeded labelling: the connected components (8-connectivity) that hold
+//! given foreground pixels, grown run by run from those pixels, without
+//! visiting the rest of the window. Tracking mode knows where each target
+//! lies to a pixel or two: growing its blob from there reads the blob and
+//! the pixels around its edge, where [`Labeller`](crate::label::Labeller)
+//! reads every pixel of the window.
+//!
+//! A grown blob is the labeller's blob exactly: its runs are the maximal
+//! runs of the window, its statistics are added in the labeller's
+//! (row-major) order, so that its centre and moments are bit for bit the
+//! ones the whole-window labeller gives it.
+
+use crate::label::{Blob, Run};
+use crate::pixel::{Pixel, Plane};
+use crate::threshold::Threshold;
+
+/// No run (end of a row's list).
+const NONE: u32 = u32::MAX;
+
+/// Why growing stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeedOverflow {
+    /// More runs than the capacity.
+    Runs,
+    /// More blobs than the capacity.
+    Blobs,
+}
+
+/// The seeded labeller with its buffers (allocated once).
+#[derive(Debug)]
+pub struct SeedLabeller {
+    /// The runs found in the current window.
+    runs: Vec<Run>,
+    /// Per run: the next run of its row (in column order), or [`NONE`].
+    next: Vec<u32>,
+    /// Per run: its blob.
+    owner: Vec<u32>,
+    /// Per window row: its first run, or [`NONE`].
+    head: Vec<u32>,
+    /// Runs whose neighbour rows are still to be searched.
+    stack: Vec<u32>,
+    blobs: Vec<Blob>,
+    max_runs: usize,
+    max_blobs: usize,
+    /// The window: full-frame first row and column, last column.
+    row0: usize,
+    col0: usize,
+}
+
+impl SeedLabeller {
+    /// A labeller for at most `max_runs` runs, `max_blobs` blobs and
+    /// `max_rows` rows per window.
+    pub fn new(max_runs: usize, max_blobs: usize, max_rows: usize) -> Self {
+        SeedLabeller {
+            runs: Vec::with_capacity(max_runs),
+            next: Vec::with_capacity(max_runs),
+            owner: Vec::with_capacity(max_runs),
+            head: Vec::with_capacity(max_rows),
+            stack: Vec::with_capacity(max_runs),
+            blobs: Vec::with_capacity(max_blobs),
+            max_runs,
+            max_blobs,
+            row0: 0,
+            col0: 0,
+        }
+    }
+
+    /// Starts a window: forgets the blobs of the last one. A window with
+    /// more rows than the capacity (given at [`SeedLabeller::new`]) makes
+    /// the row table grow once.
+    pub fn start<P>(&mut self, plane: &Plane<'_, P>) {
+        self.runs.clear();
+        self.next.clear();
+        self.owner.clear();
+        self.stack.clear();
+        self.blobs.clear();
+        self.head.clear();
+        self.head.resize(plane.height, NONE);
+        self.row0 = plane.row0;
+        self.col0 = plane.col0;
+    }
+
+    /// The blobs grown in this window, in the order they were grown.
+    pub fn blobs(&self) -> &[Blob] {
+        &self.blobs
+    }
+
+    /// The blob holding full-frame pixel `(col, row)` of the window, if one
+    /// was grown.
+    pub fn blob_at(&self, col: usize, row: usize) -> Option<usize> {
+        let r = row.checked_sub(self.row0)?;
+        let mut k = *self.head.get(r)?;
+        let col = col as u32;
+        while k != NONE {
+            let run = &self.runs[k as usize];
+            if run.start > col {
+                return None;
+            }
+            if col < run.end {
+                return Some(self.owner[k as usize] as usize);
+            }
+            k = self.next[k as usize];
+        }
+        None
+    }
+
+    /// Grows the blob holding full-frame pixel `(col, row)` of `plane` (the
+    /// window given to [`SeedLabeller::start`]): `Ok(Some(index))` of the
+    /// blob in [`SeedLabeller::blobs`] (an earlier one if it holds the
+    /// pixel already), `Ok(None)` if the pixel is background or outside
+    /// the window. Pixels at or above `saturation` count as saturated.
+    pub fn grow<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        saturation: u32,
+        col: usize,
+        row: usize,
+    ) -> Result<Option<usize>, SeedOverflow> {
+        if col < plane.col0 || col > plane.last_col() || row < plane.row0 || row > plane.last_row()
+        {
+            return Ok(None);
+        }
+        if !threshold.is_foreground(plane.row(row)[col - plane.col0].value()) {
+            return Ok(None);
+        }
+        if let Some(b) = self.blob_at(col, row) {
+            return Ok(Some(b));
+        }
+        if self.blobs.len() >= self.max_blobs {
+            return Err(SeedOverflow::Blobs);
+        }
+        let blob = self.blobs.len() as u32;
+        let first = self.runs.len();
+        self.add_run_at(plane, threshold, saturation, col - plane.col0, row, blob)?;
+        let mut rows = (row as u32, row as u32);
+        while let Some(k) = self.stack.pop() {
+            let run = self.runs[k as usize];
+            let r = run.row as usize;
+            for nr in [r.wrapping_sub(1), r + 1] {
+                if nr < plane.row0 || nr > plane.last_row() {
+                    continue;
+                }
+                // Runs of row `nr` touching `run` (8-connectivity) have a
+                // pixel in columns `start − 1 ..= end`.
+                let line = plane.row(nr);
+                let lo = (run.start as usize).saturating_sub(1).max(plane.col0) - plane.col0;
+                let hi = (run.end as usize).min(plane.last_col()) - plane.col0;
+                let mut x = lo;
+                while x <= hi {
+                    if !threshold.is_foreground(line[x].value()) {
+                        x += 1;
+                        continue;
+                    }
+                    x = match self.run_end_at(x + plane.col0, nr) {
+                        Some(end) => end - plane.col0,
+                        None => {
+                            let end = self.add_run_at(plane, threshold, saturation, x, nr, blob)?;
+                            rows = (rows.0.min(nr as u32), rows.1.max(nr as u32));
+                            end
+                        }
+                    };
+                }
+            }
+        }
+        // The statistics in the labeller's order: row by row, each row's
+        // runs by column.
+        let mut b = Blob::empty();
+        for r in rows.0..=rows.1 {
+            let mut k = self.head[r as usize - self.row0];
+            while k != NONE {
+                if self.owner[k as usize] == blob {
+                    b.add_run(&self.runs[k as usize]);
+                }
+                k = self.next[k as usize];
+            }
+        }
+        debug_assert!(self.runs.len() > first);
+        self.blobs.push(b);
+        Ok(Some(blob as usize))
+    }
+
+    /// Grows the blobs of every foreground pixel of full-frame row `row`,
+    /// columns `col_lo..=col_hi` (clipped to the window) not yet in a
+    /// blob: [`SeedLabeller::grow`] for a stretch of a row, skipping the
+    /// runs found before in one step.
+    pub fn grow_span<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        saturation: u32,
+        row: usize,
+        col_lo: usize,
+        col_hi: usize,
+    ) -> Result<(), SeedOverflow> {
+        if row < plane.row0 || row > plane.last_row() {
+            return Ok(());
+        }
+        let lo = col_lo.max(plane.col0);
+        let hi = col_hi.min(plane.last_col());
+        let line = plane.row(row);
+        let mut col = lo;
+        while col <= hi {
+            if !threshold.is_foreground(line[col - plane.col0].value()) {
+                col += 1;
+                continue;
+            }
+            col = match self.run_end_at(col, row) {
+                Some(end) => end,
+                None => {
+                    let b = self.grow(plane, threshold, saturation, col, row)?;
+                    debug_assert!(b.is_some());
+                    self.run_end_at(col, row).unwrap_or(col + 1)
+                }
+            };
+        }
+        Ok(())
+    }
+
+    /// One past the last column of the run of row `row` holding column
+    /// `col`, if one was found.
+    fn run_end_at(&self, col: usize, row: usize) -> Option<usize> {
+        let mut k = self.head[row - self.row0];
+        let col = col as u32;
+        while k != NONE {
+            let run = &self.runs[k as usize];
+            if run.start > col {
+                return None;
+            }
+            if col < run.end {
+                return Some(run.end as usize);
+            }
+            k = self.next[k as usize];
+        }
+        None
+    }
+
+    /// Adds the maximal run of window row `row` (full frame) through window
+    /// column offset `x` to blob `blob` and to the search; returns the
+    /// window column offset one past its end.
+    fn add_run_at<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        saturation: u32,
+        x: usize,
+        row: usize,
+        blob: u32,
+    ) -> Result<usize, SeedOverflow> {
+        if self.runs.len() >= self.max_runs {
+            return Err(SeedOverflow::Runs);
+        }
+        let line = plane.row(row);
+        let mut start = x;
+        while start > 0 && threshold.is_foreground(line[start - 1].value()) {
+            start -= 1;
+        }
+        let mut end = x + 1;
+        while end < line.len() && threshold.is_foreground(line[end].value()) {
+            end += 1;
+        }
+        let run = Run::of(line, row as u32, plane.col0 as u32, start, end, saturation);
+        let k = self.runs.len() as u32;
+        self.runs.push(run);
+        self.owner.push(blob);
+        // Into the row's list, in column order.
+        let slot = row - self.row0;
+        let mut prev = NONE;
+        let mut cur = self.head[slot];
+        while cur != NONE && self.runs[cur as usize].start < run.start {
+            prev = cur;
+            cur = self.next[cur as usize];
+        }
+        self.next.push(cur);
+        if prev == NONE {
+            self.head[slot] = k;
+        } else {
+            self.next[prev as usize] = k;
+        }
+        self.stack.push(k);
+        Ok(end)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::label::{LabelOutcome, Labeller};
+    use proptest::prelude::*;
+
+    /// Every blob the labeller finds in a window, grown from each of its
+    /// pixels, is the labeller's blob, bit for bit.
+    fn check(data: &[u8], width: usize, window: (usize, usize, usize, usize)) {
+        let (c0, r0, w, h) = window;
+        let plane = Plane {
+            data: &data[r0 * width + c0..],
+            width: w,
+            height: h,
+            stride: width,
+            col0: c0,
+            row0: r0,
+        };
+        let t = Threshold::global(100);
+        let mut labeller = Labeller::new(10_000, 10_000);
+        assert_eq!(labeller.label(&plane, t, 250), LabelOutcome::Complete);
+        let mut seeds = SeedLabeller::new(10_000, 10_000, 4);
+        seeds.start(&plane);
+        for row in r0..r0 + h {
+            for col in c0..c0 + w {
+                let v = data[row * width + col] as u32;
+                let got = seeds.grow(&plane, t, 250, col, row).expect("capacity");
+                assert_eq!(got.is_some(), v > 100, "({col}, {row})");
+            }
+        }
+        // The same, a row at a time (the span reaching past the window).
+        let mut spans = SeedLabeller::new(10_000, 10_000, 4);
+        spans.start(&plane);
+        for row in 0..r0 + h + 1 {
+            spans
+                .grow_span(&plane, t, 250, row, 0, width + 3)
+                .expect("capacity");
+        }
+        let mut want: Vec<Blob> = labeller.blobs().to_vec();
+        let mut got: Vec<Blob> = seeds.blobs().to_vec();
+        let mut by_span: Vec<Blob> = spans.blobs().to_vec();
+        let key = |b: &Blob| (b.row0, b.origin_col);
+        want.sort_by_key(key);
+        got.sort_by_key(key);
+        by_span.sort_by_key(key);
+        assert_eq!(got, want);
+        assert_eq!(by_span, want);
+    }
+
+    #[test]
+    fn shapes_with_arms_and_holes_grow_as_the_labeller_finds_them() {
+        let img = [
+            "#...#.....##", //
+            "#...#....#..", //
+            "#####...#..#", //
+            "..#....#...#", //
+            ".#.#...#####", //
+            "#...#.......", //
+        ];
+        let (w, h) = (img[0].len(), img.len());
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        check(&data, w, (0, 0, w, h));
+        check(&data, w, (1, 1, w - 2, h - 2));
+    }
+
+    #[test]
+    fn a_background_seed_or_one_outside_the_window_grows_nothing() {
+        let data = [10u8, 200, 10, 10];
+        let plane = Plane::whole(&data, 4, 1);
+        let mut s = SeedLabeller::new(8, 8, 1);
+        s.start(&plane);
+        let t = Threshold::global(100);
+        assert_eq!(s.grow(&plane, t, 250, 0, 0), Ok(None));
+        assert_eq!(s.grow(&plane, t, 250, 9, 0), Ok(None));
+        assert_eq!(s.grow(&plane, t, 250, 1, 0), Ok(Some(0)));
+        assert_eq!(s.grow(&plane, t, 250, 1, 0), Ok(Some(0)));
+        assert_eq!(s.blobs().len(), 1);
+    }
+
+    #[test]
+    fn capacity_is_reported() {
+        let data = [200u8, 10, 200, 10, 200, 10, 200, 200, 200, 200];
+        let plane = Plane::whole(&data, 5, 2);
+        let t = Threshold::global(100);
+        let mut s = SeedLabeller::new(2, 8, 2);
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 0, 0), Err(SeedOverflow::Runs));
+        let mut s = SeedLabeller::new(8, 1, 2);
+        s.start(&plane);
+        let data = [200u8, 10, 200];
+        let plane = Plane::whole(&data, 3, 1);
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 0, 0), Ok(Some(0)));
+        assert_eq!(s.grow(&plane, t, 250, 2, 0), Err(SeedOverflow::Blobs));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        #[test]
+        fn random_frames_grow_as_the_labeller_labels_them(
+            bits in proptest::collection::vec(0u8..3, 12 * 10),
+            c0 in 0usize..3, r0 in 0usize..3, dw in 0usize..3, dh in 0usize..3,
+        ) {
+            // About a third of the pixels bright, some saturated.
+            let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
+            let (w, h) = (12 - c0 - dw, 10 - r0 - dh);
+            check(&data, 12, (c0, r0, w, h));
+        }
+    }
+}
