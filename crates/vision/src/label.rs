@@ -117,6 +117,9 @@ pub struct Blob {
     pub saturated: u32,
     /// Binary moments Σx, Σy, Σx², Σy², Σxy relative to `(origin_col, row0)`.
     pub m: [f64; 5],
+    /// Higher binary moments Σx³, Σx²y, Σxy², Σy³, Σx⁴, Σx³y, Σx²y², Σxy³,
+    /// Σy⁴ about the same origin (for [`Blob::kurtosis`]).
+    pub m4: [f64; 9],
     /// Column of the moments' origin (the start of the blob's first run).
     pub origin_col: u32,
 }
@@ -133,6 +136,7 @@ impl Blob {
             max: 0,
             saturated: 0,
             m: [0.0; 5],
+            m4: [0.0; 9],
             origin_col: 0,
         }
     }
@@ -160,6 +164,22 @@ impl Blob {
         self.m[2] += sxx;
         self.m[3] += n * y * y;
         self.m[4] += sx * y;
+        // Σx³ and Σx⁴ over the run, from the power sums up to its ends.
+        let (p3, p4) = (
+            sum_pow3_below(e) - sum_pow3_below(a),
+            sum_pow4_below(e) - sum_pow4_below(a),
+        );
+        let (y2, y3) = (y * y, y * y * y);
+        let m4 = &mut self.m4;
+        m4[0] += p3;
+        m4[1] += sxx * y;
+        m4[2] += sx * y2;
+        m4[3] += n * y3;
+        m4[4] += p4;
+        m4[5] += p3 * y;
+        m4[6] += sxx * y2;
+        m4[7] += sx * y3;
+        m4[8] += n * y3 * y;
         self.area += run.end - run.start;
         self.sum += run.sum as u64;
         self.max = self.max.max(run.max as u32);
@@ -176,6 +196,69 @@ impl Blob {
             self.origin_col as f64 + self.m[0] / n,
             self.row0 as f64 + self.m[1] / n,
         )
+    }
+
+    /// Normalised fourth moment of the blob's pixels along its major axis
+    /// (the axis of [`Blob::covariance`]), `n Σu⁴ / (Σu²)²` with `u` the
+    /// offset from the centre along it: 2 for a filled ellipse, 1.8 for a
+    /// bar, lower for two merged blobs, higher for a dot with a tail; 0
+    /// for a blob without extent.
+    pub fn kurtosis(&self) -> f64 {
+        let n = self.area as f64;
+        if n == 0.0 {
+            return 0.0;
+        }
+        let (cxx, cyy, cxy) = self.covariance();
+        // The major axis: the half angle of (cxx − cyy, 2 cxy).
+        let (t, t2) = (cxx - cyy, 2.0 * cxy);
+        let r = (t * t + t2 * t2).sqrt();
+        let (ux, uy) = if r > 0.0 {
+            let c2 = t / r;
+            (
+                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
+                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
+            )
+        } else {
+            (1.0, 0.0)
+        };
+        // Central moments from the raw ones about the origin: Σ (x + a)^p
+        // (y + b)^q with a, b the centre's negated offsets, expanded.
+        let [s10, s01, s20, s02, s11] = self.m;
+        let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = self.m4;
+        let (a, b) = (-s10 / n, -s01 / n);
+        let (a2, b2) = (a * a, b * b);
+        let c20 = s20 + 2.0 * a * s10 + a2 * n;
+        let c02 = s02 + 2.0 * b * s01 + b2 * n;
+        let c11 = s11 + a * s01 + b * s10 + a * b * n;
+        let c40 = s40 + 4.0 * a * s30 + 6.0 * a2 * s20 + 4.0 * a2 * a * s10 + a2 * a2 * n;
+        let c04 = s04 + 4.0 * b * s03 + 6.0 * b2 * s02 + 4.0 * b2 * b * s01 + b2 * b2 * n;
+        let c31 = s31
+            + b * s30
+            + 3.0 * a * (s21 + b * s20)
+            + 3.0 * a2 * (s11 + b * s10)
+            + a2 * a * (s01 + b * n);
+        let c13 = s13
+            + a * s03
+            + 3.0 * b * (s12 + a * s02)
+            + 3.0 * b2 * (s11 + a * s01)
+            + b2 * b * (s10 + a * n);
+        let c22 = s22
+            + 2.0 * b * s21
+            + b2 * s20
+            + 2.0 * a * (s12 + 2.0 * b * s11 + b2 * s10)
+            + a2 * (s02 + 2.0 * b * s01 + b2 * n);
+        let (ux2, uy2) = (ux * ux, uy * uy);
+        let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
+        let su4 = ux2 * ux2 * c40
+            + 4.0 * ux2 * ux * uy * c31
+            + 6.0 * ux2 * uy2 * c22
+            + 4.0 * ux * uy2 * uy * c13
+            + uy2 * uy2 * c04;
+        if su2 > 0.0 {
+            n * su4 / (su2 * su2)
+        } else {
+            0.0
+        }
     }
 
     /// Binary central second moments `(cxx, cyy, cxy)`, px², including the
@@ -239,6 +322,20 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[inline]
 fn sum_sq_below(k: f64) -> f64 {
     (k - 1.0) * k * (2.0 * k - 1.0) / 6.0
+}
+
+/// `Σ_{x=0}^{k-1} x³` (for negative `k` too: the polynomial telescopes).
+#[inline]
+fn sum_pow3_below(k: f64) -> f64 {
+    let h = (k - 1.0) * k / 2.0;
+    h * h
+}
+
+/// `Σ_{x=0}^{k-1} x⁴` (for negative `k` too).
+#[inline]
+fn sum_pow4_below(k: f64) -> f64 {
+    let m = k - 1.0;
+    m * (m + 1.0) * (2.0 * m + 1.0) * (3.0 * m * m + 3.0 * m - 1.0) / 30.0
 }
 
 /// Length of the dark stretches that [`Labeller`] skips with one test.
@@ -494,6 +591,76 @@ mod tests {
         let (cxx, _, _) = b[0].covariance();
         let want = (0.0 + 16.0 + 0.0 + 16.0 + 30.0) / 9.0 - 4.0 + 1.0 / 12.0;
         assert!((cxx - want).abs() < 1e-12);
+    }
+
+    /// `n Σu⁴ / (Σu²)²` of the pixels of a mask, straight from its pixels,
+    /// along the major axis of `(cxx, cyy, cxy)` (the blob's: a disc's
+    /// axis is an accident of rounding).
+    fn kurtosis_of(pixels: &[(f64, f64)], (cxx, cyy, cxy): (f64, f64, f64)) -> f64 {
+        let n = pixels.len() as f64;
+        let (mx, my) = pixels
+            .iter()
+            .fold((0.0, 0.0), |(a, b), &(x, y)| (a + x / n, b + y / n));
+        let theta = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+        let (ux, uy) = (theta.cos(), theta.sin());
+        let (mut s2, mut s4) = (0.0, 0.0);
+        for &(x, y) in pixels {
+            let u = ux * (x - mx) + uy * (y - my);
+            s2 += u * u;
+            s4 += u * u * u * u;
+        }
+        n * s4 / (s2 * s2)
+    }
+
+    #[test]
+    fn kurtosis_is_that_of_the_pixels_and_tells_shapes_apart() {
+        // A filled disc (r = 6), a bar, two touching discs, a tilted
+        // ellipse with a tail: the closed form against the pixels.
+        let shapes: [&dyn Fn(f64, f64) -> bool; 4] = [
+            &|x, y| (x - 10.0).powi(2) + (y - 9.0).powi(2) <= 36.0,
+            &|x, y| (3.0..=17.0).contains(&x) && (7.0..=9.0).contains(&y),
+            &|x, y| {
+                (x - 6.0).powi(2) + (y - 9.0).powi(2) <= 12.0
+                    || (x - 13.0).powi(2) + (y - 9.0).powi(2) <= 12.0
+            },
+            &|x, y| {
+                let (u, v) = (
+                    0.8 * (x - 9.0) + 0.6 * (y - 9.0),
+                    -0.6 * (x - 9.0) + 0.8 * (y - 9.0),
+                );
+                (u / 7.0).powi(2) + (v / 3.5).powi(2) <= 1.0
+                    || (u > 0.0 && u < 9.5 && v.abs() < 1.0)
+            },
+        ];
+        let mut got = Vec::new();
+        for inside in shapes {
+            let (w, h) = (22usize, 19usize);
+            let mut data = vec![0u8; w * h];
+            let mut pixels = Vec::new();
+            for y in 0..h {
+                for x in 0..w {
+                    if inside(x as f64, y as f64) {
+                        data[y * w + x] = 200;
+                        pixels.push((x as f64, y as f64));
+                    }
+                }
+            }
+            let mut l = Labeller::new(1000, 10);
+            let plane = Plane::whole(&data, w, h);
+            assert_eq!(
+                l.label(&plane, Threshold::global(100), 255),
+                LabelOutcome::Complete
+            );
+            assert_eq!(l.blobs().len(), 1);
+            let k = l.blobs()[0].kurtosis();
+            let want = kurtosis_of(&pixels, l.blobs()[0].covariance());
+            assert!((k - want).abs() < 1e-9, "{k} against {want}");
+            got.push(k);
+        }
+        assert!((got[0] - 2.0).abs() < 0.05, "disc {}", got[0]);
+        assert!((got[1] - 1.8).abs() < 0.05, "bar {}", got[1]);
+        assert!(got[2] < 1.75, "two discs {}", got[2]);
+        assert!(got[3] > 2.1, "a dot with a tail {}", got[3]);
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub struct Measurement {
     pub background: f64,
     /// Normalised fourth moment of the binary shape along its major axis
     /// (2 for a filled ellipse, 1.8 for a bar, lower for two merged blobs,
-    /// higher for a dot with a tail).
+    /// higher for a dot with a tail): the blob's [`Blob::kurtosis`].
     pub kurtosis: f64,
 }
 
@@ -168,15 +168,6 @@ fn ceil_i64(x: f64) -> i64 {
 #[inline(always)]
 fn round_i64(x: f64) -> i64 {
     floor_i64(x + 0.5)
-}
-
-/// `Σ_{k=1}^{m} k^j` for `j = 0..=4` (Faulhaber), so that the sums over
-/// `ka..=kb` are `power_sums(kb) − power_sums(ka − 1)` for any integers.
-#[inline(always)]
-fn power_sums(m: i64) -> [i64; 5] {
-    let s1 = m * (m + 1) / 2;
-    let s2 = m * (m + 1) * (2 * m + 1) / 6;
-    [m, s1, s2, s1 * s1, s2 * (3 * m * m + 3 * m - 1) / 5]
 }
 
 /// `Σ_{k=1}^{m} k²`, valid for every integer `m` (telescoping).
@@ -319,20 +310,6 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     }
     let (qxx, qyy, qxy) = (cyy / (4.0 * det), cxx / (4.0 * det), -cxy / (4.0 * det));
     let (s_in, s_out) = (scale * scale, bg_outer * bg_outer);
-    // Direction of the major axis (for the fourth moment, whose sign does
-    // not matter): the half angle of `(cxx − cyy, 2 cxy)`.
-    let (t, t2) = (cxx - cyy, 2.0 * cxy);
-    let r = (t * t + t2 * t2).sqrt();
-    let (ux, uy) = if r > 0.0 {
-        let c2 = t / r;
-        (
-            ((1.0 + c2) / 2.0).max(0.0).sqrt(),
-            ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
-        )
-    } else {
-        (1.0, 0.0)
-    };
-
     // Window: the box grown by GROW (and one more pixel for the background).
     let g = ceil_i64(grow) + 2;
     let (first_col, first_row) = (plane.col0 as i64, plane.row0 as i64);
@@ -368,8 +345,8 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     //   and `g k²` per row (`k` the column relative to the blob's nearest
     //   integer column), turned into moments about the blob's centre in
     //   closed form, with the matching pixel-count moments so that the
-    //   background is subtracted once it is known;
-    // - the fourth moment of the foreground pixels along the major axis.
+    //   background is subtracted once it is known.
+    // (The fourth moment is the blob's own: `Blob::kurtosis`.)
     let mut bg_buf = [0u32; BG_SAMPLES];
     let est = std::f64::consts::PI * (s_out - s_in) * 4.0 * det.sqrt();
     let stride = ceil_i64(est / BG_SAMPLES as f64).max(1) as usize;
@@ -377,7 +354,6 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     // Σg·(1, dx, dx², dy, dy², dx dy) and Σ1·(...).
     let mut gm = [0.0f64; 6];
     let mut nm = [0.0f64; 6];
-    let (mut n_fg, mut su2, mut su4) = (0.0, 0.0, 0.0);
     let cc = round_i64(bx);
     let d0 = cc as f64 - bx;
     for row in r0..=r1 {
@@ -451,37 +427,6 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             t1 += vi * k;
             t2 += vi * k * k;
         }
-        // Σ k^j, j = 0..4, over the foreground pixels, run by run.
-        let mut f = [0i64; 5];
-        let mut i = 0;
-        while i < px.len() {
-            if !threshold.is_foreground(px[i].value()) {
-                i += 1;
-                continue;
-            }
-            let start = i;
-            while i < px.len() && threshold.is_foreground(px[i].value()) {
-                i += 1;
-            }
-            let (ka, kb) = (a - cc + start as i64, a - cc + i as i64 - 1);
-            let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
-            for j in 0..5 {
-                f[j] += hi[j] - lo[j];
-            }
-        }
-        if f[0] > 0 {
-            // u = ux (k + d0) + uy dy = ux k + c: Σu² and Σu⁴ from the sums.
-            let c = ux * d0 + uy * dy;
-            let [f0, f1, f2, f3, f4] = f.map(|x| x as f64);
-            let (ux2, c2) = (ux * ux, c * c);
-            n_fg += f0;
-            su2 += ux2 * f2 + 2.0 * ux * c * f1 + c2 * f0;
-            su4 += ux2 * ux2 * f4
-                + 4.0 * ux2 * ux * c * f3
-                + 6.0 * ux2 * c2 * f2
-                + 4.0 * ux * c2 * c * f1
-                + c2 * c2 * f0;
-        }
         let (ka, kb) = (a - cc, b - cc);
         let n = (b - a + 1) as f64;
         let k1 = ((ka + kb) * (kb - ka + 1) / 2) as f64;
@@ -514,11 +459,7 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
         return None;
     }
     let (mx, my) = (sx / sw, sy / sw);
-    let kurtosis = if su2 > 0.0 {
-        n_fg * su4 / (su2 * su2)
-    } else {
-        0.0
-    };
+    let kurtosis = blob.kurtosis();
     Some(Measurement {
         col: bx + mx,
         row: by + my,
@@ -543,21 +484,6 @@ mod tests {
             sorted.sort_unstable();
             assert_eq!(quantile(&mut v, k, 100), sorted[k]);
             assert_eq!(quantile(&mut v.clone(), k, 4000), sorted[k]);
-        }
-    }
-
-    #[test]
-    fn power_sums_telescope_over_any_range() {
-        for (ka, kb) in [(-7i64, 5i64), (-3, -1), (0, 0), (2, 9), (-12, -12)] {
-            let (hi, lo) = (power_sums(kb), power_sums(ka - 1));
-            for j in 0..5u32 {
-                let want: i64 = (ka..=kb).map(|k| k.pow(j)).sum();
-                assert_eq!(
-                    hi[j as usize] - lo[j as usize],
-                    want,
-                    "j = {j}, {ka}..={kb}"
-                );
-            }
         }
     }
 
