@@ -222,3 +222,89 @@ fn tracked_poses_along_a_moving_circle_equal_the_whole_frame_within_a_tenth_of_s
         "largest differences (Xc, Yc, Zc, ωX, ωY, ωZ) in σ: {worst:?}"
     );
 }
+
+/// An over-exposed frame (targets at four times full scale: most pixels
+/// of every dot clipped) with the saturated roll-off on tracked from a prediction: every target, coded ones included,
+/// has the centre the whole frame gives it (the saturated roll-off applied
+/// alike; compared before the eccentricity correction, which depends on
+/// the pose it starts from), and the pose is the whole frame's.
+#[test]
+fn an_over_exposed_frame_tracked_has_the_whole_frame_centres() {
+    let camera = photopose_formats::default_camera();
+    let field = default_plate();
+    let mut renderer = Renderer::new(
+        camera,
+        &field,
+        RenderOptions {
+            target: 4.0,
+            seed: 11,
+            ..RenderOptions::default()
+        },
+    )
+    .unwrap();
+    // With the roll-off below saturation on (off by default).
+    let options = DetectorOptions {
+        saturated_knee: 0.7,
+        ..DetectorOptions::for_field(&field)
+    };
+    let detector = Detector::new(camera.sensor.width, camera.sensor.height, options).unwrap();
+    let mut locator =
+        Locator::with_detector(camera, field, LocateOptions::default(), detector).unwrap();
+    let truth = Exterior::from_kuka_pose([20.0, -10.0, 800.0, 10.0, 4.0, -3.0]);
+    let mut img = renderer.new_image();
+    renderer.render(&truth, &mut img).unwrap();
+    let whole = locator.locate(img.view()).unwrap();
+    assert_eq!(*whole.status, PoseStatus::Ok);
+    let full = *whole.pose.unwrap();
+    let threshold = whole.detections.threshold;
+    let mut centres: Vec<(u64, f64, f64, bool)> = whole
+        .targets
+        .iter()
+        .map(|t| (t.id, t.blob_col, t.blob_row, t.saturated))
+        .collect();
+    centres.sort_by_key(|c| c.0);
+    let saturated_coded = whole
+        .targets
+        .iter()
+        .filter(|t| t.saturated && t.kind == photopose_field::TargetKind::Coded)
+        .count();
+    assert!(
+        saturated_coded >= 5,
+        "{saturated_coded} saturated coded targets"
+    );
+    let prior = Prior {
+        exterior: shifted(&full.exterior, Vector3::new(0.3, 0.2, -0.3)),
+        covariance: full.covariance,
+        motion_px: 1.0,
+        threshold,
+    };
+    let tracked = *locator
+        .track(img.view(), &prior, &TrackOptions::default())
+        .unwrap();
+    let mut got: Vec<(u64, f64, f64, bool)> = locator
+        .identified()
+        .iter()
+        .map(|t| (t.id, t.blob_col, t.blob_row, t.saturated))
+        .collect();
+    got.sort_by_key(|c| c.0);
+    assert_eq!(got.len(), centres.len());
+    for (g, w) in got.iter().zip(&centres) {
+        assert_eq!(g.0, w.0);
+        assert_eq!(g.3, w.3, "target {}: saturated flag", g.0);
+        assert!(
+            (g.1 - w.1).abs() < 1e-9 && (g.2 - w.2).abs() < 1e-9,
+            "target {} (saturated {}): tracked ({}, {}), whole frame ({}, {})",
+            g.0,
+            g.3,
+            g.1,
+            g.2,
+            w.1,
+            w.2
+        );
+    }
+    let sigma = full.std_center();
+    for k in 0..3 {
+        let d = (tracked.exterior.center[k] - full.exterior.center[k]).abs();
+        assert!(d <= 0.1 * sigma[k], "axis {k}: {d} mm vs σ {}", sigma[k]);
+    }
+}
