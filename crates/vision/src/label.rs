@@ -143,7 +143,7 @@ impl Blob {
 
     /// Adds a run's pixels to the blob's statistics (the blob's first run
     /// fixes the moments' origin; runs come in row-major order).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn add_run(&mut self, run: &Run) {
         if self.area == 0 {
             self.origin_col = run.start;
