@@ -1,11 +1,14 @@
 //! The GigE Vision source (`[source.gige]`, the `gige` feature): the keys
 //! of the section and their checks, mapped onto `photopose-acquire`'s
 //! [`GigeConfig`], whose `Default` holds the one set of defaults. Opening
-//! and reconnecting the camera is the acquisition crate's.
+//! and reconnecting the camera is the acquisition crate's, and so is the
+//! exposure control loop (`[source.gige.exposure_control]`, its defaults
+//! in [`ExposureSettings::default`]).
 
 use super::Bad;
 use crate::config::ConfigError;
-use photopose_acquire::{FeatureValue, GigeConfig, PixelDepth, Roi};
+use photopose_acquire::exposure::SettingsError;
+use photopose_acquire::{ExposureSettings, FeatureValue, GigeConfig, PixelDepth, Roi};
 use serde::de::{MapAccess, Visitor};
 use serde::{Deserialize, Deserializer};
 
@@ -29,6 +32,56 @@ pub(crate) struct GigeSection {
     transfer_ms: Option<f64>,
     #[serde(default)]
     features: Features,
+    exposure_control: Option<ExposureControlSection>,
+}
+
+/// `[source.gige.exposure_control]` as written: every key optional, an
+/// absent one takes [`ExposureSettings::default`]'s value; off unless
+/// `enabled = true`.
+#[derive(Debug, Deserialize, Clone, Default)]
+#[serde(deny_unknown_fields)]
+struct ExposureControlSection {
+    enabled: Option<bool>,
+    target_peak: Option<f64>,
+    min_us: Option<f64>,
+    max_us: Option<f64>,
+    gain: Option<f64>,
+    max_step_ratio: Option<f64>,
+    dead_band: Option<f64>,
+    every_frames: Option<u32>,
+}
+
+/// Validates `[source.gige.exposure_control]`: `None` when it is off.
+fn exposure_control(
+    s: Option<ExposureControlSection>,
+    bad: Bad<'_>,
+) -> Result<Option<ExposureSettings>, ConfigError> {
+    let Some(s) = s else { return Ok(None) };
+    let d = ExposureSettings::default();
+    let settings = ExposureSettings {
+        target_peak: s.target_peak.unwrap_or(d.target_peak),
+        min_us: s.min_us.unwrap_or(d.min_us),
+        max_us: s.max_us.unwrap_or(d.max_us),
+        gain: s.gain.unwrap_or(d.gain),
+        max_step_ratio: s.max_step_ratio.unwrap_or(d.max_step_ratio),
+        dead_band: s.dead_band.unwrap_or(d.dead_band),
+        every_frames: s.every_frames.unwrap_or(d.every_frames),
+    };
+    // Checked even when off, so that turning it on cannot surprise.
+    if let Err(SettingsError::OutOfRange { key, value, reason }) = settings.check() {
+        let key = match key {
+            "target_peak" => "source.gige.exposure_control.target_peak",
+            "min_us" => "source.gige.exposure_control.min_us",
+            "max_us" => "source.gige.exposure_control.max_us",
+            "gain" => "source.gige.exposure_control.gain",
+            "max_step_ratio" => "source.gige.exposure_control.max_step_ratio",
+            "dead_band" => "source.gige.exposure_control.dead_band",
+            "every_frames" => "source.gige.exposure_control.every_frames",
+            _ => "source.gige.exposure_control",
+        };
+        return Err(bad(key, value.to_string(), reason));
+    }
+    Ok(s.enabled.unwrap_or(false).then_some(settings))
 }
 
 /// `[source.gige.features]`: GenICam feature name → value, kept in the
@@ -186,6 +239,7 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
         // Set from `[source] latency_ms` by the seam.
         fixed_latency: None,
         features: features(g.features, bad)?,
+        exposure_control: exposure_control(g.exposure_control, bad)?,
     };
     if config.backoff_max < config.backoff_initial {
         return Err(bad(
