@@ -280,3 +280,92 @@ fn features(f: Features, bad: Bad<'_>) -> Result<Vec<(String, FeatureValue)>, Co
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Config, Source};
+
+    fn gige(section: &str) -> Result<photopose_acquire::GigeConfig, String> {
+        let text = format!("[source]\nkind = \"gige\"\n[source.gige.exposure_control]\n{section}");
+        match Config::parse(&text, "x.toml")
+            .map_err(|e| e.to_string())?
+            .source
+        {
+            Source::Gige(g) => Ok(g),
+            other => panic!("not gige: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn exposure_control_is_off_unless_enabled() {
+        assert_eq!(gige("").unwrap().exposure_control, None);
+        assert_eq!(
+            gige("enabled = false\nmax_us = 900.0\n")
+                .unwrap()
+                .exposure_control,
+            None
+        );
+        let s = gige(
+            "enabled = true\ntarget_peak = 0.7\nmin_us = 50.0\nmax_us = 900.0\ngain = 0.8\n\
+             max_step_ratio = 1.5\ndead_band = 0.05\nevery_frames = 2\n",
+        )
+        .unwrap()
+        .exposure_control
+        .unwrap();
+        assert_eq!(
+            s,
+            photopose_acquire::ExposureSettings {
+                target_peak: 0.7,
+                min_us: 50.0,
+                max_us: 900.0,
+                gain: 0.8,
+                max_step_ratio: 1.5,
+                dead_band: 0.05,
+                every_frames: 2,
+            }
+        );
+        let d = gige("enabled = true\n").unwrap().exposure_control.unwrap();
+        assert_eq!(d, photopose_acquire::ExposureSettings::default());
+        assert_eq!(d.target_peak, 0.8);
+    }
+
+    #[test]
+    fn exposure_control_errors_name_the_key() {
+        for (section, key) in [
+            (
+                "target_peak = 1.2\n",
+                "source.gige.exposure_control.target_peak",
+            ),
+            (
+                "target_peak = 0.0\n",
+                "source.gige.exposure_control.target_peak",
+            ),
+            ("min_us = -1.0\n", "source.gige.exposure_control.min_us"),
+            (
+                "min_us = 500.0\nmax_us = 100.0\n",
+                "source.gige.exposure_control.max_us",
+            ),
+            ("gain = 0.0\n", "source.gige.exposure_control.gain"),
+            ("gain = 1.01\n", "source.gige.exposure_control.gain"),
+            (
+                "max_step_ratio = 1.0\n",
+                "source.gige.exposure_control.max_step_ratio",
+            ),
+            (
+                "dead_band = 1.0\n",
+                "source.gige.exposure_control.dead_band",
+            ),
+            (
+                "every_frames = 0\n",
+                "source.gige.exposure_control.every_frames",
+            ),
+            ("target = 0.5\n", "target"),
+        ] {
+            let e = gige(&format!("enabled = true\n{section}")).unwrap_err();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(key),
+                "{section}: {e}"
+            );
+        }
+    }
+}
