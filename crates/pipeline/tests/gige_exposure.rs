@@ -97,9 +97,17 @@ fn the_exposure_follows_the_targets_peak_within_its_limits() {
         [8000, 4000, 2000, 1000, 500],
         "steps down while clipped"
     );
+    // Every step counted once the camera took it (the count follows the
+    // read-back of the register).
+    let t0 = Instant::now();
+    while exposure.writes.get() < 7 {
+        assert!(t0.elapsed() < Duration::from_secs(2), "writes counted");
+        std::thread::sleep(Duration::from_millis(5));
+    }
     // No targets: nothing to hold, nothing changes.
     fake.set_image(&blank).unwrap();
     let writes = exposure.writes.get();
+    assert_eq!(writes, 7);
     let t0 = Instant::now();
     while t0.elapsed() < Duration::from_secs(1) {
         assert_eq!(fake.exposure_us(), Some(500), "no targets, no change");
