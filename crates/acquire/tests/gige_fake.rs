@@ -113,6 +113,7 @@ fn gige_source_against_fake_cameras() {
     survives_losing_the_camera();
     serves_given_images_in_process();
     steers_the_exposure_in_process();
+    refuses_exposure_limits_the_camera_lacks();
 }
 
 /// Several seconds at 20 frames/s through the grabber into the ring, opened
@@ -601,6 +602,46 @@ fn steers_the_exposure_in_process() {
     assert_eq!(link.writes.get(), 8);
     assert_eq!(link.write_failures.get(), 0);
     assert!((link.exposure_s.get() - 3e-3).abs() < 1e-9);
+    source.stop();
+    drop(source);
+    drop(camera);
+}
+
+/// Exposure control limits that miss the camera's exposure range refuse
+/// the configuration at opening (fatal, naming the keys), like a camera
+/// without an exposure feature.
+fn refuses_exposure_limits_the_camera_lacks() {
+    let image = Image::new_mono8(320, 240);
+    let camera = FakeGigeCamera::start("PPEXPO03", &image).unwrap();
+    let config = GigeConfig {
+        camera: Some(camera.serial().into()),
+        exposure_control: Some(ExposureSettings {
+            min_us: 1.0,
+            max_us: 5.0,
+            ..ExposureSettings::default()
+        }),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-expo-range", config).unwrap();
+    let mut slot = Slot::new(Image::new_mono8(320, 240));
+    source.start().unwrap();
+    let t0 = Instant::now();
+    let refused = loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "not refused within 10 s"
+        );
+        match source.next_frame(&mut slot, Duration::from_millis(200)) {
+            Err(e) if e.is_fatal() => break e.to_string(),
+            Ok(()) => panic!("frames despite exposure limits the camera lacks"),
+            Err(_) => {}
+        }
+    };
+    assert!(
+        refused.contains("source.gige.exposure_control.min_us/max_us")
+            && refused.contains("ExposureTimeAbs"),
+        "{refused}"
+    );
     source.stop();
     drop(source);
     drop(camera);
