@@ -115,6 +115,9 @@ const EXPOSURE_LOG_EVERY: Duration = Duration::from_secs(1);
 /// The exposure control loop's side in the source.
 struct Steer {
     settings: ExposureSettings,
+    /// The law as configured (each opening starts from a copy of it).
+    configured: ExposureLaw,
+    /// The law of this opening (limits narrowed to the camera's range).
     law: ExposureLaw,
     /// The exposure in effect as the camera reported it, µs.
     current_us: f64,
@@ -163,17 +166,21 @@ impl GigeSource {
     ) -> Result<Self, SourceError> {
         config.validate()?;
         let steer = match config.exposure_control {
-            Some(settings) => Some(Steer {
-                settings,
-                law: ExposureLaw::new(settings).map_err(|e| SourceError::Config {
+            Some(settings) => {
+                let law = ExposureLaw::new(settings).map_err(|e| SourceError::Config {
                     what: "exposure_control".into(),
                     reason: e.to_string(),
-                })?,
-                current_us: 0.0,
-                fresh_from: 0,
-                last_used: None,
-                logged: None,
-            }),
+                })?;
+                Some(Steer {
+                    settings,
+                    configured: law.clone(),
+                    law,
+                    current_us: 0.0,
+                    fresh_from: 0,
+                    last_used: None,
+                    logged: None,
+                })
+            }
             None => None,
         };
         let counters = Arc::new(SourceCounters::default());
@@ -230,7 +237,7 @@ impl GigeSource {
         self.exposure.exposure_s.set(exposure_us * 1e-6);
         if let (Some(st), Some(node)) = (self.steer.as_mut(), live.device.exposure_control) {
             let queued = live.device.stream.n_buffers().1.max(0) as u64;
-            st.law = ExposureLaw::new(st.settings).expect("checked when the source was made");
+            st.law = st.configured.clone();
             st.law.limit_to(node.range.0, node.range.1);
             st.current_us = exposure_us;
             st.fresh_from = self.next_seq + queued + SETTLE_FRAMES;
@@ -282,8 +289,8 @@ impl GigeSource {
                 self.pending_exposure = Some((st.fresh_from, (got * 1e3).round() as u64));
                 let from = st.current_us;
                 st.current_us = got;
-                self.exposure.writes.inc();
                 self.exposure.exposure_s.set(got * 1e-6);
+                self.exposure.writes.inc();
                 let now = Instant::now();
                 let worth = st.logged.is_none_or(|(logged, at)| {
                     (got / logged - 1.0).abs() > st.settings.dead_band
@@ -497,6 +504,29 @@ mod tests {
         };
         assert!(GigeSource::new("t", bad).is_err());
         assert!(GigeSource::new("t", GigeConfig::default()).is_ok());
+        let bad = GigeConfig {
+            exposure_control: Some(crate::ExposureSettings {
+                min_us: 500.0,
+                max_us: 100.0,
+                ..crate::ExposureSettings::default()
+            }),
+            ..GigeConfig::default()
+        };
+        match GigeSource::new("t", bad) {
+            Err(SourceError::Config { what, .. }) => assert_eq!(what, "exposure_control.max_us"),
+            other => panic!("{other:?}"),
+        }
+        let steered = GigeSource::new(
+            "t",
+            GigeConfig {
+                exposure_control: Some(crate::ExposureSettings::default()),
+                ..GigeConfig::default()
+            },
+        )
+        .unwrap();
+        assert!(steered.exposure_link().is_some_and(|l| l.steering()));
+        let plain = GigeSource::new("t", GigeConfig::default()).unwrap();
+        assert!(plain.exposure_link().is_some_and(|l| !l.steering()));
         let slow = GigeConfig {
             frame_rate: Some(0.5),
             ..GigeConfig::default()
