@@ -128,6 +128,16 @@ impl FakeGigeCamera {
         Ok(())
     }
 
+    /// The exposure time the camera holds now (its `ExposureTimeAbs`, as
+    /// a client last set it), µs, read from its register: what an
+    /// exposure control loop wrote.
+    pub fn exposure_us(&self) -> Option<u32> {
+        self.camera
+            .as_ref()?
+            .fake_camera()?
+            .read_register(aravis_sys::ARV_FAKE_CAMERA_REGISTER_EXPOSURE_TIME_US as u32)
+    }
+
     /// The camera's serial number (open it by this).
     pub fn serial(&self) -> &str {
         &self.serial

@@ -8,6 +8,9 @@
 //! - [`reopen`]: keeping a device open with back-off on helper threads
 //!   (opener, reaper), shared by the camera sources;
 //! - [`grabber`]: the grabber thread that runs a source into a ring;
+//! - [`exposure`]: the exposure control law (pure), the per-frame peak
+//!   measurement it is fed and the lock-free link from the detection
+//!   workers to the source that steers;
 //! - [`clock_map`]: the camera-clock → host-clock estimate (pure: pairs
 //!   passed in);
 //! - [`mono`]: the host's monotonic clock in ns, the daemon's time base;
@@ -21,6 +24,7 @@
 //! builds with no system library, and the GigE source is not there.
 
 pub mod clock_map;
+pub mod exposure;
 #[cfg(feature = "gige")]
 pub mod fake;
 #[cfg(feature = "gige")]
@@ -35,6 +39,7 @@ pub mod ring;
 pub mod source;
 
 pub use clock_map::{ClockMap, ClockMapConfig, Mapped};
+pub use exposure::{ExposureLaw, ExposureLink, ExposureSettings};
 #[cfg(feature = "gige")]
 pub use gige::{list_cameras, CameraInfo, FeatureValue, GigeConfig, GigeSource, PixelDepth, Roi};
 pub use grabber::{

@@ -5,6 +5,7 @@
 //! allocates frames of its own. Time comes in through a [`Clock`], so tests
 //! and replays can fix it.
 
+use crate::exposure::ExposureLink;
 use crate::ring::Slot;
 use photopose_frame::Image;
 use photopose_telemetry::{Collect, Counter, Scrape};
@@ -95,6 +96,13 @@ pub trait FrameSource: Send {
     fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
         None
     }
+
+    /// The source's [`ExposureLink`], if it reports its exposure time
+    /// (and, when [`ExposureLink::steering`], steers it from the frames'
+    /// peaks the detection workers offer there).
+    fn exposure_link(&self) -> Option<Arc<ExposureLink>> {
+        None
+    }
 }
 
 impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
@@ -115,6 +123,9 @@ impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
     }
     fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
         (**self).shared_counters()
+    }
+    fn exposure_link(&self) -> Option<Arc<ExposureLink>> {
+        (**self).exposure_link()
     }
 }
 

@@ -6,11 +6,12 @@
 //! one after the other inside a single test function, never concurrently.
 //! A missing `arv-fake-gv-camera-0.8` fails the test (run `.ci/deps.sh`).
 
+use photopose_acquire::exposure::SATURATED_PEAK;
 use photopose_acquire::fake::FakeGigeCamera;
 use photopose_acquire::grabber::{spawn_grabber, GrabberExit};
 use photopose_acquire::ring::{Overflow, Ring};
 use photopose_acquire::source::FrameSource;
-use photopose_acquire::{GigeConfig, GigeSource, PixelDepth, Roi, Slot};
+use photopose_acquire::{ExposureSettings, GigeConfig, GigeSource, PixelDepth, Roi, Slot};
 use photopose_frame::{Image, Pixels};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -111,6 +112,8 @@ fn gige_source_against_fake_cameras() {
     waits_for_an_absent_camera();
     survives_losing_the_camera();
     serves_given_images_in_process();
+    steers_the_exposure_in_process();
+    refuses_exposure_limits_the_camera_lacks();
 }
 
 /// Several seconds at 20 frames/s through the grabber into the ring, opened
@@ -492,6 +495,154 @@ fn serves_given_images_in_process() {
     // A 1.3 MB frame can be lost on a loaded loopback (UDP): it is counted
     // as missing, never delivered wrong; more than one is not load.
     assert!(stats.missing <= 1, "{stats:?}");
+    drop(source);
+    drop(camera);
+}
+
+/// The exposure control loop on a real GigE Vision peer (the in-process
+/// camera, whose exposure feature is `ExposureTimeAbs`): the opening
+/// brings the exposure inside the loop's limits; frames without a
+/// measurement change nothing; peaks offered on the source's link, as a
+/// detection worker offers them, steer the exposure down while the frames
+/// read clipped and up while they read dim, one step at a time, never
+/// outside the limits, and the frames carry the exposure in effect.
+fn steers_the_exposure_in_process() {
+    let image = Image::new_mono8(320, 240);
+    let camera = FakeGigeCamera::start("PPEXPO01", &image).unwrap();
+    let settings = ExposureSettings {
+        min_us: 200.0,
+        max_us: 3000.0,
+        gain: 1.0,
+        max_step_ratio: 2.0,
+        every_frames: 1,
+        ..ExposureSettings::default()
+    };
+    let config = GigeConfig {
+        camera: Some(camera.serial().into()),
+        frame_rate: Some(50.0),
+        exposure_us: Some(5000.0),
+        exposure_control: Some(settings),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-expo", config).unwrap();
+    let link = source
+        .exposure_link()
+        .expect("a GigE source reports its exposure");
+    assert!(link.steering());
+    let mut slot = Slot::new(Image::new_mono8(320, 240));
+    source.start().unwrap();
+    fn next(source: &mut GigeSource, slot: &mut Slot) {
+        let t0 = Instant::now();
+        loop {
+            match source.next_frame(slot, Duration::from_millis(200)) {
+                Ok(()) => return,
+                Err(e) if !e.is_fatal() && t0.elapsed() < Duration::from_secs(10) => {}
+                Err(e) => panic!("no frame from the in-process camera: {e}"),
+            }
+        }
+    }
+    next(&mut source, &mut slot);
+    assert_eq!(
+        camera.exposure_us(),
+        Some(3000),
+        "brought inside the limits at opening"
+    );
+    assert!((link.exposure_s.get() - 3e-3).abs() < 1e-9);
+    assert_eq!(slot.meta.exposure_ns, 3_000_000);
+    for _ in 0..10 {
+        next(&mut source, &mut slot);
+    }
+    assert_eq!(
+        camera.exposure_us(),
+        Some(3000),
+        "no measurement, no change"
+    );
+    assert_eq!(link.writes.get(), 0);
+    // Feeds `peak` for every frame until the exposure reaches `end` µs
+    // (and two seconds more frames change nothing); the exposures seen.
+    let mut steer = |slot: &mut Slot, peak: f32, end: u32| {
+        let mut seen = vec![camera.exposure_us().unwrap()];
+        let t0 = Instant::now();
+        while *seen.last().unwrap() != end {
+            assert!(
+                t0.elapsed() < Duration::from_secs(10),
+                "{seen:?} never reaches {end} µs"
+            );
+            next(&mut source, slot);
+            link.offer(slot.meta.seq, peak);
+            let now = camera.exposure_us().unwrap();
+            if now != *seen.last().unwrap() {
+                seen.push(now);
+            }
+        }
+        for _ in 0..20 {
+            next(&mut source, slot);
+            link.offer(slot.meta.seq, peak);
+        }
+        assert_eq!(camera.exposure_us(), Some(end), "stays at the limit");
+        assert!(seen.iter().all(|us| (200..=3000).contains(us)), "{seen:?}");
+        seen
+    };
+    let down = steer(&mut slot, SATURATED_PEAK, 200);
+    assert_eq!(
+        down,
+        [3000, 1500, 750, 375, 200],
+        "halved per step while clipped"
+    );
+    assert_eq!(
+        slot.meta.exposure_ns, 200_000,
+        "frames carry the exposure in effect"
+    );
+    let up = steer(&mut slot, 0.2, 3000);
+    assert_eq!(
+        up,
+        [200, 400, 800, 1600, 3000],
+        "doubled per step while dim"
+    );
+    assert_eq!(link.writes.get(), 8);
+    assert_eq!(link.write_failures.get(), 0);
+    assert!((link.exposure_s.get() - 3e-3).abs() < 1e-9);
+    source.stop();
+    drop(source);
+    drop(camera);
+}
+
+/// Exposure control limits that miss the camera's exposure range refuse
+/// the configuration at opening (fatal, naming the keys), like a camera
+/// without an exposure feature.
+fn refuses_exposure_limits_the_camera_lacks() {
+    let image = Image::new_mono8(320, 240);
+    let camera = FakeGigeCamera::start("PPEXPO03", &image).unwrap();
+    let config = GigeConfig {
+        camera: Some(camera.serial().into()),
+        exposure_control: Some(ExposureSettings {
+            min_us: 1.0,
+            max_us: 5.0,
+            ..ExposureSettings::default()
+        }),
+        ..GigeConfig::default()
+    };
+    let mut source = GigeSource::new("gv-expo-range", config).unwrap();
+    let mut slot = Slot::new(Image::new_mono8(320, 240));
+    source.start().unwrap();
+    let t0 = Instant::now();
+    let refused = loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "not refused within 10 s"
+        );
+        match source.next_frame(&mut slot, Duration::from_millis(200)) {
+            Err(e) if e.is_fatal() => break e.to_string(),
+            Ok(()) => panic!("frames despite exposure limits the camera lacks"),
+            Err(_) => {}
+        }
+    };
+    assert!(
+        refused.contains("source.gige.exposure_control.min_us/max_us")
+            && refused.contains("ExposureTimeAbs"),
+        "{refused}"
+    );
+    source.stop();
     drop(source);
     drop(camera);
 }

@@ -1009,6 +1009,11 @@ mod tests {
         assert_eq!(g.camera.as_deref(), Some("Aravis-Fake-GV01"));
         assert_eq!(g.roi.map(|r| (r.width, r.height)), Some((1300, 1030)));
         assert_eq!(g.packet_size, Some(1500));
+        // The exposure loop's keys as documented: its defaults.
+        assert_eq!(
+            g.exposure_control,
+            Some(photopose_acquire::ExposureSettings::default())
+        );
         let r = Config::parse(&example_with("replay", "replay"), "replay example").unwrap();
         assert!(matches!(
             r.source,

@@ -57,6 +57,9 @@ pub struct Counters {
     /// The source's own counters (GigE: missing and incomplete frames,
     /// losses, openings, connection), when it keeps them.
     pub source: Option<Arc<photopose_acquire::SourceCounters>>,
+    /// The camera's exposure (GigE: the exposure in effect and the control
+    /// loop's writes), when the source reports it.
+    pub exposure: Option<Arc<photopose_acquire::ExposureLink>>,
     /// The TCP pose stream's counters (clients), when one is configured.
     pub tcp: Option<Arc<photopose_stream::TcpStats>>,
     /// The UDP destinations' counters, when there are any.
@@ -152,6 +155,7 @@ impl Default for Counters {
             grabber: Arc::default(),
             ring: None,
             source: None,
+            exposure: None,
             tcp: None,
             udp: None,
             rsi: None,
@@ -311,6 +315,9 @@ impl Collect for Counters {
                 "Camera state: 1 while the camera is connected and streaming (sources without a connection: a frame within the last second), else 0.",
                 f64::from(u8::from(frame_age.is_some_and(|a| a < 1.0))),
             )?,
+        }
+        if let Some(exposure) = &self.exposure {
+            exposure.collect(out)?;
         }
         if let Some(tcp) = &self.tcp {
             tcp.collect(out)?;

@@ -269,8 +269,11 @@ impl Pipeline {
             _ => (source, None),
         };
         let tcp_addr = sinks.tcp_addr;
+        // The camera's exposure, and the link its control loop is fed by.
+        let exposure = source.exposure_link();
         let counters = Arc::new(Counters {
             source: source.shared_counters(),
+            exposure: exposure.clone(),
             tcp: sinks.tcp.clone(),
             udp: sinks.udp.clone(),
             rsi: sinks.rsi.clone(),
@@ -330,6 +333,12 @@ impl Pipeline {
             let counters = counters.clone();
             let camera_id = camera_id.clone();
             let (targets, on_change) = (targets.clone(), on_change.clone());
+            // With the exposure control loop on: each frame's peak offered
+            // to the source (a scratch list per worker, no allocation).
+            let mut peaks = exposure
+                .clone()
+                .filter(|l| l.steering())
+                .map(|l| (l, Vec::with_capacity(field.len())));
             let name = format!("detect-{k}");
             let beat = Arc::new(Heartbeat::default());
             watched.watch_heartbeat(name.clone(), &beat);
@@ -356,6 +365,9 @@ impl Pipeline {
                 );
                 if let Some(link) = &on_change {
                     link.frame_on_change(&frame, result.status);
+                }
+                if let Some((link, scratch)) = &mut peaks {
+                    offer_peak(link, scratch, &frame, locator.identified());
                 }
                 counters.frames_processed.inc();
                 let outcome = Outcome::Message {
@@ -558,6 +570,39 @@ fn locate(
     match located {
         Some(_) => result.with_targets(targets.take(), locator.identified()),
         None => result,
+    }
+}
+
+/// Offers the frame's peak (`photopose_acquire::exposure::frame_peak` of
+/// its identified targets' peaks as shares of full scale, clipped ones
+/// counted above it) to the exposure control loop; a frame without
+/// identified targets offers nothing. Allocates nothing: `scratch` has
+/// room for the field's targets.
+fn offer_peak(
+    link: &photopose_acquire::ExposureLink,
+    scratch: &mut Vec<f32>,
+    frame: &Slot,
+    identified: &[photopose_locate::Identified],
+) {
+    use photopose_acquire::exposure::{frame_peak, peak_near, SATURATED_PEAK};
+    scratch.clear();
+    let full = f32::from(frame.image.max_value().max(1));
+    for t in identified {
+        if scratch.len() == scratch.capacity() {
+            break;
+        }
+        let peak = if t.saturated {
+            SATURATED_PEAK
+        } else {
+            match peak_near(&frame.image, t.blob_col, t.blob_row) {
+                Some(v) => f32::from(v) / full,
+                None => continue,
+            }
+        };
+        scratch.push(peak);
+    }
+    if let Some(peak) = frame_peak(scratch) {
+        link.offer(frame.meta.seq, peak);
     }
 }
 

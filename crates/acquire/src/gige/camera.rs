@@ -5,6 +5,7 @@
 //! frame path.
 
 use super::config::{FeatureValue, GigeConfig, PixelDepth};
+use crate::exposure::ExposureSettings;
 use crate::ffi;
 use aravis::prelude::*;
 use aravis::{AcquisitionMode, Buffer, Camera, DeviceError, PixelFormat, Stream};
@@ -28,6 +29,18 @@ pub(super) struct Opened {
     pub(super) exposure_ns: u64,
     /// Bytes per frame on the wire (the payload).
     pub(super) payload: usize,
+    /// With exposure control: the camera's exposure feature and the
+    /// range the loop may set, µs (its limits within the camera's).
+    pub(super) exposure_control: Option<ExposureNode>,
+}
+
+/// The exposure feature the control loop writes, found at opening.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ExposureNode {
+    /// `ExposureTime` (SFNC) or `ExposureTimeAbs` (older cameras).
+    pub(super) feature: &'static str,
+    /// The loop's limits narrowed to the camera's range, µs.
+    pub(super) range: (f64, f64),
 }
 
 pub(super) enum OpenError {
@@ -125,6 +138,10 @@ pub(super) fn open(
     for (name, value) in &config.features {
         set_feature(&camera, name, value)?;
     }
+    let exposure_control = match &config.exposure_control {
+        Some(settings) => Some(exposure_node(&camera, settings)?),
+        None => None,
+    };
     if camera.is_gv_device() {
         if let Some(p) = config.packet_size {
             camera
@@ -142,7 +159,11 @@ pub(super) fn open(
     let payload = camera.payload().map_err(setting("payload"))? as usize;
     // What the camera really uses (it may round the asked value); the
     // exposure instant is its middle.
-    let exposure_ns = match camera.exposure_time() {
+    let exposure_us = match exposure_control {
+        Some(node) => camera.float(node.feature),
+        None => camera.exposure_time(),
+    };
+    let exposure_ns = match exposure_us {
         Ok(us) if us.is_finite() && us > 0.0 => (us * 1e3).round() as u64,
         _ => 0,
     };
@@ -169,6 +190,81 @@ pub(super) fn open(
         took: t0.elapsed(),
         exposure_ns,
         payload,
+        exposure_control,
+    })
+}
+
+/// Finds the exposure feature the control loop writes (`ExposureTime`,
+/// else `ExposureTimeAbs`), turns the camera's own automatic exposure off
+/// where it has one, narrows the loop's limits to the camera's range and
+/// brings the exposure inside them. A camera with neither feature, or
+/// whose range misses the limits, refuses the configuration.
+fn exposure_node(camera: &Camera, settings: &ExposureSettings) -> Result<ExposureNode, OpenError> {
+    const WHAT: &str = "source.gige.exposure_control";
+    let Some(device) = camera.device() else {
+        return Err(OpenError::Config {
+            what: WHAT.into(),
+            reason: "the camera has no device to steer the exposure on".into(),
+        });
+    };
+    let writable = |name: &str| {
+        device.feature(name).is_some_and(|node| {
+            node.downcast_ref::<aravis::GcFeatureNode>()
+                .is_none_or(|f| f.actual_access_mode() != aravis::GcAccessMode::Ro)
+        })
+    };
+    let Some(feature) = ["ExposureTime", "ExposureTimeAbs"]
+        .into_iter()
+        .find(|name| writable(name))
+    else {
+        return Err(OpenError::Config {
+            what: WHAT.into(),
+            reason: "the camera has no writable ExposureTime or ExposureTimeAbs feature".into(),
+        });
+    };
+    if device.feature("ExposureAuto").is_some() {
+        // The camera's own loop would fight ours.
+        if let Err(e) = camera.set_string("ExposureAuto", "Off") {
+            if transient(&e) {
+                return Err(OpenError::Absent(format!("ExposureAuto: {e}")));
+            }
+            tracing::warn!(error = %e, "ExposureAuto could not be turned off; the camera's automatic exposure may fight the control loop");
+        }
+    }
+    let (lo, hi) = match camera.float_bounds(feature) {
+        Ok((lo, hi)) if lo.is_finite() && hi.is_finite() && lo <= hi => (lo, hi),
+        _ => (0.0, f64::MAX),
+    };
+    let (min, max) = (settings.min_us.max(lo), settings.max_us.min(hi));
+    if min > max {
+        return Err(OpenError::Config {
+            what: format!("{WHAT}.min_us/max_us"),
+            reason: format!(
+                "[{}, {}] µs misses the camera's {feature} range [{lo}, {hi}] µs",
+                settings.min_us, settings.max_us
+            ),
+        });
+    }
+    let now = camera.float(feature).map_err(setting(feature))?;
+    if !(now.is_finite() && (min..=max).contains(&now)) {
+        let inside = if now.is_finite() {
+            now.clamp(min, max)
+        } else {
+            min
+        };
+        camera
+            .set_float(feature, inside)
+            .map_err(setting(feature))?;
+        tracing::info!(
+            feature,
+            from_us = now,
+            to_us = inside,
+            "exposure brought inside the control loop's limits"
+        );
+    }
+    Ok(ExposureNode {
+        feature,
+        range: (min, max),
     })
 }
 

@@ -1,8 +1,10 @@
 //! The GigE source's settings: what is asked of the camera (pixel format,
 //! exposure, gain, frame rate, ROI, packet size, packet socket, buffers) and
 //! the loss and back-off timing, with their one set of defaults and checks;
-//! and any further GenICam feature by name (`[source.gige.features]`).
+//! any further GenICam feature by name (`[source.gige.features]`); and the
+//! exposure control loop's settings (`[source.gige.exposure_control]`).
 
+use crate::exposure::{ExposureSettings, SettingsError};
 use crate::source::SourceError;
 use std::time::Duration;
 
@@ -96,6 +98,10 @@ pub struct GigeConfig {
     /// middle of the exposure to the reception (`None`: the exposure
     /// instant is not known).
     pub fixed_latency: Option<Duration>,
+    /// The exposure control loop (`None`: off, the exposure is left as
+    /// set): the camera's `ExposureTime` (or `ExposureTimeAbs`) steered to
+    /// hold the targets' peak (`crate::exposure`).
+    pub exposure_control: Option<ExposureSettings>,
 }
 
 impl Default for GigeConfig {
@@ -116,6 +122,7 @@ impl Default for GigeConfig {
             features: Vec::new(),
             transfer: None,
             fixed_latency: None,
+            exposure_control: None,
         }
     }
 }
@@ -182,6 +189,14 @@ impl GigeConfig {
                     return bad("features", format!("{name} = {v} is not finite"));
                 }
             }
+        }
+        if let Some(Err(SettingsError::OutOfRange { key, value, reason })) =
+            self.exposure_control.as_ref().map(ExposureSettings::check)
+        {
+            return bad(
+                &format!("exposure_control.{key}"),
+                format!("{value} {reason}"),
+            );
         }
         if self.lost_after.is_zero() || self.backoff_initial.is_zero() {
             return bad("lost_after/backoff_initial", "must be positive".into());

@@ -41,6 +41,24 @@
 //! `exposure_sigma_ns` the mapping's uncertainty. A camera that sends no
 //! timestamps gets its exposure from [`GigeConfig::fixed_latency`], or none.
 //!
+//! # Exposure control
+//! With [`GigeConfig::exposure_control`] the source steers the camera's
+//! exposure time to hold its targets' peak (`crate::exposure`): at each
+//! opening it finds the feature (`ExposureTime`, else `ExposureTimeAbs`;
+//! neither refuses the configuration), turns `ExposureAuto` off and
+//! brings the exposure inside the loop's limits (narrowed to the
+//! camera's range). Between frames — at the start of
+//! [`FrameSource::next_frame`], never while a frame is being copied — it
+//! reads the newest measurement the detection workers offered on its
+//! [`ExposureLink`], runs the law and writes the feature (then reads back
+//! what the camera took). Only measurements of frames exposed after the
+//! last write count: the frames already queued in the stream and the one
+//! being exposed are skipped, and from the first fresh frame on the
+//! frames carry the new `exposure_ns`. A camera that may be dying (no
+//! buffer for half of `lost_after`, or control lost) is not written to.
+//! A failed write is counted and logged, never fatal. The exposure in
+//! effect is the link's gauge, with or without the loop.
+//!
 //! # Missing frames
 //! Gaps in the camera's frame (block) ids between delivered frames are
 //! counted in [`SourceStats::missing`](crate::source::SourceStats) and
@@ -57,6 +75,7 @@ pub use config::{FeatureValue, GigeConfig, PixelDepth, Roi};
 pub use copy::id_gap;
 
 use crate::clock_map::{ClockMap, ClockMapConfig};
+use crate::exposure::{seq_after, ExposureLaw, ExposureLink, ExposureSettings, Step};
 use crate::reopen::{Backoff, Device, OpenFailure, Ready, Reopener};
 use crate::ring::Slot;
 use crate::source::{Clock, FrameSource, SourceCounters, SourceError, SourceStats, SystemClock};
@@ -79,6 +98,36 @@ pub struct GigeSource {
     next_seq: u64,
     resized_logged: bool,
     clock_map: ClockMap,
+    exposure: Arc<ExposureLink>,
+    steer: Option<Steer>,
+    /// The exposure time of the frames from this `seq` on, ns, after a
+    /// write whose frames have not arrived yet.
+    pending_exposure: Option<(u64, u64)>,
+}
+
+/// Frames after the ones queued in the stream that may still have been
+/// exposed before an exposure write took effect (the one being exposed).
+const SETTLE_FRAMES: u64 = 2;
+
+/// Shortest time between two log lines of exposure changes.
+const EXPOSURE_LOG_EVERY: Duration = Duration::from_secs(1);
+
+/// The exposure control loop's side in the source.
+struct Steer {
+    settings: ExposureSettings,
+    /// The law as configured (each opening starts from a copy of it).
+    configured: ExposureLaw,
+    /// The law of this opening (limits narrowed to the camera's range).
+    law: ExposureLaw,
+    /// The exposure in effect as the camera reported it, µs.
+    current_us: f64,
+    /// Measurements of frames before this `seq` were exposed before the
+    /// last write or opening: not used.
+    fresh_from: u64,
+    /// The frame number of the last measurement used.
+    last_used: Option<u32>,
+    /// The exposure last logged, µs, and when.
+    logged: Option<(f64, Instant)>,
 }
 
 impl std::fmt::Debug for GigeSource {
@@ -116,6 +165,24 @@ impl GigeSource {
         clock: Box<dyn Clock>,
     ) -> Result<Self, SourceError> {
         config.validate()?;
+        let steer = match config.exposure_control {
+            Some(settings) => {
+                let law = ExposureLaw::new(settings).map_err(|e| SourceError::Config {
+                    what: "exposure_control".into(),
+                    reason: e.to_string(),
+                })?;
+                Some(Steer {
+                    settings,
+                    configured: law.clone(),
+                    law,
+                    current_us: 0.0,
+                    fresh_from: 0,
+                    last_used: None,
+                    logged: None,
+                })
+            }
+            None => None,
+        };
         let counters = Arc::new(SourceCounters::default());
         let cfg = config.clone();
         let mut resolved = None;
@@ -145,6 +212,9 @@ impl GigeSource {
             next_seq: 0,
             resized_logged: false,
             clock_map: ClockMap::new(ClockMapConfig::default()),
+            exposure: Arc::new(ExposureLink::new(steer.is_some())),
+            steer,
+            pending_exposure: None,
         })
     }
 
@@ -161,6 +231,89 @@ impl GigeSource {
         }
         // A reopened camera may have restarted its clock.
         self.clock_map.reset();
+        self.pending_exposure = None;
+        let Some(live) = self.link.live() else { return };
+        let exposure_us = live.device.exposure_ns as f64 / 1e3;
+        self.exposure.exposure_s.set(exposure_us * 1e-6);
+        if let (Some(st), Some(node)) = (self.steer.as_mut(), live.device.exposure_control) {
+            let queued = live.device.stream.n_buffers().1.max(0) as u64;
+            st.law = st.configured.clone();
+            st.law.limit_to(node.range.0, node.range.1);
+            st.current_us = exposure_us;
+            st.fresh_from = self.next_seq + queued + SETTLE_FRAMES;
+            st.last_used = None;
+            tracing::info!(source = %self.name, feature = node.feature, exposure_us,
+                min_us = node.range.0, max_us = node.range.1,
+                target_peak = st.settings.target_peak, "exposure control on");
+        }
+    }
+
+    /// The exposure control loop's turn, between frames: the newest fresh
+    /// measurement through the law, and the camera's exposure written if
+    /// the law asks (see the module docs).
+    fn steer(&mut self) {
+        let Some(st) = self.steer.as_mut() else {
+            return;
+        };
+        let Some(live) = self.link.live_mut() else {
+            return;
+        };
+        let Some(node) = live.device.exposure_control else {
+            return;
+        };
+        // Every register access to a dead camera blocks for seconds.
+        if live.device.control_lost.load(Ordering::Acquire)
+            || live.last_buffer.elapsed() > self.lost_after / 2
+        {
+            return;
+        }
+        let Some((seq, peak)) = self.exposure.latest() else {
+            return;
+        };
+        if st.last_used.is_some_and(|l| !seq_after(seq, l)) || seq_after(st.fresh_from as u32, seq)
+        {
+            return;
+        }
+        st.last_used = Some(seq);
+        let Step::Set(us) = st.law.observe(f64::from(peak), st.current_us) else {
+            return;
+        };
+        let camera = &live.device.camera;
+        let written = camera
+            .set_float(node.feature, us)
+            .and_then(|()| camera.float(node.feature));
+        let failure = match written {
+            Ok(got) if got.is_finite() && got > 0.0 => {
+                let queued = live.device.stream.n_buffers().1.max(0) as u64;
+                st.fresh_from = self.next_seq + queued + SETTLE_FRAMES;
+                self.pending_exposure = Some((st.fresh_from, (got * 1e3).round() as u64));
+                let from = st.current_us;
+                st.current_us = got;
+                self.exposure.exposure_s.set(got * 1e-6);
+                self.exposure.writes.inc();
+                let now = Instant::now();
+                let worth = st.logged.is_none_or(|(logged, at)| {
+                    (got / logged - 1.0).abs() > st.settings.dead_band
+                        && now.duration_since(at) >= EXPOSURE_LOG_EVERY
+                });
+                if worth {
+                    tracing::info!(source = %self.name, from_us = from, to_us = got,
+                        peak = f64::from(peak), target_peak = st.settings.target_peak, "exposure changed");
+                    st.logged = Some((got, now));
+                } else {
+                    tracing::debug!(source = %self.name, from_us = from, to_us = got, peak = f64::from(peak), "exposure changed");
+                }
+                return;
+            }
+            Ok(got) => format!("the camera reports {got} µs after the write"),
+            Err(e) => e.to_string(),
+        };
+        self.exposure.write_failures.inc();
+        let n = self.exposure.write_failures.get();
+        if n.is_power_of_two() {
+            tracing::warn!(source = %self.name, feature = node.feature, exposure_us = us,
+                error = %failure, failures = n, "exposure write failed");
+        }
     }
 
     fn grab(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
@@ -200,6 +353,12 @@ impl GigeSource {
             _ => (utc_now, mono_now),
         };
         live.device.stream.push_buffer(buffer);
+        if let Some((from, ns)) = self.pending_exposure {
+            if self.next_seq >= from {
+                live.device.exposure_ns = ns;
+                self.pending_exposure = None;
+            }
+        }
         let (exposure_ns, payload) = (live.device.exposure_ns, live.device.payload);
         match copied {
             Ok(resized) => {
@@ -281,6 +440,8 @@ impl FrameSource for GigeSource {
         let (ready, left) = self.link.ready(timeout)?;
         if ready == Ready::Opened {
             self.on_opened();
+        } else {
+            self.steer();
         }
         self.grab(slot, left)
     }
@@ -306,6 +467,10 @@ impl FrameSource for GigeSource {
 
     fn shared_counters(&self) -> Option<Arc<SourceCounters>> {
         Some(self.counters())
+    }
+
+    fn exposure_link(&self) -> Option<Arc<ExposureLink>> {
+        Some(Arc::clone(&self.exposure))
     }
 }
 
@@ -339,6 +504,29 @@ mod tests {
         };
         assert!(GigeSource::new("t", bad).is_err());
         assert!(GigeSource::new("t", GigeConfig::default()).is_ok());
+        let bad = GigeConfig {
+            exposure_control: Some(crate::ExposureSettings {
+                min_us: 500.0,
+                max_us: 100.0,
+                ..crate::ExposureSettings::default()
+            }),
+            ..GigeConfig::default()
+        };
+        match GigeSource::new("t", bad) {
+            Err(SourceError::Config { what, .. }) => assert_eq!(what, "exposure_control.max_us"),
+            other => panic!("{other:?}"),
+        }
+        let steered = GigeSource::new(
+            "t",
+            GigeConfig {
+                exposure_control: Some(crate::ExposureSettings::default()),
+                ..GigeConfig::default()
+            },
+        )
+        .unwrap();
+        assert!(steered.exposure_link().is_some_and(|l| l.steering()));
+        let plain = GigeSource::new("t", GigeConfig::default()).unwrap();
+        assert!(plain.exposure_link().is_some_and(|l| !l.steering()));
         let slow = GigeConfig {
             frame_rate: Some(0.5),
             ..GigeConfig::default()

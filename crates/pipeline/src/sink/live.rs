@@ -285,6 +285,10 @@ impl FrameSource for LiveTap {
     fn shared_counters(&self) -> Option<Arc<photopose_acquire::SourceCounters>> {
         self.inner.shared_counters()
     }
+
+    fn exposure_link(&self) -> Option<Arc<photopose_acquire::ExposureLink>> {
+        self.inner.exposure_link()
+    }
 }
 
 /// The live view's sink: the latest state, throttled to `pose_hz`.

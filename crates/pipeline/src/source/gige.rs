@@ -1,11 +1,14 @@
 //! The GigE Vision source (`[source.gige]`, the `gige` feature): the keys
 //! of the section and their checks, mapped onto `photopose-acquire`'s
 //! [`GigeConfig`], whose `Default` holds the one set of defaults. Opening
-//! and reconnecting the camera is the acquisition crate's.
+//! and reconnecting the camera is the acquisition crate's, and so is the
+//! exposure control loop (`[source.gige.exposure_control]`, its defaults
+//! in [`ExposureSettings::default`]).
 
 use super::Bad;
 use crate::config::ConfigError;
-use photopose_acquire::{FeatureValue, GigeConfig, PixelDepth, Roi};
+use photopose_acquire::exposure::SettingsError;
+use photopose_acquire::{ExposureSettings, FeatureValue, GigeConfig, PixelDepth, Roi};
 use serde::de::{MapAccess, Visitor};
 use serde::{Deserialize, Deserializer};
 
@@ -29,6 +32,56 @@ pub(crate) struct GigeSection {
     transfer_ms: Option<f64>,
     #[serde(default)]
     features: Features,
+    exposure_control: Option<ExposureControlSection>,
+}
+
+/// `[source.gige.exposure_control]` as written: every key optional, an
+/// absent one takes [`ExposureSettings::default`]'s value; off unless
+/// `enabled = true`.
+#[derive(Debug, Deserialize, Clone, Default)]
+#[serde(deny_unknown_fields)]
+struct ExposureControlSection {
+    enabled: Option<bool>,
+    target_peak: Option<f64>,
+    min_us: Option<f64>,
+    max_us: Option<f64>,
+    gain: Option<f64>,
+    max_step_ratio: Option<f64>,
+    dead_band: Option<f64>,
+    every_frames: Option<u32>,
+}
+
+/// Validates `[source.gige.exposure_control]`: `None` when it is off.
+fn exposure_control(
+    s: Option<ExposureControlSection>,
+    bad: Bad<'_>,
+) -> Result<Option<ExposureSettings>, ConfigError> {
+    let Some(s) = s else { return Ok(None) };
+    let d = ExposureSettings::default();
+    let settings = ExposureSettings {
+        target_peak: s.target_peak.unwrap_or(d.target_peak),
+        min_us: s.min_us.unwrap_or(d.min_us),
+        max_us: s.max_us.unwrap_or(d.max_us),
+        gain: s.gain.unwrap_or(d.gain),
+        max_step_ratio: s.max_step_ratio.unwrap_or(d.max_step_ratio),
+        dead_band: s.dead_band.unwrap_or(d.dead_band),
+        every_frames: s.every_frames.unwrap_or(d.every_frames),
+    };
+    // Checked even when off, so that turning it on cannot surprise.
+    if let Err(SettingsError::OutOfRange { key, value, reason }) = settings.check() {
+        let key = match key {
+            "target_peak" => "source.gige.exposure_control.target_peak",
+            "min_us" => "source.gige.exposure_control.min_us",
+            "max_us" => "source.gige.exposure_control.max_us",
+            "gain" => "source.gige.exposure_control.gain",
+            "max_step_ratio" => "source.gige.exposure_control.max_step_ratio",
+            "dead_band" => "source.gige.exposure_control.dead_band",
+            "every_frames" => "source.gige.exposure_control.every_frames",
+            _ => "source.gige.exposure_control",
+        };
+        return Err(bad(key, value.to_string(), reason));
+    }
+    Ok(s.enabled.unwrap_or(false).then_some(settings))
 }
 
 /// `[source.gige.features]`: GenICam feature name → value, kept in the
@@ -186,6 +239,7 @@ pub(crate) fn validate(g: GigeSection, bad: Bad<'_>) -> Result<GigeConfig, Confi
         // Set from `[source] latency_ms` by the seam.
         fixed_latency: None,
         features: features(g.features, bad)?,
+        exposure_control: exposure_control(g.exposure_control, bad)?,
     };
     if config.backoff_max < config.backoff_initial {
         return Err(bad(
@@ -225,4 +279,93 @@ fn features(f: Features, bad: Bad<'_>) -> Result<Vec<(String, FeatureValue)>, Co
         out.push((name, value));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Config, Source};
+
+    fn gige(section: &str) -> Result<photopose_acquire::GigeConfig, String> {
+        let text = format!("[source]\nkind = \"gige\"\n[source.gige.exposure_control]\n{section}");
+        match Config::parse(&text, "x.toml")
+            .map_err(|e| e.to_string())?
+            .source
+        {
+            Source::Gige(g) => Ok(g),
+            other => panic!("not gige: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn exposure_control_is_off_unless_enabled() {
+        assert_eq!(gige("").unwrap().exposure_control, None);
+        assert_eq!(
+            gige("enabled = false\nmax_us = 900.0\n")
+                .unwrap()
+                .exposure_control,
+            None
+        );
+        let s = gige(
+            "enabled = true\ntarget_peak = 0.7\nmin_us = 50.0\nmax_us = 900.0\ngain = 0.8\n\
+             max_step_ratio = 1.5\ndead_band = 0.05\nevery_frames = 2\n",
+        )
+        .unwrap()
+        .exposure_control
+        .unwrap();
+        assert_eq!(
+            s,
+            photopose_acquire::ExposureSettings {
+                target_peak: 0.7,
+                min_us: 50.0,
+                max_us: 900.0,
+                gain: 0.8,
+                max_step_ratio: 1.5,
+                dead_band: 0.05,
+                every_frames: 2,
+            }
+        );
+        let d = gige("enabled = true\n").unwrap().exposure_control.unwrap();
+        assert_eq!(d, photopose_acquire::ExposureSettings::default());
+        assert_eq!(d.target_peak, 0.8);
+    }
+
+    #[test]
+    fn exposure_control_errors_name_the_key() {
+        for (section, key) in [
+            (
+                "target_peak = 1.2\n",
+                "source.gige.exposure_control.target_peak",
+            ),
+            (
+                "target_peak = 0.0\n",
+                "source.gige.exposure_control.target_peak",
+            ),
+            ("min_us = -1.0\n", "source.gige.exposure_control.min_us"),
+            (
+                "min_us = 500.0\nmax_us = 100.0\n",
+                "source.gige.exposure_control.max_us",
+            ),
+            ("gain = 0.0\n", "source.gige.exposure_control.gain"),
+            ("gain = 1.01\n", "source.gige.exposure_control.gain"),
+            (
+                "max_step_ratio = 1.0\n",
+                "source.gige.exposure_control.max_step_ratio",
+            ),
+            (
+                "dead_band = 1.0\n",
+                "source.gige.exposure_control.dead_band",
+            ),
+            (
+                "every_frames = 0\n",
+                "source.gige.exposure_control.every_frames",
+            ),
+            ("target = 0.5\n", "target"),
+        ] {
+            let e = gige(&format!("enabled = true\n{section}")).unwrap_err();
+            assert!(
+                e.starts_with("x.toml: ") && e.contains(key),
+                "{section}: {e}"
+            );
+        }
+    }
 }

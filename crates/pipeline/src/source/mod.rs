@@ -244,6 +244,10 @@ impl FrameSource for Limited {
     fn shared_counters(&self) -> Option<std::sync::Arc<photopose_acquire::SourceCounters>> {
         self.inner.shared_counters()
     }
+
+    fn exposure_link(&self) -> Option<std::sync::Arc<photopose_acquire::ExposureLink>> {
+        self.inner.exposure_link()
+    }
 }
 
 /// Makes `slot`'s image an 8-bit `width`×`height` one (allocates only if
