@@ -38,6 +38,7 @@ pub mod code;
 mod detector;
 pub mod label;
 pub mod measure;
+mod num;
 pub mod pixel;
 pub mod seed;
 pub mod threshold;

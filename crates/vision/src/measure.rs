@@ -17,6 +17,7 @@
 //! subtracted once it is known).
 
 use crate::label::Blob;
+use crate::num::{ceil_i64, floor_i64, near_i64, round_i64};
 use crate::pixel::{Pixel, Plane};
 use crate::threshold::Threshold;
 
@@ -139,35 +140,6 @@ impl Conic {
             out,
         )
     }
-}
-
-/// Nearest integer (ties to even) for `|x| < 2³¹`, with an add and a move:
-/// adding 1.5 · 2⁵² leaves the integer in the low bits of the mantissa.
-#[inline(always)]
-fn near_i64(x: f64) -> i64 {
-    const ROUND: f64 = 6_755_399_441_055_744.0;
-    (x + ROUND).to_bits() as u32 as i32 as i64
-}
-
-/// `floor` for values well inside the `i64` range (no libm call on
-/// baseline x86-64).
-#[inline(always)]
-fn floor_i64(x: f64) -> i64 {
-    let t = x as i64;
-    t - ((t as f64) > x) as i64
-}
-
-/// `ceil`, see [`floor_i64`].
-#[inline(always)]
-fn ceil_i64(x: f64) -> i64 {
-    let t = x as i64;
-    t + ((t as f64) < x) as i64
-}
-
-/// Nearest integer, see [`floor_i64`].
-#[inline(always)]
-fn round_i64(x: f64) -> i64 {
-    floor_i64(x + 0.5)
 }
 
 /// `Σ_{k=1}^{m} k²`, valid for every integer `m` (telescoping).
@@ -484,15 +456,6 @@ mod tests {
             sorted.sort_unstable();
             assert_eq!(quantile(&mut v, k, 100), sorted[k]);
             assert_eq!(quantile(&mut v.clone(), k, 4000), sorted[k]);
-        }
-    }
-
-    #[test]
-    fn rounding_helpers() {
-        for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
-            assert_eq!(near_i64(x), x.round_ties_even() as i64, "{x}");
-            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
-            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
         }
     }
 

@@ -22,6 +22,7 @@ use crate::code::{CodeParams, Gap, RingTables};
 use crate::detector::{blob_tests, centroid, coded_centre, read_ring, shape_test};
 use crate::label::Blob;
 use crate::measure;
+use crate::num::{ceil_i64, floor_i64, round_i64};
 use crate::pixel::{Pixel, Plane};
 use crate::seed::SeedLabeller;
 use crate::{CodeStatus, DetectorOptions, RejectReason, ThresholdResult, Uncertainty};
@@ -175,8 +176,8 @@ impl WindowMeasurer {
         let reach = e.gate_px + 1.0;
         let (th, seeds) = (t.threshold, &mut self.seeds);
         let nearest = (
-            e.col.round().max(0.0) as usize,
-            e.row.round().max(0.0) as usize,
+            round_i64(e.col).max(0) as usize,
+            round_i64(e.row).max(0) as usize,
         );
         if seeds
             .grow(&core_plane, th, max_value, nearest.0, nearest.1)
@@ -184,12 +185,12 @@ impl WindowMeasurer {
         {
             return WindowOutcome::Ambiguous;
         }
-        let mut row = (e.row - reach).ceil().max(0.0);
+        let mut row = ceil_i64(e.row - reach).max(0) as f64;
         while row <= e.row + reach {
             let dy = row - e.row;
             let half = (reach * reach - dy * dy).max(0.0).sqrt();
-            let lo = (e.col - half).ceil().max(0.0) as usize;
-            let hi = (e.col + half).floor();
+            let lo = ceil_i64(e.col - half).max(0) as usize;
+            let hi = floor_i64(e.col + half) as f64;
             if hi >= 0.0
                 && seeds
                     .grow_span(&core_plane, th, max_value, row as usize, lo, hi as usize)
@@ -356,10 +357,10 @@ fn sub_plane<'a, P>(
         c0 as f64 + image.width() as f64 - 1.0,
         r0 as f64 + image.height() as f64 - 1.0,
     );
-    let lo_c = (col - half).floor().max(c0 as f64);
-    let lo_r = (row - half).floor().max(r0 as f64);
-    let hi_c = (col + half).ceil().min(c1);
-    let hi_r = (row + half).ceil().min(r1);
+    let lo_c = (floor_i64(col - half) as f64).max(c0 as f64);
+    let lo_r = (floor_i64(row - half) as f64).max(r0 as f64);
+    let hi_c = (ceil_i64(col + half) as f64).min(c1);
+    let hi_r = (ceil_i64(row + half) as f64).min(r1);
     if !(lo_c <= hi_c && lo_r <= hi_r) {
         return None;
     }

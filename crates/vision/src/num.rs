@@ -1,0 +1,47 @@
+//! Rounding of pixel positions without libm: on baseline x86-64 (no
+//! SSE4.1) `f64::floor`, `ceil` and `round` are library calls, which the
+//! per-target paths (centroid windows, tracking windows) would make
+//! thousands of times per frame.
+
+/// Nearest integer (ties to even) for `|x| < 2³¹`, with an add and a move:
+/// adding 1.5 · 2⁵² leaves the integer in the low bits of the mantissa.
+#[inline(always)]
+pub(crate) fn near_i64(x: f64) -> i64 {
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    (x + ROUND).to_bits() as u32 as i32 as i64
+}
+
+/// `floor` for values well inside the `i64` range (no libm call on
+/// baseline x86-64).
+#[inline(always)]
+pub(crate) fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t - ((t as f64) > x) as i64
+}
+
+/// `ceil`, see [`floor_i64`].
+#[inline(always)]
+pub(crate) fn ceil_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t + ((t as f64) < x) as i64
+}
+
+/// Nearest integer, see [`floor_i64`].
+#[inline(always)]
+pub(crate) fn round_i64(x: f64) -> i64 {
+    floor_i64(x + 0.5)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rounding_helpers() {
+        for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
+            assert_eq!(near_i64(x), x.round_ties_even() as i64, "{x}");
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
+        }
+    }
+}
