@@ -544,7 +544,7 @@ pub(crate) fn blob_tests<P: Pixel>(
         return Err(RejectReason::Saturated);
     }
     let (cxx, cyy, cxy) = blob.covariance();
-    let (a, b, _) = measure::ellipse(cxx, cyy, cxy);
+    let (a, b) = measure::axes(cxx, cyy, cxy);
     if b.is_nan() || b <= 0.0 || a / b > o.max_axis_ratio {
         return Err(RejectReason::Elongated);
     }

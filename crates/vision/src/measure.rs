@@ -48,12 +48,19 @@ pub struct Measurement {
 /// (a uniform ellipse with semi-axes `a, b` has moments `a²/4, b²/4`): returns
 /// `(a, b, angle)` with the angle of the major axis from `+col` towards `+row`.
 pub fn ellipse(cxx: f64, cyy: f64, cxy: f64) -> (f64, f64, f64) {
+    let (a, b) = axes(cxx, cyy, cxy);
+    let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
+    (a, b, angle)
+}
+
+/// The semi-axes `(a, b)` of [`ellipse`] without its angle (no `atan2`:
+/// the blob tests ask for the axes of every blob).
+pub fn axes(cxx: f64, cyy: f64, cxy: f64) -> (f64, f64) {
     let tr = cxx + cyy;
     let d = ((cxx - cyy) * (cxx - cyy) / 4.0 + cxy * cxy).sqrt();
     let l1 = (tr / 2.0 + d).max(0.0);
     let l2 = (tr / 2.0 - d).max(0.0);
-    let angle = 0.5 * (2.0 * cxy).atan2(cxx - cyy);
-    (2.0 * l1.sqrt(), 2.0 * l2.sqrt(), angle)
+    (2.0 * l1.sqrt(), 2.0 * l2.sqrt())
 }
 
 /// The dot's own second moments with the blur removed, given its amplitude
