@@ -151,9 +151,9 @@ impl Detector {
         let max_value = image.max_value() as u32;
         Ok(match image.pixels() {
             ViewPixels::Mono8(data) => {
-                self.find_threshold(&plane(&image, data), max_value.min(255))
+                self.find_threshold(&plane(&image, data), max_value.min(255), false)
             }
-            ViewPixels::Mono16(data) => self.find_threshold(&plane(&image, data), max_value),
+            ViewPixels::Mono16(data) => self.find_threshold(&plane(&image, data), max_value, false),
         })
     }
 
@@ -223,11 +223,13 @@ impl Detector {
         self.out.clear();
         self.candidates.clear();
         self.order.clear();
-        // 1. Threshold.
+        // 1. Threshold (and the tile peaks of the local levels, from the
+        // same pass over the rows).
+        let local = given.is_none() && self.options.local_threshold > 0.0;
         let t = match given {
             Some(t) => *t,
             None => {
-                let t = self.find_threshold(plane, max_value);
+                let t = self.find_threshold(plane, max_value, local);
                 self.hold(t, max_value)
             }
         };
@@ -238,10 +240,10 @@ impl Detector {
             return;
         }
         // Local levels: only for a threshold found on this window.
-        if given.is_none() && self.options.local_threshold > 0.0 {
+        if local {
             let o = &self.options;
             let floor = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
-            self.levels.compute(plane, &t, o.local_threshold, floor);
+            self.levels.from_peaks(plane, &t, o.local_threshold, floor);
         } else {
             self.levels.set_global(plane, t.threshold);
         }
@@ -283,15 +285,28 @@ impl Detector {
         t
     }
 
-    /// Stage 1: the sub-sampled histogram of the window and its threshold.
+    /// Stage 1: the sub-sampled histogram of the window and its threshold;
+    /// with `peaks`, the tile peaks of the local levels as well (from the
+    /// same pass over the rows).
     fn find_threshold<P: Pixel>(
         &mut self,
         plane: &Plane<'_, P>,
         max_value: u32,
+        peaks: bool,
     ) -> ThresholdResult {
         let o = &self.options;
         let shift = threshold::bin_shift(max_value);
-        let n = threshold::histogram(plane, o.histogram_step, shift, max_value, &mut self.hist);
+        let n = if peaks {
+            self.levels.histogram_and_peaks(
+                plane,
+                o.histogram_step,
+                shift,
+                max_value,
+                &mut self.hist,
+            )
+        } else {
+            threshold::histogram(plane, o.histogram_step, shift, max_value, &mut self.hist)
+        };
         let params = ThresholdParams {
             step: o.histogram_step,
             noise_factor: o.noise_factor,
