@@ -760,6 +760,111 @@ mod tests {
     }
 
     #[test]
+    fn the_grid_of_every_fourth_row_and_column_is_fixed_in_the_frame() {
+        // 8-bit (the unrolled path) and 16-bit: rows and columns ≡ 1 (mod 4).
+        let (w, h) = (37usize, 23usize);
+        let data: Vec<u16> = (0..(w * h) as u16).map(|v| v % 251).collect();
+        let data8: Vec<u8> = data.iter().map(|&v| v as u8).collect();
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 30, 20), (2, 1, 33, 17), (5, 5, 1, 1)] {
+            let mut want = vec![0u32; MAX_BINS];
+            let mut m = 0;
+            for r in (r0..r0 + hh).filter(|r| r % 4 == 1) {
+                for c in (c0..c0 + ww).filter(|c| c % 4 == 1) {
+                    want[data[r * w + c] as usize] += 1;
+                    m += 1;
+                }
+            }
+            let mut got = vec![0u32; MAX_BINS];
+            let start = r0 * w + c0;
+            let n = histogram(
+                &Plane {
+                    data: &data8[start..],
+                    width: ww,
+                    height: hh,
+                    stride: w,
+                    col0: c0,
+                    row0: r0,
+                },
+                4,
+                0,
+                255,
+                &mut got,
+            );
+            assert_eq!((n, &got), (m, &want), "8-bit window at ({c0}, {r0})");
+            let n = histogram(
+                &Plane {
+                    data: &data[start..],
+                    width: ww,
+                    height: hh,
+                    stride: w,
+                    col0: c0,
+                    row0: r0,
+                },
+                4,
+                0,
+                4095,
+                &mut got,
+            );
+            assert_eq!((n, &got), (m, &want), "16-bit window at ({c0}, {r0})");
+        }
+    }
+
+    /// The one pass over the rows (histogram and tile peaks) gives what
+    /// the two plain passes give, for 8- and 16-bit windows at any origin.
+    #[test]
+    fn histogram_and_peaks_in_one_pass_equal_the_plain_passes() {
+        let (w, h) = (300usize, 200usize);
+        // Pseudo-random grey values with bright patches.
+        let mut x = 12345u32;
+        let mut v16: Vec<u16> = (0..w * h)
+            .map(|_| {
+                x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                (x >> 20) as u16
+            })
+            .collect();
+        for (c0, r0) in [(30usize, 40usize), (170, 130), (250, 10)] {
+            for r in r0..r0 + 7 {
+                for c in c0..c0 + 9 {
+                    v16[r * w + c] = 4000 - (r + c) as u16;
+                }
+            }
+        }
+        let v8: Vec<u8> = v16.iter().map(|&v| (v >> 4) as u8).collect();
+        fn check<P: Pixel>(data: &[P], w: usize, h: usize, max: u32, what: &str) {
+            let shift = bin_shift(max);
+            for step in [1usize, 2, 3, 4, 5] {
+                for (c0, r0, ww, hh) in [(0, 0, w, h), (3, 5, 200, 150), (64, 63, 130, 70)] {
+                    let plane = Plane {
+                        data: &data[r0 * w + c0..],
+                        width: ww,
+                        height: hh,
+                        stride: w,
+                        col0: c0,
+                        row0: r0,
+                    };
+                    let mut plain = LocalLevels::new(w, h);
+                    let mut fused = LocalLevels::new(w, h);
+                    let (mut h1, mut h2) = (vec![7u32; MAX_BINS], vec![9u32; MAX_BINS]);
+                    let n1 = histogram(&plane, step, shift, max, &mut h1);
+                    plain.sample_peaks(&plane);
+                    let n2 = fused.histogram_and_peaks(&plane, step, shift, max, &mut h2);
+                    let at = format!("{what}, step {step}, window at ({c0}, {r0})");
+                    assert_eq!((n1, &h1), (n2, &h2), "{at}");
+                    assert_eq!(plain.peaks, fused.peaks, "{at}");
+                    assert!(plain.peaks.iter().any(|&p| p > 0), "{at}");
+                    let t = threshold(&h1, n1, shift, max, &P);
+                    plain.from_peaks(&plane, &t, 0.3, 2.0);
+                    fused.compute(&plane, &t, 0.3, 2.0);
+                    assert_eq!(plain.levels, fused.levels, "{at}");
+                }
+            }
+        }
+        check(&v8, w, h, 255, "8-bit");
+        check(&v16, w, h, 4095, "12-bit");
+        check(&v16, w, h, 65535, "16-bit");
+    }
+
+    #[test]
     fn sixteen_bit_is_binned() {
         assert_eq!(bin_shift(255), 0);
         assert_eq!(bin_shift(4095), 0);
