@@ -206,8 +206,10 @@ impl<'a, P: Pixel> Plane<'a, P> {
         let ri = (((row - 0.5) + ROUND).to_bits() as u32 as usize)
             .saturating_sub(self.row0)
             .min(h - 2);
-        let fx = col - (self.col0 + ci) as f64;
-        let fy = row - (self.row0 + ri) as f64;
+        // (Through `u32`: one instruction each, where `usize` to `f64` takes
+        // several; frame coordinates fit, and the value is the same.)
+        let fx = col - (self.col0 + ci) as u32 as f64;
+        let fy = row - (self.row0 + ri) as u32 as f64;
         let s = self.stride;
         let i = ri * s + ci;
         // One range check for the 2 × 2 cell.
