@@ -534,7 +534,7 @@ fn suppress_ring_parts(
     cands: &mut [Candidate],
     rejected: &mut [crate::Rejection],
     order: &mut Vec<u32>,
-    by_row: Option<&mut Vec<u32>>,
+    mut by_row: Option<&mut Vec<u32>>,
 ) {
     order.clear();
     order.extend(0..cands.len() as u32);
@@ -552,12 +552,11 @@ fn suppress_ring_parts(
         let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
         rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
     });
-    let by_row = by_row.map(|b| {
+    if let Some(b) = by_row.as_mut() {
         b.clear();
         b.extend(0..cands.len() as u32);
         b.sort_unstable_by(|&x, &y| cands[x as usize].m.row.total_cmp(&cands[y as usize].m.row));
-        b
-    });
+    }
     for &i in order.iter() {
         let i = i as usize;
         let y = cands[i];
