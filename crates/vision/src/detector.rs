@@ -740,9 +740,24 @@ pub(crate) fn read_ring<P: Pixel>(
     o: &DetectorOptions,
     tables: &RingTables,
 ) -> Ring {
-    let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
+    // The dot's amplitude from five samples half a pixel apart: without
+    // range checks when all five lie inside (the same values).
+    let inside = plane.width >= 2
+        && plane.height >= 2
+        && m.col - 0.5 >= plane.col0 as f64
+        && m.row - 0.5 >= plane.row0 as f64
+        && m.col + 0.5 <= plane.last_col() as f64
+        && m.row + 0.5 <= plane.last_row() as f64;
+    let at = |col: f64, row: f64| {
+        if inside {
+            plane.bilinear_inside(col, row)
+        } else {
+            plane.bilinear(col, row).unwrap_or(0.0)
+        }
+    };
+    let mut amplitude = at(m.col, m.row);
     for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-        amplitude += plane.bilinear(m.col + dx, m.row + dy).unwrap_or(0.0);
+        amplitude += at(m.col + dx, m.row + dy);
     }
     amplitude = amplitude / 5.0 - m.background;
     let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
