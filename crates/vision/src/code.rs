@@ -557,14 +557,22 @@ pub fn read<P: Pixel>(
     let base_margin = params.sector_margin * contrast;
     let base_sample_margin = params.sample_margin * contrast;
     let mut raw = 0u16;
+    // The sample angles turned to the ring's phase: at the middle radius,
+    // then reused at the inner and outer ones.
+    let mut turned = [[(0.0f64, 0.0f64); SECTOR_OFFSETS.len()]; 12];
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
         let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
         let mut word = 0u16;
-        for angles in &tables.sector {
+        for (angles, turned) in tables.sector.iter().zip(turned.iter_mut()) {
+            if ri == 0 {
+                for (t, &a) in turned.iter_mut().zip(angles) {
+                    *t = rotate_cs(a, boundary_cs);
+                }
+            }
             let mut s = [0.0f64; SECTOR_OFFSETS.len()];
-            for (v, &a) in s.iter_mut().zip(angles) {
-                let (x, y) = f.point_cs(k, rotate_cs(a, boundary_cs));
+            for (v, &cs) in s.iter_mut().zip(turned.iter()) {
+                let (x, y) = f.point_cs(k, cs);
                 match plane.at(x, y) {
                     Some(g) => *v = g,
                     None => return out,

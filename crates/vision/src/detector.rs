@@ -59,6 +59,8 @@ pub struct Detector {
     labeller: Labeller,
     candidates: Vec<Candidate>,
     order: Vec<u32>,
+    /// The candidates by row (ring-part suppression).
+    by_row: Vec<u32>,
     tables: RingTables,
     /// The window's local levels (all at the global level unless
     /// [`DetectorOptions::local_threshold`] found dim surroundings).
@@ -104,6 +106,7 @@ impl Detector {
             labeller: Labeller::new(options.max_runs, options.max_blobs),
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
+            by_row: Vec::with_capacity(options.max_targets),
             tables: RingTables::default(),
             levels: LocalLevels::new(max_width as usize, max_height as usize),
             held: None,
@@ -151,9 +154,9 @@ impl Detector {
         let max_value = image.max_value() as u32;
         Ok(match image.pixels() {
             ViewPixels::Mono8(data) => {
-                self.find_threshold(&plane(&image, data), max_value.min(255))
+                self.find_threshold(&plane(&image, data), max_value.min(255), false)
             }
-            ViewPixels::Mono16(data) => self.find_threshold(&plane(&image, data), max_value),
+            ViewPixels::Mono16(data) => self.find_threshold(&plane(&image, data), max_value, false),
         })
     }
 
@@ -223,11 +226,13 @@ impl Detector {
         self.out.clear();
         self.candidates.clear();
         self.order.clear();
-        // 1. Threshold.
+        // 1. Threshold (and the tile peaks of the local levels, from the
+        // same pass over the rows).
+        let local = given.is_none() && self.options.local_threshold > 0.0;
         let t = match given {
             Some(t) => *t,
             None => {
-                let t = self.find_threshold(plane, max_value);
+                let t = self.find_threshold(plane, max_value, local);
                 self.hold(t, max_value)
             }
         };
@@ -238,10 +243,10 @@ impl Detector {
             return;
         }
         // Local levels: only for a threshold found on this window.
-        if given.is_none() && self.options.local_threshold > 0.0 {
+        if local {
             let o = &self.options;
             let floor = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
-            self.levels.compute(plane, &t, o.local_threshold, floor);
+            self.levels.from_peaks(plane, &t, o.local_threshold, floor);
         } else {
             self.levels.set_global(plane, t.threshold);
         }
@@ -283,15 +288,28 @@ impl Detector {
         t
     }
 
-    /// Stage 1: the sub-sampled histogram of the window and its threshold.
+    /// Stage 1: the sub-sampled histogram of the window and its threshold;
+    /// with `peaks`, the tile peaks of the local levels as well (from the
+    /// same pass over the rows).
     fn find_threshold<P: Pixel>(
         &mut self,
         plane: &Plane<'_, P>,
         max_value: u32,
+        peaks: bool,
     ) -> ThresholdResult {
         let o = &self.options;
         let shift = threshold::bin_shift(max_value);
-        let n = threshold::histogram(plane, o.histogram_step, shift, max_value, &mut self.hist);
+        let n = if peaks {
+            self.levels.histogram_and_peaks(
+                plane,
+                o.histogram_step,
+                shift,
+                max_value,
+                &mut self.hist,
+            )
+        } else {
+            threshold::histogram(plane, o.histogram_step, shift, max_value, &mut self.hist)
+        };
         let params = ThresholdParams {
             step: o.histogram_step,
             noise_factor: o.noise_factor,
@@ -418,68 +436,24 @@ impl Detector {
         }
     }
 
-    /// Ring parts: blobs in the ring zone of a target with a ring.
-    /// Decoded targets come first, then rings with dark surroundings
-    /// (whatever their reading), then the rest by decreasing area; the
-    /// first two suppress whatever lies in their ring zone (but a decoded
-    /// target only yields to a decoded one), the rest only smaller blobs.
+    /// Ring parts: blobs in the ring zone of a target with a ring
+    /// ([`suppress_ring_parts`]).
     fn suppress_ring_parts(&mut self) {
         let Detector {
             labeller,
-            candidates: cands,
+            candidates,
             order,
+            by_row,
             out,
             ..
         } = self;
-        let blobs = labeller.blobs();
-        order.extend(0..cands.len() as u32);
-        let rank = |c: &Candidate| -> u8 {
-            if c.reading.status.id().is_some() {
-                0
-            } else if strong_ring(&c.reading) {
-                1
-            } else {
-                2
-            }
-        };
-        order.sort_unstable_by(|&x, &y| {
-            let (cx, cy) = (&cands[x as usize], &cands[y as usize]);
-            let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
-            rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
-        });
-        for &i in order.iter() {
-            let i = i as usize;
-            let y = cands[i];
-            if y.suppressed || !y.reading.ring_present {
-                continue;
-            }
-            let Some(f) = y.frame else { continue };
-            let y_area = blobs[y.blob as usize].area;
-            let y_rank = rank(&y);
-            for (j, x) in cands.iter_mut().enumerate() {
-                if j == i || x.suppressed {
-                    continue;
-                }
-                if y_rank == 2 && blobs[x.blob as usize].area > y_area {
-                    continue;
-                }
-                if x.reading.status.id().is_some() && y_rank > 0 {
-                    continue;
-                }
-                let rho = f.radius_of(x.m.col, x.m.row);
-                if (1.6..=3.8).contains(&rho) {
-                    x.suppressed = true;
-                }
-            }
-            // Rejected blobs inside a ring zone are ring parts as well.
-            for r in out.rejected.iter_mut() {
-                if matches!(r.reason, RejectReason::Shape | RejectReason::Elongated)
-                    && (1.6..=3.8).contains(&f.radius_of(r.col, r.row))
-                {
-                    r.reason = RejectReason::CodeRing;
-                }
-            }
-        }
+        suppress_ring_parts(
+            labeller.blobs(),
+            candidates,
+            &mut out.rejected,
+            order,
+            Some(by_row),
+        );
     }
 
     /// The output: every candidate not suppressed becomes a target.
@@ -516,6 +490,102 @@ impl Detector {
                 saturated: blob.saturated > 0,
             });
             self.out.n_saturated += (blob.saturated > 0) as usize;
+        }
+    }
+}
+
+/// The ring zone of a target with a ring, in units of its dot's radius.
+const RING_ZONE: std::ops::RangeInclusive<f64> = 1.6..=3.8;
+
+/// Ring parts: blobs in the ring zone of a target with a ring. Decoded
+/// targets come first, then rings with dark surroundings (whatever their
+/// reading), then the rest by decreasing area; the first two suppress
+/// whatever lies in their ring zone (but a decoded target only yields to a
+/// decoded one), the rest only smaller blobs. Rejected blobs of odd shape
+/// in a ring zone become ring parts as well.
+///
+/// With `by_row` (a buffer), the candidates a ring may suppress are looked
+/// up among those whose rows lie within the ring zone's reach (candidates
+/// sorted by row), not among all of them; the result is the same.
+fn suppress_ring_parts(
+    blobs: &[Blob],
+    cands: &mut [Candidate],
+    rejected: &mut [crate::Rejection],
+    order: &mut Vec<u32>,
+    mut by_row: Option<&mut Vec<u32>>,
+) {
+    order.clear();
+    order.extend(0..cands.len() as u32);
+    let rank = |c: &Candidate| -> u8 {
+        if c.reading.status.id().is_some() {
+            0
+        } else if strong_ring(&c.reading) {
+            1
+        } else {
+            2
+        }
+    };
+    order.sort_unstable_by(|&x, &y| {
+        let (cx, cy) = (&cands[x as usize], &cands[y as usize]);
+        let (ax, ay) = (blobs[cx.blob as usize].area, blobs[cy.blob as usize].area);
+        rank(cx).cmp(&rank(cy)).then(ay.cmp(&ax)).then(x.cmp(&y))
+    });
+    if let Some(b) = by_row.as_mut() {
+        b.clear();
+        b.extend(0..cands.len() as u32);
+        b.sort_unstable_by(|&x, &y| cands[x as usize].m.row.total_cmp(&cands[y as usize].m.row));
+    }
+    for &i in order.iter() {
+        let i = i as usize;
+        let y = cands[i];
+        if y.suppressed || !y.reading.ring_present {
+            continue;
+        }
+        let Some(f) = y.frame else { continue };
+        let y_area = blobs[y.blob as usize].area;
+        let y_rank = rank(&y);
+        let consider = |j: usize, x: &mut Candidate| {
+            if j == i || x.suppressed {
+                return;
+            }
+            if y_rank == 2 && blobs[x.blob as usize].area > y_area {
+                return;
+            }
+            if x.reading.status.id().is_some() && y_rank > 0 {
+                return;
+            }
+            if RING_ZONE.contains(&f.radius_of(x.m.col, x.m.row)) {
+                x.suppressed = true;
+            }
+        };
+        match by_row.as_deref() {
+            Some(by_row) => {
+                // A point at radius ρ of the ring's frame lies at most ρ
+                // times the norm of E's second row away in rows (with a
+                // margin for rounding).
+                let reach = RING_ZONE.end() * (f.e[1] * f.e[1] + f.e[2] * f.e[2]).sqrt();
+                let reach = reach * (1.0 + 1e-6) + 1e-6;
+                let (lo, hi) = (f.row - reach, f.row + reach);
+                let row = |j: &u32| cands[*j as usize].m.row;
+                let first = by_row.partition_point(|j| row(j).total_cmp(&lo).is_lt());
+                let last = by_row.partition_point(|j| row(j).total_cmp(&hi).is_le());
+                for &j in &by_row[first..last.max(first)] {
+                    consider(j as usize, &mut cands[j as usize]);
+                }
+            }
+            None => {
+                for (j, x) in cands.iter_mut().enumerate() {
+                    consider(j, x);
+                }
+            }
+        }
+        // Rejected blobs inside a ring zone are ring parts as well.
+        for r in rejected.iter_mut() {
+            if matches!(r.reason, RejectReason::Shape | RejectReason::Elongated)
+                && RING_ZONE.contains(&f.radius_of(r.col, r.row))
+            {
+                r.reason = RejectReason::CodeRing;
+            }
         }
     }
 }
@@ -696,9 +766,24 @@ pub(crate) fn read_ring<P: Pixel>(
     o: &DetectorOptions,
     tables: &RingTables,
 ) -> Ring {
-    let mut amplitude = plane.bilinear(m.col, m.row).unwrap_or(0.0);
+    // The dot's amplitude from five samples half a pixel apart: without
+    // range checks when all five lie inside (the same values).
+    let inside = plane.width >= 2
+        && plane.height >= 2
+        && m.col - 0.5 >= plane.col0 as f64
+        && m.row - 0.5 >= plane.row0 as f64
+        && m.col + 0.5 <= plane.last_col() as f64
+        && m.row + 0.5 <= plane.last_row() as f64;
+    let at = |col: f64, row: f64| {
+        if inside {
+            plane.bilinear_inside(col, row)
+        } else {
+            plane.bilinear(col, row).unwrap_or(0.0)
+        }
+    };
+    let mut amplitude = at(m.col, m.row);
     for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-        amplitude += plane.bilinear(m.col + dx, m.row + dy).unwrap_or(0.0);
+        amplitude += at(m.col + dx, m.row + dy);
     }
     amplitude = amplitude / 5.0 - m.background;
     let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
@@ -750,4 +835,86 @@ fn strong_ring(r: &Reading) -> bool {
                     | Uncertainty::LowContrast
             )
         )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photopose_field::design::default_plate;
+    use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+    use photopose_render::{RenderOptions, Renderer};
+
+    /// The ring-part suppression looking up candidates by row suppresses
+    /// exactly what the plain one over all candidates does, on rendered
+    /// frames of the default plate (near, far, oblique) with ring parts.
+    #[test]
+    fn suppression_by_row_equals_the_plain_one() {
+        let cam = Camera::new(
+            Sensor {
+                width: 1300,
+                height: 1030,
+                pixel_size: 0.0067,
+            },
+            Interior {
+                c: 12.0,
+                x0: 0.021,
+                y0: -0.014,
+            },
+            Distortion::default(),
+        )
+        .unwrap();
+        let field = default_plate();
+        let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
+        let mut image = renderer.new_image();
+        let mut det = Detector::new(1300, 1030, DetectorOptions::for_field(&field)).unwrap();
+        let mut suppressed = 0;
+        for (k, &(d, tilt, az)) in [
+            (600.0, 45.0, 30.0),
+            (900.0, 10.0, 200.0),
+            (1300.0, 30.0, 100.0),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let (t, a) = (f64::to_radians(tilt), f64::to_radians(az));
+            let eye = Vector3::new(t.sin() * a.cos(), t.sin() * a.sin(), t.cos()) * d;
+            let e = Exterior::look_at(eye, Vector3::zeros(), Vector3::new(-a.sin(), a.cos(), 0.0))
+                .unwrap();
+            renderer
+                .set_options(RenderOptions {
+                    seed: k as u64 + 3,
+                    ..RenderOptions::default()
+                })
+                .unwrap();
+            renderer.render(&e, &mut image).unwrap();
+            det.detect(image.view()).unwrap();
+            // The candidates as they were before the suppression, and the
+            // rejections with odd shapes turned back.
+            let mut cands = det.candidates.clone();
+            cands.iter_mut().for_each(|c| c.suppressed = false);
+            let mut rejected = det.out.rejected.clone();
+            for r in rejected.iter_mut() {
+                if r.reason == RejectReason::CodeRing {
+                    r.reason = RejectReason::Shape;
+                }
+            }
+            let (mut plain, mut plain_rejected) = (cands.clone(), rejected.clone());
+            let blobs = det.labeller.blobs();
+            let mut order = Vec::new();
+            let mut by_row = Vec::new();
+            suppress_ring_parts(
+                blobs,
+                &mut cands,
+                &mut rejected,
+                &mut order,
+                Some(&mut by_row),
+            );
+            suppress_ring_parts(blobs, &mut plain, &mut plain_rejected, &mut order, None);
+            let flags = |c: &[Candidate]| c.iter().map(|c| c.suppressed).collect::<Vec<_>>();
+            assert_eq!(flags(&cands), flags(&plain), "frame {k}");
+            assert_eq!(rejected, plain_rejected, "frame {k}");
+            suppressed += flags(&plain).iter().filter(|&&s| s).count();
+        }
+        assert!(suppressed > 20, "ring parts were suppressed: {suppressed}");
+    }
 }

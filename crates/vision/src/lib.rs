@@ -104,7 +104,9 @@ pub struct DetectorOptions {
     pub noise_factor: f64,
     /// ... and at least this fraction of the saturation level above it.
     pub min_contrast: f64,
-    /// Histogram sub-sampling step.
+    /// Histogram sub-sampling step: rows and columns `≡ 1 (mod step)` of
+    /// the full frame. At [`threshold::PEAK_STEP`] (the default, 4) one pass
+    /// over those rows gives the histogram and the local levels' tile peaks.
     pub histogram_step: usize,
     /// Capacity: runs per frame.
     pub max_runs: usize,
@@ -179,7 +181,7 @@ impl Default for DetectorOptions {
             kurtosis_tolerance: 0.1,
             noise_factor: 8.0,
             min_contrast: 0.04,
-            histogram_step: 2,
+            histogram_step: 4,
             max_runs: 262_144,
             max_blobs: 32_768,
             max_targets: 4096,

@@ -195,19 +195,39 @@ impl<'a, P: Pixel> Plane<'a, P> {
     pub fn bilinear_inside(&self, col: f64, row: f64) -> f64 {
         let (w, h) = (self.width, self.height);
         // The cell's corner: `col − 0.5` rounded to an integer by adding
-        // 1.5 · 2⁵² (its low mantissa bits are the integer). That is the
-        // floor of `col`, or one less for an integer `col`, where the
-        // fraction is then 1 and the interpolation gives the same value.
-        // Clamped to the window's cells (in window offsets).
+        // 1.5 · 2⁵² (the sum is that integer plus 1.5 · 2⁵², and its low
+        // mantissa bits are the integer). That is the floor of `col`, or
+        // one less for an integer `col`, where the fraction is then 1 and
+        // the interpolation gives the same value. Clamped to the window's
+        // cells while still offset (two float instructions, no branches),
+        // then taken apart: the integer from the low bits, its value as a
+        // float by taking the offset off again (both exact).
         const ROUND: f64 = 6_755_399_441_055_744.0;
-        let ci = (((col - 0.5) + ROUND).to_bits() as u32 as usize)
-            .saturating_sub(self.col0)
-            .min(w - 2);
-        let ri = (((row - 0.5) + ROUND).to_bits() as u32 as usize)
-            .saturating_sub(self.row0)
-            .min(h - 2);
-        let fx = col - (self.col0 + ci) as f64;
-        let fy = row - (self.row0 + ri) as f64;
+        // (`if` rather than `f64::max`: one instruction each; NaN gives
+        // the lower bound.)
+        let clamp = |v: f64, lo: f64, hi: f64| {
+            let v = if v > lo { v } else { lo };
+            if v < hi {
+                v
+            } else {
+                hi
+            }
+        };
+        let (c0, r0) = (self.col0 as u32 as f64, self.row0 as u32 as f64);
+        let cc = clamp(
+            (col - 0.5) + ROUND,
+            ROUND + c0,
+            ROUND + c0 + w.saturating_sub(2) as u32 as f64,
+        );
+        let rc = clamp(
+            (row - 0.5) + ROUND,
+            ROUND + r0,
+            ROUND + r0 + h.saturating_sub(2) as u32 as f64,
+        );
+        let ci = (cc.to_bits() as u32).wrapping_sub(self.col0 as u32) as usize;
+        let ri = (rc.to_bits() as u32).wrapping_sub(self.row0 as u32) as usize;
+        let fx = col - (cc - ROUND);
+        let fy = row - (rc - ROUND);
         let s = self.stride;
         let i = ri * s + ci;
         // One range check for the 2 × 2 cell.
@@ -250,6 +270,57 @@ mod tests {
         assert_eq!(p.bilinear(2.1, 0.0), None);
         assert_eq!(p.bilinear(-0.1, 0.0), None);
         assert_eq!(u16::max_of(&[3, 900, 7]), 900);
+    }
+
+    /// The unchecked sampling equals the checked one bit for bit anywhere
+    /// in the hull of the pixel centres (integer, half-integer and other
+    /// positions; windows at even and odd origins), and outside it stays
+    /// a value, never a panic.
+    #[test]
+    fn bilinear_inside_equals_bilinear_in_the_hull() {
+        let (w, h) = (23usize, 17usize);
+        let data: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 4096) as u16).collect();
+        let mut x = 99u64;
+        let mut unit = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 20, 13), (2, 1, 7, 9), (3, 3, 2, 2)] {
+            let win = Plane {
+                data: &data[r0 * w + c0..],
+                width: ww,
+                height: hh,
+                stride: w,
+                col0: c0,
+                row0: r0,
+            };
+            let (cl, rl) = (win.last_col() as f64, win.last_row() as f64);
+            for k in 0..4000 {
+                let (mut c, mut r) = (
+                    c0 as f64 + unit() * (cl - c0 as f64),
+                    r0 as f64 + unit() * (rl - r0 as f64),
+                );
+                // Every fourth on the grid of half pixels.
+                if k % 4 == 0 {
+                    c = (2.0 * c).round() / 2.0;
+                    r = (2.0 * r).round() / 2.0;
+                }
+                let want = win.bilinear(c, r).unwrap();
+                assert_eq!(
+                    win.bilinear_inside(c, r).to_bits(),
+                    want.to_bits(),
+                    "{c} {r}"
+                );
+            }
+            for (c, r) in [
+                (-3.0, 0.5),
+                (cl + 4.0, rl + 9.0),
+                (f64::NAN, 1.0),
+                (1e12, -1e12),
+            ] {
+                let _ = win.bilinear_inside(c, r);
+            }
+        }
     }
 
     #[test]

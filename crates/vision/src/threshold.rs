@@ -5,20 +5,26 @@
 //! degenerate frames (all dark, saturated, nearly uniform).
 //!
 //! The histogram is taken on a sub-sampled grid (every `step`-th row and
-//! column, fixed in full-frame coordinates so that a window samples the
-//! same pixels as its frame): the threshold is a property of the grey-value
-//! distribution, and a quarter of the pixels estimate it as well as all of
-//! them. 16-bit values are binned down to at most [`MAX_BINS`] bins.
+//! column, rows and columns `≡ 1 (mod step)`, fixed in full-frame
+//! coordinates so that a window samples the same pixels as its frame): the
+//! threshold is a property of the grey-value distribution, and a sixteenth
+//! of the pixels (the default step 4) estimate it as well as all of them
+//! (Otsu's level within one 8-bit grey value of the level on every second
+//! row and column). Reading a quarter of the rows also spares the memory
+//! traffic of a frame not yet in the cache. 16-bit values are binned down
+//! to at most [`MAX_BINS`] bins.
 //!
 //! The local levels ([`LocalLevels`]): one level per tile of
 //! [`TILE`] × [`TILE`] pixels (aligned to the full frame), never above the
 //! global level and never below the noise floor, so that dim targets (far
 //! from the ring light) are found next to bright ones: where the brightest
 //! pixel near a tile (its own and its eight neighbours', sampled on every
-//! second row) rises less than half as high above the background as the
-//! frame's brightest, the tile's level drops to a share of that local
-//! peak's height above the background. Tiles with nothing above the
-//! (local) floor, or with bright surroundings, keep the global level.
+//! [`PEAK_STEP`]-th row, every column) rises less than half as high above
+//! the background as the frame's brightest, the tile's level drops to a
+//! share of that local peak's height above the background. Tiles with
+//! nothing above the (local) floor, or with bright surroundings, keep the
+//! global level. With the histogram on the same rows, one pass over them
+//! gives both ([`LocalLevels::histogram_and_peaks`]).
 
 use crate::pixel::{Pixel, Plane};
 
@@ -68,6 +74,12 @@ impl Threshold {
 /// pixels of a row lies in one tile).
 pub const TILE: usize = 64;
 const TILE_SHIFT: u32 = 6;
+
+/// The tile peaks are sampled on every `PEAK_STEP`-th row (full-frame rows
+/// `≡ 1 (mod PEAK_STEP)`, every column): a dot's bright core spans more
+/// rows than that, and the peak is taken over a tile and its neighbours.
+/// The default histogram step, so that one pass reads those rows once.
+pub const PEAK_STEP: usize = 4;
 
 /// One level per tile of a window: its buffers, sized once for the
 /// largest window.
@@ -151,16 +163,87 @@ impl LocalLevels {
     }
 
     /// The local levels of the window `plane`: per tile, the largest value
-    /// on every second row (full-frame rows `≡ 1 mod 2`) of the tile and
-    /// its eight neighbours is the local peak; where it rises less than half
-    /// as high above the background as the frame's brightest sampled pixel,
-    /// the level is `share` of the peak's height above the background,
-    /// between the local floor
-    /// (`floor` above the background: a lower noise multiple than the
-    /// global floor's, as only tiles with a peak above it are lowered) and
-    /// the global level; tiles whose peak does not rise above the local
-    /// floor keep the global level.
+    /// on every [`PEAK_STEP`]-th row (full-frame rows `≡ 1 mod PEAK_STEP`)
+    /// of the tile and its eight neighbours is the local peak; where it
+    /// rises less than half as high above the background as the frame's
+    /// brightest sampled pixel, the level is `share` of the peak's height
+    /// above the background, between the local floor (`floor` above the
+    /// background: a lower noise multiple than the global floor's, as only
+    /// tiles with a peak above it are lowered) and the global level; tiles
+    /// whose peak does not rise above the local floor keep the global level.
     pub fn compute<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        t: &ThresholdResult,
+        share: f64,
+        floor: f64,
+    ) {
+        self.sample_peaks(plane);
+        self.from_peaks(plane, t, share, floor);
+    }
+
+    /// The tile peaks of the window `plane` alone (a pass of its own over
+    /// the sampled rows).
+    pub fn sample_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>) {
+        self.layout(plane);
+        self.clear_peaks();
+        let mut row = plane.row0 + grid_start(plane.row0, PEAK_STEP);
+        while row <= plane.last_row() {
+            self.add_row_peaks(plane, row, plane.row(row));
+            row += PEAK_STEP;
+        }
+    }
+
+    /// The sub-sampled histogram of the window `plane` ([`histogram`], same
+    /// arguments and result) and its tile peaks ([`LocalLevels::sample_peaks`]);
+    /// when `step` is [`PEAK_STEP`] both come from one pass over the rows.
+    pub fn histogram_and_peaks<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        step: usize,
+        shift: u32,
+        max_value: u32,
+        hist: &mut [u32],
+    ) -> u32 {
+        if step != PEAK_STEP {
+            self.sample_peaks(plane);
+            return histogram(plane, step, shift, max_value, hist);
+        }
+        self.layout(plane);
+        self.clear_peaks();
+        histogram_rows(plane, step, shift, max_value, hist, |row, line| {
+            self.add_row_peaks(plane, row, line)
+        })
+    }
+
+    fn clear_peaks(&mut self) {
+        self.peaks.clear();
+        self.peaks.resize(self.cols * self.rows, 0);
+    }
+
+    /// Raises the peaks of the tiles that full-frame row `row` (`line`, the
+    /// window's pixels of it) crosses.
+    #[inline(always)]
+    fn add_row_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>, row: usize, line: &[P]) {
+        let tr = ((row >> TILE_SHIFT) - self.tile_row0) * self.cols;
+        let peaks = &mut self.peaks[tr..tr + self.cols];
+        let mut i = 0;
+        let mut tc = 0;
+        while i < line.len() {
+            let end = ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(line.len());
+            let m = P::max_of(&line[i..end]);
+            if let Some(p) = peaks.get_mut(tc) {
+                *p = (*p).max(m);
+            }
+            i = end;
+            tc += 1;
+        }
+    }
+
+    /// The levels from the peaks sampled last (on the same window `plane`,
+    /// by [`LocalLevels::sample_peaks`] or
+    /// [`LocalLevels::histogram_and_peaks`]); see [`LocalLevels::compute`].
+    pub fn from_peaks<P>(
         &mut self,
         plane: &Plane<'_, P>,
         t: &ThresholdResult,
@@ -171,29 +254,14 @@ impl LocalLevels {
         self.set_global(plane, t.threshold);
         let bg = t.background;
         let floor = ((bg + floor).ceil().max(0.0) as u32).min(global);
-        // Nothing can be lowered (and the peaks are not looked for) when
-        // the global level is the local floor already.
-        if t.status != FrameStatus::Normal || share <= 0.0 || floor >= global {
+        // Nothing can be lowered when the global level is the local floor
+        // already.
+        if t.status != FrameStatus::Normal
+            || share <= 0.0
+            || floor >= global
+            || self.peaks.len() != self.levels.len()
+        {
             return;
-        }
-        self.peaks.clear();
-        self.peaks.resize(self.cols * self.rows, 0);
-        let mut row = plane.row0 + grid_start(plane.row0, 2);
-        while row <= plane.last_row() {
-            let line = plane.row(row);
-            let tr = ((row >> TILE_SHIFT) - self.tile_row0) * self.cols;
-            let mut i = 0;
-            let mut tc = 0;
-            while i < line.len() {
-                let end =
-                    ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(line.len());
-                let m = P::max_of(&line[i..end]);
-                let p = &mut self.peaks[tr + tc];
-                *p = (*p).max(m);
-                i = end;
-                tc += 1;
-            }
-            row += 2;
         }
         for r in 0..self.rows {
             for c in 0..self.cols {
@@ -319,9 +387,10 @@ pub fn bin_shift(max_value: u32) -> u32 {
 }
 
 /// The first offset from `origin` of the sampling grid: full-frame rows
-/// (columns) `≡ step / 2 (mod step)`.
+/// (columns) `≡ 1 (mod step)` (every one for step 1).
 fn grid_start(origin: usize, step: usize) -> usize {
-    (step / 2 + step - origin % step) % step
+    let phase = (step > 1) as usize;
+    (phase + step - origin % step) % step
 }
 
 /// Fills `hist` (length ≥ `(max_value >> shift) + 1`) with the sub-sampled
@@ -333,17 +402,50 @@ pub fn histogram<P: Pixel>(
     max_value: u32,
     hist: &mut [u32],
 ) -> u32 {
+    histogram_rows(plane, step, shift, max_value, hist, |_, _| {})
+}
+
+/// [`histogram`], calling `row_seen(row, pixels)` with every sampled
+/// full-frame row (all its pixels in the window) as it goes.
+#[inline(always)]
+fn histogram_rows<P: Pixel>(
+    plane: &Plane<'_, P>,
+    step: usize,
+    shift: u32,
+    max_value: u32,
+    hist: &mut [u32],
+    row_seen: impl FnMut(usize, &[P]),
+) -> u32 {
     let step = step.max(1);
     let top = (max_value >> shift) as usize;
     hist.iter_mut().for_each(|h| *h = 0);
-    if shift == 0 && P::MAX <= 255 && top >= 255 && step == 2 {
-        return histogram_8bit_step2(plane, hist);
+    if shift == 0 && P::MAX <= 255 && top >= 255 {
+        match step {
+            2 => return histogram_8bit::<P, 2>(plane, hist, row_seen),
+            4 => return histogram_8bit::<P, 4>(plane, hist, row_seen),
+            _ => {}
+        }
     }
+    histogram_any(plane, step, shift, max_value, hist, row_seen)
+}
+
+/// [`histogram_rows`] for any pixel type, step and binning.
+#[inline(always)]
+fn histogram_any<P: Pixel>(
+    plane: &Plane<'_, P>,
+    step: usize,
+    shift: u32,
+    max_value: u32,
+    hist: &mut [u32],
+    mut row_seen: impl FnMut(usize, &[P]),
+) -> u32 {
+    let top = (max_value >> shift) as usize;
     let mut n = 0u32;
     let mut row = plane.row0 + grid_start(plane.row0, step);
     let col_start = grid_start(plane.col0, step);
     while row <= plane.last_row() {
         let line = plane.row(row);
+        row_seen(row, line);
         let mut col = col_start;
         while col < line.len() {
             let b = ((line[col].value().min(max_value)) >> shift) as usize;
@@ -356,30 +458,37 @@ pub fn histogram<P: Pixel>(
     n
 }
 
-/// [`histogram`] of 8-bit values (no binning, no clamping) on every
-/// second row and column: four interleaved partial histograms, so that
+/// [`histogram_rows`] of 8-bit values (no binning, no clamping) on every
+/// `STEP`-th row and column: four interleaved partial histograms, so that
 /// runs of equal grey values (the background) do not wait on each other's
 /// increments.
-fn histogram_8bit_step2<P: Pixel>(plane: &Plane<'_, P>, hist: &mut [u32]) -> u32 {
+#[inline(always)]
+fn histogram_8bit<P: Pixel, const STEP: usize>(
+    plane: &Plane<'_, P>,
+    hist: &mut [u32],
+    mut row_seen: impl FnMut(usize, &[P]),
+) -> u32 {
     let mut part = [[0u32; 256]; 4];
     let mut n = 0u32;
     let bin = |p: P| p.value() as u8 as usize;
-    let mut row = plane.row0 + grid_start(plane.row0, 2);
-    let col_start = grid_start(plane.col0, 2);
+    let mut row = plane.row0 + grid_start(plane.row0, STEP);
+    let col_start = grid_start(plane.col0, STEP);
     while row <= plane.last_row() {
-        let line = &plane.row(row)[col_start.min(plane.width)..];
-        let mut chunks = line.chunks_exact(8);
+        let whole = plane.row(row);
+        row_seen(row, whole);
+        let line = &whole[col_start.min(plane.width)..];
+        let mut chunks = line.chunks_exact(4 * STEP);
         for c in &mut chunks {
             part[0][bin(c[0])] += 1;
-            part[1][bin(c[2])] += 1;
-            part[2][bin(c[4])] += 1;
-            part[3][bin(c[6])] += 1;
+            part[1][bin(c[STEP])] += 1;
+            part[2][bin(c[2 * STEP])] += 1;
+            part[3][bin(c[3 * STEP])] += 1;
         }
-        for p in chunks.remainder().iter().step_by(2) {
+        for p in chunks.remainder().iter().step_by(STEP) {
             part[0][bin(*p)] += 1;
         }
-        n += line.len().div_ceil(2) as u32;
-        row += 2;
+        n += line.len().div_ceil(STEP) as u32;
+        row += STEP;
     }
     for (i, h) in hist.iter_mut().take(256).enumerate() {
         *h = part[0][i] + part[1][i] + part[2][i] + part[3][i];
@@ -648,6 +757,111 @@ mod tests {
         l.compute(&win, &t, 0.3, 10.0);
         assert_eq!(l.at(290, 160).level(), 32);
         assert_eq!(l.row(&win, 160).at(90).level(), 32);
+    }
+
+    #[test]
+    fn the_grid_of_every_fourth_row_and_column_is_fixed_in_the_frame() {
+        // 8-bit (the unrolled path) and 16-bit: rows and columns ≡ 1 (mod 4).
+        let (w, h) = (37usize, 23usize);
+        let data: Vec<u16> = (0..(w * h) as u16).map(|v| v % 251).collect();
+        let data8: Vec<u8> = data.iter().map(|&v| v as u8).collect();
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 30, 20), (2, 1, 33, 17), (5, 5, 1, 1)] {
+            let mut want = vec![0u32; MAX_BINS];
+            let mut m = 0;
+            for r in (r0..r0 + hh).filter(|r| r % 4 == 1) {
+                for c in (c0..c0 + ww).filter(|c| c % 4 == 1) {
+                    want[data[r * w + c] as usize] += 1;
+                    m += 1;
+                }
+            }
+            let mut got = vec![0u32; MAX_BINS];
+            let start = r0 * w + c0;
+            let n = histogram(
+                &Plane {
+                    data: &data8[start..],
+                    width: ww,
+                    height: hh,
+                    stride: w,
+                    col0: c0,
+                    row0: r0,
+                },
+                4,
+                0,
+                255,
+                &mut got,
+            );
+            assert_eq!((n, &got), (m, &want), "8-bit window at ({c0}, {r0})");
+            let n = histogram(
+                &Plane {
+                    data: &data[start..],
+                    width: ww,
+                    height: hh,
+                    stride: w,
+                    col0: c0,
+                    row0: r0,
+                },
+                4,
+                0,
+                4095,
+                &mut got,
+            );
+            assert_eq!((n, &got), (m, &want), "16-bit window at ({c0}, {r0})");
+        }
+    }
+
+    /// The one pass over the rows (histogram and tile peaks) gives what
+    /// the two plain passes give, for 8- and 16-bit windows at any origin.
+    #[test]
+    fn histogram_and_peaks_in_one_pass_equal_the_plain_passes() {
+        let (w, h) = (300usize, 200usize);
+        // Pseudo-random grey values with bright patches.
+        let mut x = 12345u32;
+        let mut v16: Vec<u16> = (0..w * h)
+            .map(|_| {
+                x = x.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                (x >> 20) as u16
+            })
+            .collect();
+        for (c0, r0) in [(30usize, 40usize), (170, 130), (250, 10)] {
+            for r in r0..r0 + 7 {
+                for c in c0..c0 + 9 {
+                    v16[r * w + c] = 4000 - (r + c) as u16;
+                }
+            }
+        }
+        let v8: Vec<u8> = v16.iter().map(|&v| (v >> 4) as u8).collect();
+        fn check<P: Pixel>(data: &[P], w: usize, h: usize, max: u32, what: &str) {
+            let shift = bin_shift(max);
+            for step in [1usize, 2, 3, 4, 5] {
+                for (c0, r0, ww, hh) in [(0, 0, w, h), (3, 5, 200, 150), (64, 63, 130, 70)] {
+                    let plane = Plane {
+                        data: &data[r0 * w + c0..],
+                        width: ww,
+                        height: hh,
+                        stride: w,
+                        col0: c0,
+                        row0: r0,
+                    };
+                    let mut plain = LocalLevels::new(w, h);
+                    let mut fused = LocalLevels::new(w, h);
+                    let (mut h1, mut h2) = (vec![7u32; MAX_BINS], vec![9u32; MAX_BINS]);
+                    let n1 = histogram(&plane, step, shift, max, &mut h1);
+                    plain.sample_peaks(&plane);
+                    let n2 = fused.histogram_and_peaks(&plane, step, shift, max, &mut h2);
+                    let at = format!("{what}, step {step}, window at ({c0}, {r0})");
+                    assert_eq!((n1, &h1), (n2, &h2), "{at}");
+                    assert_eq!(plain.peaks, fused.peaks, "{at}");
+                    assert!(plain.peaks.iter().any(|&p| p > 0), "{at}");
+                    let t = threshold(&h1, n1, shift, max, &P);
+                    plain.from_peaks(&plane, &t, 0.3, 2.0);
+                    fused.compute(&plane, &t, 0.3, 2.0);
+                    assert_eq!(plain.levels, fused.levels, "{at}");
+                }
+            }
+        }
+        check(&v8, w, h, 255, "8-bit");
+        check(&v16, w, h, 4095, "12-bit");
+        check(&v16, w, h, 65535, "16-bit");
     }
 
     #[test]
