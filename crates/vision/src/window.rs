@@ -322,25 +322,12 @@ fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>)
     }
 }
 
-/// The sum of one pixel per 64 bytes of every row of the square of
-/// half-width `half` around `e` and of its last column (see
-/// [`WindowMeasurer::warm`]).
+/// [`Plane::touch`] of the square of half-width `half` around `e`.
 fn touch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) -> u32 {
     let Some(plane) = sub_plane(image, data, e.col, e.row, half) else {
         return 0;
     };
-    let step = (64 / std::mem::size_of::<P>()).max(1);
-    let mut sum = 0u32;
-    for row in plane.row0..=plane.last_row() {
-        let line = plane.row(row);
-        for p in line.iter().step_by(step) {
-            sum = sum.wrapping_add(p.value());
-        }
-        if let Some(p) = line.last() {
-            sum = sum.wrapping_add(p.value());
-        }
-    }
-    sum
+    plane.touch(plane.col0, plane.row0, plane.last_col(), plane.last_row())
 }
 
 /// The square of half-width `half` px around `(col, row)`, clipped to
