@@ -158,6 +158,10 @@ impl Resection {
         self.status.clear();
         self.status.resize(n, Status::Used);
         self.rejected.clear();
+        // Room for every observation to be rejected, taken with the status
+        // on the first solve: a later frame's first rejection must not
+        // allocate (no allocation per frame once warm).
+        self.rejected.reserve(n);
     }
 
     /// Full resection: closed form inside hypothesise-and-verify, refinement,

@@ -89,6 +89,8 @@ pub struct LocalLevels {
     levels: Vec<u32>,
     /// Sampled peak per tile.
     peaks: Vec<u32>,
+    /// Per tile, the largest peak of it and its left and right neighbours.
+    across: Vec<u32>,
     /// Full-frame tile index of the window's first tile column and row.
     tile_col0: usize,
     tile_row0: usize,
@@ -138,6 +140,7 @@ impl LocalLevels {
         LocalLevels {
             levels: Vec::with_capacity(n),
             peaks: Vec::with_capacity(n),
+            across: Vec::with_capacity(n),
             tile_col0: 0,
             tile_row0: 0,
             cols: 0,
@@ -263,14 +266,23 @@ impl LocalLevels {
         {
             return;
         }
-        for r in 0..self.rows {
-            for c in 0..self.cols {
-                let mut peak = 0;
-                for rr in r.saturating_sub(1)..(r + 2).min(self.rows) {
-                    for cc in c.saturating_sub(1)..(c + 2).min(self.cols) {
-                        peak = peak.max(self.peaks[rr * self.cols + cc]);
-                    }
-                }
+        // The peak of a tile's surroundings (its own and its eight
+        // neighbours'): the largest along each row of tiles first, then of
+        // those along the columns.
+        let (rows, cols) = (self.rows, self.cols);
+        self.across.clear();
+        for p in self.peaks.chunks_exact(cols) {
+            for c in 0..cols {
+                let left = p[c.saturating_sub(1)];
+                let right = p[(c + 1).min(cols - 1)];
+                self.across.push(p[c].max(left).max(right));
+            }
+        }
+        for r in 0..rows {
+            let (up, down) = (r.saturating_sub(1) * cols, (r + 1).min(rows - 1) * cols);
+            for c in 0..cols {
+                let a = &self.across;
+                let peak = a[r * cols + c].max(a[up + c]).max(a[down + c]);
                 // Only surroundings that peak at less than half the height
                 // of the frame's brightest sampled pixel: elsewhere the
                 // global level serves (and the frame is labelled exactly
