@@ -8,40 +8,17 @@
 
 use photopose_field::design::default_plate;
 use photopose_geometry::rng::SplitMix64;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_locate::{LocateOptions, Locator};
 use photopose_render::{RenderOptions, Renderer};
-
-/// The camera of `config/camera.toml`.
-fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .expect("camera")
-}
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let frames: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(8);
     let rounds: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(2);
     let field = default_plate();
-    let mut renderer = Renderer::new(camera(), &field, RenderOptions::default()).expect("renderer");
+    let mut renderer =
+        Renderer::new(Camera::reference(), &field, RenderOptions::default()).expect("renderer");
     let mut rng = SplitMix64::new(7);
     let mut images = Vec::new();
     for k in 0..frames {
@@ -66,7 +43,8 @@ fn main() {
         renderer.render(&e, &mut img).expect("render");
         images.push(img);
     }
-    let mut locator = Locator::new(camera(), field, LocateOptions::default()).expect("locator");
+    let mut locator =
+        Locator::new(Camera::reference(), field, LocateOptions::default()).expect("locator");
     let (mut ok, mut check) = (0, 0.0f64);
     for _ in 0..rounds {
         for img in &images {

@@ -6,41 +6,18 @@
 //! in a release build. Arguments: frames (default 20), rounds (default 200).
 
 use photopose_field::design::default_plate;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_locate::track::{Motion, Prior, TrackOptions};
 use photopose_locate::{LocateOptions, Locator};
 use photopose_render::{RenderOptions, Renderer};
-
-/// The camera of `config/camera.toml`.
-fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .expect("camera")
-}
 
 fn main() {
     let mut args = std::env::args().skip(1);
     let frames: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(20);
     let rounds: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(200);
     let field = default_plate();
-    let mut renderer = Renderer::new(camera(), &field, RenderOptions::default()).expect("renderer");
+    let mut renderer =
+        Renderer::new(Camera::reference(), &field, RenderOptions::default()).expect("renderer");
     let mut images = Vec::new();
     for k in 0..frames {
         let a = k as f64 * 0.001;
@@ -61,7 +38,7 @@ fn main() {
         renderer.render(&e, &mut img).expect("render");
         images.push(img);
     }
-    let cam = camera();
+    let cam = Camera::reference();
     let (c, px) = (cam.interior.c, cam.sensor.pixel_size);
     let mut locator = Locator::new(cam, field, LocateOptions::default()).expect("locator");
     let first = locator.locate(images[0].view()).expect("locate");

@@ -841,7 +841,7 @@ fn strong_ring(r: &Reading) -> bool {
 mod tests {
     use super::*;
     use photopose_field::design::default_plate;
-    use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+    use photopose_geometry::{Camera, Exterior, Vector3};
     use photopose_render::{RenderOptions, Renderer};
 
     /// The ring-part suppression looking up candidates by row suppresses
@@ -849,20 +849,7 @@ mod tests {
     /// frames of the default plate (near, far, oblique) with ring parts.
     #[test]
     fn suppression_by_row_equals_the_plain_one() {
-        let cam = Camera::new(
-            Sensor {
-                width: 1300,
-                height: 1030,
-                pixel_size: 0.0067,
-            },
-            Interior {
-                c: 12.0,
-                x0: 0.021,
-                y0: -0.014,
-            },
-            Distortion::default(),
-        )
-        .unwrap();
+        let cam = Camera::reference();
         let field = default_plate();
         let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
         let mut image = renderer.new_image();

@@ -88,6 +88,11 @@ impl SeedLabeller {
     /// The blob holding full-frame pixel `(col, row)` of the window, if one
     /// was grown.
     pub fn blob_at(&self, col: usize, row: usize) -> Option<usize> {
+        self.run_at(col, row).map(|k| self.owner[k] as usize)
+    }
+
+    /// The run found so far that holds full-frame pixel `(col, row)`.
+    fn run_at(&self, col: usize, row: usize) -> Option<usize> {
         let r = row.checked_sub(self.row0)?;
         let mut k = *self.head.get(r)?;
         let col = col as u32;
@@ -97,7 +102,7 @@ impl SeedLabeller {
                 return None;
             }
             if col < run.end {
-                return Some(self.owner[k as usize] as usize);
+                return Some(k as usize);
             }
             k = self.next[k as usize];
         }
@@ -220,19 +225,7 @@ impl SeedLabeller {
     /// One past the last column of the run of row `row` holding column
     /// `col`, if one was found.
     fn run_end_at(&self, col: usize, row: usize) -> Option<usize> {
-        let mut k = self.head[row - self.row0];
-        let col = col as u32;
-        while k != NONE {
-            let run = &self.runs[k as usize];
-            if run.start > col {
-                return None;
-            }
-            if col < run.end {
-                return Some(run.end as usize);
-            }
-            k = self.next[k as usize];
-        }
-        None
+        self.run_at(col, row).map(|k| self.runs[k].end as usize)
     }
 
     /// Adds the maximal run of window row `row` (full frame) through window

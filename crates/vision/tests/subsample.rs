@@ -8,7 +8,7 @@
 use photopose_field::design::default_plate;
 use photopose_frame::Image;
 use photopose_geometry::rng::SplitMix64;
-use photopose_geometry::{Camera, Distortion, Exterior, Interior, Sensor, Vector3};
+use photopose_geometry::{Camera, Exterior, Vector3};
 use photopose_render::{RenderOptions, Renderer};
 use photopose_vision::{Detector, DetectorOptions, FrameStatus};
 
@@ -21,33 +21,9 @@ fn pose(distance: f64, tilt_deg: f64, az_deg: f64, (x, y): (f64, f64), roll: f64
     Exterior::look_at(eye, aim, Vector3::new(roll.cos(), roll.sin(), 0.0)).unwrap()
 }
 
-/// The default camera (`config/camera.toml`).
-fn camera() -> Camera {
-    Camera::new(
-        Sensor {
-            width: 1300,
-            height: 1030,
-            pixel_size: 0.0067,
-        },
-        Interior {
-            c: 12.0,
-            x0: 0.021,
-            y0: -0.014,
-        },
-        Distortion {
-            k1: -1.2e-4,
-            k2: 3.0e-7,
-            p1: 5.0e-6,
-            p2: -3.0e-6,
-            ..Distortion::default()
-        },
-    )
-    .unwrap()
-}
-
 #[test]
 fn every_fourth_row_and_column_give_the_threshold_of_every_second() {
-    let cam = camera();
+    let cam = Camera::reference();
     let field = default_plate();
     let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
     // The poses of `photopose bench` (seeded as in its driver).
