@@ -173,8 +173,12 @@ impl Locator {
                 coded,
                 read_code: false,
             };
-            self.window.warm(&image, &expected);
             self.windows.push((fi, expected, spacing, ideal));
+        }
+        // (A loop of its own: the loads of all windows follow one another,
+        // and the projections above overlap from target to target.)
+        for (_, expected, _, _) in &self.windows {
+            self.window.warm(&image, expected);
         }
         for &(fi, mut expected, spacing, ideal) in &self.windows {
             let t = &self.field.targets()[fi];
