@@ -116,9 +116,8 @@ struct Conic {
     bx: f64,
 }
 
-/// Rows whose spans [`measure_weighted`] computes ahead (a dot of up to
-/// 40 rows with its margins); taller windows compute them row by row.
-const PRE_ROWS: usize = 48;
+/// Rows whose spans [`measure_weighted`] computes ahead at a time.
+const SPAN_BLOCK: usize = 8;
 
 /// An empty inclusive range.
 const EMPTY: (i64, i64) = (1, 0);
@@ -339,27 +338,23 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     let mut nm = [0.0f64; 6];
     let cc = round_i64(bx);
     let d0 = cc as f64 - bx;
-    // The rows' spans first, in a loop of their own: each needs two square
-    // roots, whose latency the long row loop below would wait for one row
-    // after the other; here the rows' roots overlap.
-    let pre = r1 >= r0 && r1 - r0 < PRE_ROWS;
-    let mut spans = [[0i32; 4]; PRE_ROWS];
-    if pre {
-        for (sp, row) in spans.iter_mut().zip(r0..=r1) {
-            let ((ia, ib), (oa, ob)) = q.spans(row as i64 as f64 - by, s_in, s_out);
-            *sp = [ia as i32, ib as i32, oa as i32, ob as i32];
-        }
-    }
+    // The rows' spans a block of rows ahead, in a loop of their own: each
+    // needs two square roots, whose latency the long row loop below would
+    // wait for one row after the other; computed together, the rows'
+    // roots overlap.
+    let mut spans = [[0i32; 4]; SPAN_BLOCK];
     for row in r0..=r1 {
+        let k = (row - r0) % SPAN_BLOCK;
+        if k == 0 {
+            for (sp, ahead) in spans.iter_mut().zip(row..=r1) {
+                let ((ia, ib), (oa, ob)) = q.spans(ahead as i64 as f64 - by, s_in, s_out);
+                *sp = [ia as i32, ib as i32, oa as i32, ob as i32];
+            }
+        }
         // (Through i64: one instruction on x86-64, unlike usize → f64.)
         let row_f = row as i64 as f64;
         let dy = row_f - by;
-        let ((ia, ib), (oa, ob)) = if pre {
-            let [ia, ib, oa, ob] = spans[row - r0].map(i64::from);
-            ((ia, ib), (oa, ob))
-        } else {
-            q.spans(dy, s_in, s_out)
-        };
+        let [ia, ib, oa, ob] = spans[k].map(i64::from);
         let (oa, ob) = (oa.max(c0), ob.min(c1));
         if oa > ob {
             continue;
