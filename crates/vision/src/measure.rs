@@ -163,8 +163,10 @@ fn sum_sq_to(m: i64) -> i64 {
 #[inline]
 fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
     const SMALL: usize = 256;
-    if (max as usize) < SMALL {
-        let mut count = [0u16; SMALL];
+    // (Counts in bytes while no count can pass 255: a table of 256 bytes
+    // is cleared with a few stores, 512 would be a library call.)
+    if (max as usize) < SMALL && values.len() <= u8::MAX as usize {
+        let mut count = [0u8; SMALL];
         for &v in values.iter() {
             count[v as usize & (SMALL - 1)] += 1;
         }
@@ -472,6 +474,13 @@ mod tests {
 
     #[test]
     fn quantile_by_counting_is_the_order_statistic() {
+        // 255 values or fewer are counted in bytes; more are selected.
+        let mut few: Vec<u32> = (0..255).map(|i| (i * 37 % 7) as u32).collect();
+        for k in [0, 1, 77, 150, 254] {
+            let mut sorted = few.clone();
+            sorted.sort_unstable();
+            assert_eq!(quantile(&mut few, k, 100), sorted[k]);
+        }
         let mut v: Vec<u32> = (0..300).map(|i| (i * 37 % 101) as u32).collect();
         for k in [0, 1, 77, 150, 299] {
             let mut sorted = v.clone();
