@@ -634,7 +634,7 @@ pub(crate) fn centroid<P: Pixel>(
     o: &DetectorOptions,
     max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    let m = centre_in(
+    tested_centre(
         plane,
         blob,
         t,
@@ -643,21 +643,44 @@ pub(crate) fn centroid<P: Pixel>(
         measure::GROW,
         measure::MAX_SCALE,
     )
-    .ok_or(RejectReason::NoSignal)?;
-    shape_test(&m, blob, o)?;
-    Ok(m)
 }
 
-/// The fourth-moment test of stage 4: a filled ellipse's.
-pub(crate) fn shape_test(
-    m: &Measurement,
+/// [`centroid`] in the window of a coded target's dot that keeps clear of
+/// its ring ([`coded_centre`] with the fourth-moment test).
+pub(crate) fn coded_centroid<P: Pixel>(
+    plane: &Plane<'_, P>,
     blob: &Blob,
+    t: &ThresholdResult,
     o: &DetectorOptions,
-) -> Result<(), RejectReason> {
+    max_value: u32,
+) -> Result<Measurement, RejectReason> {
+    tested_centre(
+        plane,
+        blob,
+        t,
+        o,
+        max_value,
+        measure::CODED_GROW,
+        measure::CODED_MAX_SCALE,
+    )
+}
+
+/// [`centre_in`] and the fourth-moment test (a filled ellipse's).
+fn tested_centre<P: Pixel>(
+    plane: &Plane<'_, P>,
+    blob: &Blob,
+    t: &ThresholdResult,
+    o: &DetectorOptions,
+    max_value: u32,
+    grow: f64,
+    max_scale: f64,
+) -> Result<Measurement, RejectReason> {
+    let m =
+        centre_in(plane, blob, t, o, max_value, grow, max_scale).ok_or(RejectReason::NoSignal)?;
     if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
         return Err(RejectReason::Shape);
     }
-    Ok(())
+    Ok(m)
 }
 
 /// The centre of a coded target's dot, measured again in a window that

@@ -19,7 +19,7 @@
 //! overlapping.
 
 use crate::code::{CodeParams, Gap, RingTables};
-use crate::detector::{blob_tests, centroid, coded_centre, read_ring, shape_test};
+use crate::detector::{blob_tests, centroid, coded_centre, coded_centroid, read_ring};
 use crate::label::Blob;
 use crate::measure;
 use crate::num::{ceil_i64, floor_i64, round_i64};
@@ -51,6 +51,14 @@ pub struct Expected {
     pub coded: bool,
     /// Read the ring of a coded target too (to confirm its identity).
     pub read_code: bool,
+}
+
+impl Expected {
+    /// Half-width of the core window, px: every blob whose centre may lie
+    /// inside the gate, whole.
+    fn core_half(&self) -> f64 {
+        self.gate_px + 1.5 * self.radius_px.max(1.0) + 3.0
+    }
 }
 
 /// A target measured in its window.
@@ -138,7 +146,7 @@ impl WindowMeasurer {
             return;
         }
         // The core window (see `run`), which holds the rows the centroid reads.
-        let half = e.gate_px + 1.5 * e.radius_px.max(1.0) + 3.0;
+        let half = e.core_half();
         let sum = match image.pixels() {
             ViewPixels::Mono8(data) => touch(image, data, e, half),
             ViewPixels::Mono16(data) => touch(image, data, e, half),
@@ -161,7 +169,7 @@ impl WindowMeasurer {
         // The core holds every blob whose centre may be inside the gate,
         // whole; the outer window the centroid's window (the box grown by
         // `GROW`, scaled ellipse) and its dark ring (up to 1.8 times it).
-        let core = e.gate_px + 1.5 * radius + 3.0;
+        let core = e.core_half();
         let outer = e.gate_px + 2.0 * (1.9 * radius * measure::MAX_SCALE) + measure::GROW + 4.0;
         let Some(outer_plane) = sub_plane(image, data, e.col, e.row, outer) else {
             return WindowOutcome::Missing;
@@ -171,7 +179,7 @@ impl WindowMeasurer {
         };
         // Every blob with a pixel within the gate and one pixel more: the
         // pixel nearest the prediction first (it mostly lies in the
-        // target's blob, which then holds most of the others).
+        // target's blob, whose runs the scan of the gate then steps over).
         self.seeds.start(&core_plane);
         let reach = e.gate_px + 1.0;
         let (th, seeds) = (t.threshold, &mut self.seeds);
@@ -261,14 +269,10 @@ impl WindowMeasurer {
             // first with the plain window to read the ring (its fourth
             // moment, tested here on this window, is the same but for the
             // rare pixel the smaller window leaves out).
-            let m = match coded_centre(&outer_plane, &blob, t, &self.options, max_value) {
-                Some(m) => m,
-                None => return WindowOutcome::Rejected(RejectReason::NoSignal),
+            return match coded_centroid(&outer_plane, &blob, t, &self.options, max_value) {
+                Ok(m) => WindowOutcome::Found(found_target(&m, &blob, None)),
+                Err(reason) => WindowOutcome::Rejected(reason),
             };
-            if let Err(reason) = shape_test(&m, &blob, &self.options) {
-                return WindowOutcome::Rejected(reason);
-            }
-            return WindowOutcome::Found(found_target(&m, &blob, None));
         }
         let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
             Ok(m) => m,
