@@ -287,7 +287,7 @@ fn grab(args: GrabArgs) -> Result<ExitCode> {
                 }
             }
             taken += 1;
-            let image = &slot.image;
+            let image = slot.image();
             let path = args.out.join(format!("still-{taken:03}.pgm"));
             photopose_formats::image::save_image(&path, image)?;
             let (w, h) = (image.width(), image.height());

@@ -55,7 +55,7 @@ pub fn run(args: Args) -> Result<ExitCode> {
     while !stop.load(Ordering::Acquire) && args.frames.is_none_or(|max| n < max) {
         match source.next_frame(&mut slot, Duration::from_millis(200)) {
             Ok(()) => {
-                recorder.write(slot.meta, &slot.image)?;
+                recorder.write(slot.meta, slot.image())?;
                 n += 1;
                 bar.inc(1);
             }

@@ -308,7 +308,7 @@ mod tests {
         let mut last = None;
         while let Ok(h) = c.recv_timeout(Duration::from_secs(5)) {
             assert_eq!(
-                CountingSource::<SystemClock>::seq_of(&h.image),
+                CountingSource::<SystemClock>::seq_of(h.image()),
                 Some(h.meta.seq)
             );
             assert!(last.is_none_or(|l| h.meta.seq > l));

@@ -55,10 +55,18 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// One frame buffer: the pixels and what the source knows about them.
+///
+/// A source either writes the frame into the slot's own buffer
+/// ([`Slot::image_mut`], allocated when the ring is built) or, when it
+/// already holds the frame whole and unchanging (a replayed recording),
+/// lends it ([`Slot::share`]): the slot then holds a counted reference and
+/// nothing is copied. Readers see either through [`Slot::image`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Slot {
-    /// The pixels (allocated when the ring is built).
-    pub image: Image,
+    /// The slot's own pixels (allocated when the ring is built).
+    image: Image,
+    /// A frame lent by the source instead (shown while set).
+    shared: Option<Arc<Image>>,
     /// Sequence number, camera timestamp, host time.
     pub meta: FrameMeta,
     /// Admission number, set by [`Producer::publish`] when the frame is
@@ -74,10 +82,36 @@ impl Slot {
     pub fn new(image: Image) -> Self {
         Slot {
             image,
+            shared: None,
             meta: FrameMeta::default(),
             order: 0,
             received: Instant::now(),
         }
+    }
+
+    /// The frame: the one lent by [`Slot::share`] if any, else the slot's
+    /// own pixels.
+    pub fn image(&self) -> &Image {
+        self.shared.as_deref().unwrap_or(&self.image)
+    }
+
+    /// The slot's own pixels, to be written (ends any lent frame; a source
+    /// may also replace the image, e.g. to change its size).
+    pub fn image_mut(&mut self) -> &mut Image {
+        self.shared = None;
+        &mut self.image
+    }
+
+    /// Lends `frame` to the slot instead of copying it into its own pixels
+    /// (a counted reference: no allocation, no copy). It is dropped when a
+    /// source next writes the slot or lends another frame.
+    pub fn share(&mut self, frame: Arc<Image>) {
+        self.shared = Some(frame);
+    }
+
+    /// Whether the frame is lent ([`Slot::share`]) rather than the slot's own.
+    pub fn is_shared(&self) -> bool {
+        self.shared.is_some()
     }
 }
 
@@ -477,6 +511,25 @@ mod tests {
         Ring::build(n, policy, || Image::new_mono8(4, 3))
     }
 
+    #[test]
+    fn a_slot_shows_a_lent_frame_until_it_is_written() {
+        let mut slot = Slot::new(Image::new_mono8(4, 3));
+        let mut lent = Image::new_mono8(4, 3);
+        if let photopose_frame::Pixels::Mono8(v) = lent.pixels_mut() {
+            v[5] = 200;
+        }
+        let lent = Arc::new(lent);
+        slot.share(Arc::clone(&lent));
+        assert!(slot.is_shared());
+        assert_eq!(slot.image(), &*lent);
+        assert_eq!(Arc::strong_count(&lent), 2);
+        // Writing the slot ends the loan: the slot's own (black) pixels.
+        slot.image_mut();
+        assert!(!slot.is_shared());
+        assert_eq!(Arc::strong_count(&lent), 1);
+        assert_eq!(slot.image(), &Image::new_mono8(4, 3));
+    }
+
     fn publish_seq(p: &mut Producer, seq: u64) -> Published {
         p.slot_mut().meta.seq = seq;
         p.publish()
@@ -637,7 +690,7 @@ mod tests {
         for s in 0..50 {
             publish_seq(&mut p, s);
             let h = c.try_recv().unwrap();
-            if let photopose_frame::Pixels::Mono8(v) = h.image.pixels() {
+            if let photopose_frame::Pixels::Mono8(v) = h.image().pixels() {
                 ptrs.insert(v.as_ptr() as usize);
             }
         }

@@ -311,13 +311,14 @@ impl<C: Clock> FrameSource for CountingSource<C> {
             }
             self.next_due = Some(due + period);
         }
-        if slot.image.width() != self.width
-            || slot.image.height() != self.height
-            || !matches!(slot.image.pixels(), photopose_frame::Pixels::Mono8(_))
+        let image = slot.image_mut();
+        if image.width() != self.width
+            || image.height() != self.height
+            || !matches!(image.pixels(), photopose_frame::Pixels::Mono8(_))
         {
-            slot.image = Image::new_mono8(self.width, self.height);
+            *image = Image::new_mono8(self.width, self.height);
         }
-        if let photopose_frame::Pixels::Mono8(v) = slot.image.pixels_mut() {
+        if let photopose_frame::Pixels::Mono8(v) = image.pixels_mut() {
             v[..8].copy_from_slice(&self.next_seq.to_le_bytes());
         }
         slot.meta.seq = self.next_seq;

@@ -150,7 +150,7 @@ fn streams_without_loss() {
                 let mut stamps = Vec::new();
                 while !stop.load(Ordering::Acquire) {
                     if let Ok(f) = consumer.recv_timeout(Duration::from_millis(100)) {
-                        assert_eq!((f.image.width(), f.image.height()), (512, 512));
+                        assert_eq!((f.image().width(), f.image().height()), (512, 512));
                         seqs.push(f.meta.seq);
                         stamps.push(f.meta.camera_time_ns);
                     }
@@ -221,8 +221,8 @@ fn streams_mono16() {
         match source.next_frame(&mut slot, Duration::from_millis(200)) {
             Ok(()) => {
                 got += 1;
-                assert!(matches!(slot.image.pixels(), Pixels::Mono16(_)));
-                assert_eq!((slot.image.width(), slot.image.height()), (512, 512));
+                assert!(matches!(slot.image().pixels(), Pixels::Mono16(_)));
+                assert_eq!((slot.image().width(), slot.image().height()), (512, 512));
             }
             Err(e) => assert!(!e.is_fatal(), "{e}"),
         }
@@ -314,7 +314,7 @@ fn stamps_exposure_instants() {
 }
 
 fn slot_ptr(slot: &Slot) -> usize {
-    match slot.image.pixels() {
+    match slot.image().pixels() {
         Pixels::Mono8(v) => v.as_ptr() as usize,
         Pixels::Mono16(v) => v.as_ptr() as usize,
     }
@@ -472,23 +472,23 @@ fn serves_given_images_in_process() {
     };
     for _ in 0..10 {
         next(&mut source, &mut slot);
-        assert_eq!(slot.image, first, "frame carries the given image");
+        assert_eq!(*slot.image(), first, "frame carries the given image");
     }
     let second = pattern(2);
     camera.set_image(&second).unwrap();
     let mut switched = false;
     for _ in 0..30 {
         next(&mut source, &mut slot);
-        if slot.image == second {
+        if *slot.image() == second {
             switched = true;
             break;
         }
-        assert_eq!(slot.image, first);
+        assert_eq!(*slot.image(), first);
     }
     assert!(switched, "the new image reaches the stream");
     for _ in 0..5 {
         next(&mut source, &mut slot);
-        assert_eq!(slot.image, second);
+        assert_eq!(*slot.image(), second);
     }
     source.stop();
     let stats = source.stats();

@@ -64,7 +64,7 @@ fn hammer(policy: Overflow, capacity: usize, consumers: usize, frames: u64, slow
                         };
                         match next {
                             Ok(f) => {
-                                assert_eq!(stamped(&f.image), f.meta.seq, "pixels match metadata");
+                                assert_eq!(stamped(f.image()), f.meta.seq, "pixels match metadata");
                                 if let Some(&last) = seen.last() {
                                     assert!(
                                         f.meta.seq > last,
@@ -99,7 +99,7 @@ fn hammer(policy: Overflow, capacity: usize, consumers: usize, frames: u64, slow
     for seq in 0..frames {
         let slot = producer.slot_mut();
         slot.meta.seq = seq;
-        stamp(&mut slot.image, seq);
+        stamp(slot.image_mut(), seq);
         producer.publish();
         // A camera's pace, roughly: let the consumers interleave.
         let until = std::time::Instant::now() + Duration::from_nanos(rng.next() % 4_000);

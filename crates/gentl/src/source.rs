@@ -154,7 +154,7 @@ impl GentlSource {
                 reason: "not streaming".into(),
             });
         };
-        let image = &mut slot.image;
+        let image = slot.image_mut();
         let took = live
             .device
             .next(timeout, |d: &Delivered, bytes: &[u8]| take(d, bytes, image));
@@ -177,7 +177,7 @@ impl GentlSource {
         match took {
             Took::Frame { resized } => {
                 if resized && !self.resized_logged {
-                    tracing::warn!(source = %self.name, width = slot.image.width(), height = slot.image.height(),
+                    tracing::warn!(source = %self.name, width = slot.image().width(), height = slot.image().height(),
                         "frame size differs from the ring's slots: slot reallocated (size the ring from the camera)");
                     self.resized_logged = true;
                 }

@@ -82,8 +82,8 @@ fn frames_carry_ids_and_timestamps_and_nothing_leaks_or_allocates() {
     assert_eq!(first.camera_frame_id, 1);
     assert_eq!(first.camera_time_ns, producer::timestamp_ns(1));
     assert!(first.host_mono_ns > 0 && first.host_time_ns > 0);
-    assert!(matches!(slot.image.pixels(), Pixels::Mono8(_)));
-    assert_eq!((slot.image.width(), slot.image.height()), (w, h));
+    assert!(matches!(slot.image().pixels(), Pixels::Mono8(_)));
+    assert_eq!((slot.image().width(), slot.image().height()), (w, h));
     // Warm: the next frames allocate nothing on this thread.
     let before = photopose_testkit::allocations();
     for k in 2..=4u64 {

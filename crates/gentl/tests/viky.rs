@@ -60,8 +60,8 @@ fn acquire(source: &mut GentlSource, slot: &mut Slot, n: usize) -> Vec<(u64, u64
         );
         match source.next_frame(slot, Duration::from_millis(500)) {
             Ok(()) => {
-                assert_eq!((slot.image.width(), slot.image.height()), (400, 400));
-                assert!(matches!(slot.image.pixels(), Pixels::Mono8(_)));
+                assert_eq!((slot.image().width(), slot.image().height()), (400, 400));
+                assert!(matches!(slot.image().pixels(), Pixels::Mono8(_)));
                 got.push((slot.meta.seq, slot.meta.host_mono_ns));
             }
             Err(e @ (SourceError::Timeout(_) | SourceError::Unavailable { .. })) => {

@@ -27,6 +27,11 @@ use photopose_geometry::{
 };
 use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
 
+/// Targets ahead of the one measured whose windows are asked for from
+/// memory (the bench's tracked frame: 405 µs with all windows touched
+/// first, 341 µs asking 4 to 16 ahead; 6 sits in that plateau).
+const PREFETCH_AHEAD: usize = 6;
+
 /// Tuning of tracking mode.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackOptions {
@@ -141,8 +146,10 @@ impl Locator {
         let e = &prior.exterior;
         let gate_extra = options.motion_gate * prior.motion_px;
         let (mut confirmed, mut checked) = (0usize, 0usize);
-        // First every target's window (touching its pixels, so that the
-        // frame's lines come from memory together), then the measurements.
+        // First every target's window; then the measurements, each asking
+        // for the pixels of the window `PREFETCH_AHEAD` targets on, so that
+        // the frame's lines come from memory while the targets before them
+        // are measured.
         self.windows.clear();
         for (fi, t) in self.field.targets().iter().enumerate() {
             let Some((ideal, cov)) =
@@ -175,12 +182,13 @@ impl Locator {
             };
             self.windows.push((fi, expected, spacing, ideal));
         }
-        // (A loop of its own: the loads of all windows follow one another,
-        // and the projections above overlap from target to target.)
-        for (_, expected, _, _) in &self.windows {
-            self.window.warm(&image, expected);
+        for (_, expected, _, _) in self.windows.iter().take(PREFETCH_AHEAD) {
+            self.window.prefetch(&image, expected);
         }
-        for &(fi, mut expected, spacing, ideal) in &self.windows {
+        for (wi, &(fi, mut expected, spacing, ideal)) in self.windows.iter().enumerate() {
+            if let Some((_, ahead, _, _)) = self.windows.get(wi + PREFETCH_AHEAD) {
+                self.window.prefetch(&image, ahead);
+            }
             let t = &self.field.targets()[fi];
             expected.read_code = expected.coded && checked < options.verify_codes;
             let gate = expected.gate_px;

@@ -556,7 +556,7 @@ fn locate(
     targets: &TargetPool,
 ) -> PoseResult {
     let located = tracker
-        .locate(locator, frame.meta.seq, frame.image.view())
+        .locate(locator, frame.meta.seq, frame.image().view())
         .ok();
     if let Some((crate::track::Mode::Tracked, _, _)) = located {
         counters.frames_tracked.inc();
@@ -586,7 +586,7 @@ fn offer_peak(
 ) {
     use photopose_acquire::exposure::{frame_peak, peak_near, SATURATED_PEAK};
     scratch.clear();
-    let full = f32::from(frame.image.max_value().max(1));
+    let full = f32::from(frame.image().max_value().max(1));
     for t in identified {
         if scratch.len() == scratch.capacity() {
             break;
@@ -594,7 +594,7 @@ fn offer_peak(
         let peak = if t.saturated {
             SATURATED_PEAK
         } else {
-            match peak_near(&frame.image, t.blob_col, t.blob_row) {
+            match peak_near(frame.image(), t.blob_col, t.blob_row) {
                 Some(v) => f32::from(v) / full,
                 None => continue,
             }

@@ -25,7 +25,7 @@ impl FrameSource for Blanked {
     fn next_frame(&mut self, slot: &mut Slot, timeout: Duration) -> Result<(), SourceError> {
         self.0.next_frame(slot, timeout)?;
         if (5..10).contains(&slot.meta.seq) {
-            match slot.image.pixels_mut() {
+            match slot.image_mut().pixels_mut() {
                 Pixels::Mono8(p) => p.fill(0),
                 Pixels::Mono16(p) => p.fill(0),
             }

@@ -46,12 +46,17 @@ fn replay_once(path: &std::path::Path, frames: usize) -> Vec<serde_json::Value> 
     out
 }
 
-#[test]
-fn two_replays_give_identical_poses() {
-    let dir = std::env::temp_dir().join(format!("photopose-replay-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// Records 12 synthetic frames of the moving circle into `dir`; returns the
+/// file, the source's settings and the frames.
+fn record_circle(
+    dir: &std::path::Path,
+) -> (
+    std::path::PathBuf,
+    photopose_pipeline::config::Synthetic,
+    Vec<photopose_frame::Image>,
+) {
+    std::fs::create_dir_all(dir).unwrap();
     let path = dir.join("circle.mcap");
-    // Record 12 synthetic frames.
     let cfg = Config::parse(
         "[source]\nkind = \"synthetic\"\n[source.synthetic]\nrate_hz = 1000.0\nframes = 12\nradius_mm = 60.0\nperiod_s = 0.012\n",
         "test",
@@ -63,15 +68,59 @@ fn two_replays_give_identical_poses() {
     let mut src = SyntheticSource::new(camera(), &default_plate(), syn.clone()).unwrap();
     let mut rec = Recorder::create(&path).unwrap();
     let mut frame = Slot::new(photopose_frame::Image::new_mono8(1300, 1030));
+    let mut frames = Vec::new();
     loop {
         match src.next_frame(&mut frame, Duration::from_secs(1)) {
             Ok(()) => {}
             Err(SourceError::Ended) => break,
             Err(e) => panic!("synthetic source: {e}"),
         }
-        rec.write(frame.meta, &frame.image).unwrap();
+        rec.write(frame.meta, frame.image()).unwrap();
+        frames.push(frame.image().clone());
     }
     rec.finish().unwrap();
+    (path, syn, frames)
+}
+
+#[test]
+fn a_replay_lends_its_frames_to_the_slots_unchanged() {
+    let dir = std::env::temp_dir().join(format!("photopose-replay-lend-{}", std::process::id()));
+    let (path, _, frames) = record_circle(&dir);
+    let cfg = Config::parse(
+        &format!(
+            "[source]\nkind = \"replay\"\n[source.replay]\npath = \"{}\"\nspeed = \"max\"\npasses = 2\n",
+            path.display()
+        ),
+        "test",
+    )
+    .unwrap();
+    let Source::Replay(r) = &cfg.source else {
+        panic!("replay source expected")
+    };
+    let mut source = ReplaySource::open(&camera(), r).unwrap();
+    let mut slot = Slot::new(photopose_frame::Image::new_mono8(1300, 1030));
+    for k in 0..2 * frames.len() {
+        source
+            .next_frame(&mut slot, Duration::from_secs(1))
+            .unwrap();
+        assert!(slot.is_shared(), "frame {k} is lent, not copied");
+        assert_eq!(slot.image(), &frames[k % frames.len()], "frame {k}");
+        assert_eq!(slot.meta.seq, k as u64);
+    }
+    assert!(matches!(
+        source.next_frame(&mut slot, Duration::from_secs(1)),
+        Err(SourceError::Ended)
+    ));
+    // A source writing the slot next writes the slot's own pixels.
+    slot.image_mut();
+    assert!(!slot.is_shared());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn two_replays_give_identical_poses() {
+    let dir = std::env::temp_dir().join(format!("photopose-replay-{}", std::process::id()));
+    let (path, syn, _) = record_circle(&dir);
     let a = replay_once(&path, 12);
     let b = replay_once(&path, 12);
     for (x, y) in a.iter().zip(&b) {

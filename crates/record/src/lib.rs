@@ -44,6 +44,7 @@ pub use writer::{
 use photopose_formats::file::{read_bytes_limited, FileError, FileKind};
 use photopose_frame::{Image, Pixels};
 use std::path::Path;
+use std::sync::Arc;
 use thiserror::Error;
 
 /// The topic of the frames in the first format.
@@ -125,10 +126,12 @@ pub enum RecordError {
     },
 }
 
-/// A recording read into memory: the frames' byte ranges in file order.
+/// A recording read into memory: its frames decoded, in file order, each an
+/// [`Image`] behind a counted reference (the replay lends them to the frame
+/// ring instead of copying them: [`Recording::shared`]).
 pub struct Recording {
     path: String,
-    frames: Vec<Vec<u8>>,
+    frames: Vec<Arc<Image>>,
     metas: Vec<FrameMeta>,
 }
 
@@ -176,7 +179,12 @@ impl Recording {
                         ..FrameMeta::default()
                     },
                 };
-                frames.push(frame);
+                let frame = decode_frame(&frame).map_err(|what| RecordError::Frame {
+                    path: name.clone(),
+                    index: frames.len(),
+                    what,
+                })?;
+                frames.push(Arc::new(frame));
                 metas.push(meta);
                 return Ok(());
             }
@@ -206,7 +214,12 @@ impl Recording {
                 host_time_ns: u64_at(16),
                 ..FrameMeta::default()
             });
-            frames.push(m.data.into_owned());
+            let frame = decode_frame(d).map_err(|what| RecordError::Frame {
+                path: name.clone(),
+                index: frames.len(),
+                what,
+            })?;
+            frames.push(Arc::new(frame));
             Ok(())
         })?;
         if frames.is_empty() {
@@ -236,42 +249,26 @@ impl Recording {
 
     /// The metadata and size `(width, height)` of frame `index`.
     pub fn meta(&self, index: usize) -> (FrameMeta, u32, u32) {
-        let d = &self.frames[index];
-        let u32_at = |o: usize| u32::from_le_bytes(d[o..o + 4].try_into().unwrap_or([0; 4]));
-        (self.metas[index], u32_at(24), u32_at(28))
+        let f = &self.frames[index];
+        (self.metas[index], f.width(), f.height())
     }
 
     /// Frame `index` as a new image of its recorded depth and saturation
     /// level, with its metadata (for export, not for the replay's hot path).
     pub fn frame(&self, index: usize) -> Result<(FrameMeta, Image), RecordError> {
-        let (meta, w, h) = self.meta(index);
-        let d = &self.frames[index];
-        let max_value = u16::from_le_bytes([d[33], d[34]]);
-        let px = &d[HEADER..];
-        let pixels = if d[32] == 1 {
-            Pixels::Mono8(px.to_vec())
-        } else {
-            Pixels::Mono16(
-                px.chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect(),
-            )
-        };
-        let image =
-            Image::from_pixels(w, h, max_value, pixels).map_err(|e| RecordError::Frame {
-                path: self.path.clone(),
-                index,
-                what: e.to_string(),
-            })?;
-        Ok((meta, image))
+        Ok((self.metas[index], Image::clone(&self.frames[index])))
+    }
+
+    /// Frame `index` itself, shared (a counted reference: the replay lends
+    /// it to a frame slot without copying or allocating).
+    pub fn shared(&self, index: usize) -> &Arc<Image> {
+        &self.frames[index]
     }
 
     /// Copies frame `index` into `image` (which must have its size and
     /// depth); returns its metadata.
     pub fn copy_into(&self, index: usize, image: &mut Image) -> Result<FrameMeta, RecordError> {
         let (meta, w, h) = self.meta(index);
-        let d = &self.frames[index];
-        let bpp = d[32];
         if (image.width(), image.height()) != (w, h) {
             return Err(RecordError::Frame {
                 path: self.path.clone(),
@@ -283,19 +280,20 @@ impl Recording {
                 ),
             });
         }
-        let px = &d[HEADER..];
-        match (image.pixels_mut(), bpp) {
-            (Pixels::Mono8(out), 1) => out.copy_from_slice(px),
-            (Pixels::Mono16(out), 2) => {
-                for (o, b) in out.iter_mut().zip(px.chunks_exact(2)) {
-                    *o = u16::from_le_bytes([b[0], b[1]]);
-                }
-            }
-            _ => {
+        match (image.pixels_mut(), self.frames[index].pixels()) {
+            (Pixels::Mono8(out), Pixels::Mono8(px)) => out.copy_from_slice(px),
+            (Pixels::Mono16(out), Pixels::Mono16(px)) => out.copy_from_slice(px),
+            (_, px) => {
                 return Err(RecordError::Frame {
                     path: self.path.clone(),
                     index,
-                    what: format!("{} bytes per pixel do not fit the frame slot", bpp),
+                    what: format!(
+                        "{} bytes per pixel do not fit the frame slot",
+                        match px {
+                            Pixels::Mono8(_) => 1,
+                            Pixels::Mono16(_) => 2,
+                        }
+                    ),
                 })
             }
         }
@@ -450,6 +448,25 @@ fn check_frame(d: &[u8]) -> Result<(), String> {
         return Err(format!("{} bytes, a {w}×{h} frame needs {need}", d.len()));
     }
     Ok(())
+}
+
+/// A checked frame of the first format (header and little-endian pixels)
+/// as an image of its depth and saturation level.
+fn decode_frame(d: &[u8]) -> Result<Image, String> {
+    let w = u32::from_le_bytes([d[24], d[25], d[26], d[27]]);
+    let h = u32::from_le_bytes([d[28], d[29], d[30], d[31]]);
+    let max_value = u16::from_le_bytes([d[33], d[34]]);
+    let px = &d[HEADER..];
+    let pixels = if d[32] == 1 {
+        Pixels::Mono8(px.to_vec())
+    } else {
+        Pixels::Mono16(
+            px.chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect(),
+        )
+    };
+    Image::from_pixels(w, h, max_value, pixels).map_err(|e| e.to_string())
 }
 
 /// A `foxglove.RawImage` message as a frame of the first format (header

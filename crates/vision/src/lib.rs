@@ -39,7 +39,10 @@ mod detector;
 pub mod label;
 pub mod measure;
 mod num;
+// The prefetch hint is an `unsafe fn` (its raw pointer); see the module.
 pub mod pixel;
+#[allow(unsafe_code)]
+mod prefetch;
 pub mod seed;
 pub mod threshold;
 pub mod window;

@@ -150,32 +150,26 @@ impl<'a, P: Pixel> Plane<'a, P> {
         &self.data[start..start + self.width]
     }
 
-    /// Reads one pixel of every cache line of the full-frame box
-    /// `col0..=col1 × row0..=row1` (clipped to the window) and returns
-    /// their wrapping sum. A pass that touches the boxes of many windows
-    /// before they are measured (tracking mode) lets the processor fetch
-    /// their lines from memory together (the loads are independent)
-    /// instead of one box after the other as they are measured; a prefetch
-    /// instruction would not wait for the lines, but needs `unsafe`.
-    /// Changes nothing.
-    pub fn touch(&self, col0: usize, row0: usize, col1: usize, row1: usize) -> u32 {
+    /// Asks the processor to fetch every cache line of the full-frame box
+    /// `col0..=col1 × row0..=row1` (clipped to the window) without waiting
+    /// for them ([`crate::prefetch`]): the box is then read from the cache
+    /// when it is measured a little later. Changes nothing.
+    pub fn prefetch(&self, col0: usize, row0: usize, col1: usize, row1: usize) {
         let (c0, r0) = (col0.max(self.col0), row0.max(self.row0));
         let (c1, r1) = (col1.min(self.last_col()), row1.min(self.last_row()));
         if c0 > c1 || r0 > r1 {
-            return 0;
+            return;
         }
         let step = (64 / std::mem::size_of::<P>()).max(1);
-        let mut sum = 0u32;
         for row in r0..=r1 {
             let line = &self.row(row)[c0 - self.col0..=c1 - self.col0];
-            for p in line.iter().step_by(step) {
-                sum = sum.wrapping_add(p.value());
+            let mut k = 0;
+            while k < line.len() {
+                crate::prefetch::line(&line[k..]);
+                k += step;
             }
-            if let Some(p) = line.last() {
-                sum = sum.wrapping_add(p.value());
-            }
+            crate::prefetch::line(&line[line.len() - 1..]);
         }
-        sum
     }
 
     /// Grey value at a full-frame integer position (must be inside).

@@ -130,28 +130,21 @@ impl WindowMeasurer {
         }
     }
 
-    /// Reads one pixel of every cache line that measuring `e` in `image`
-    /// will read (the rows of the core window and of the centroid's window
-    /// with its dark ring). Tracking mode reads small windows scattered
-    /// over a frame that is mostly not in the cache: each window's rows are
-    /// fetched from memory one after the other while it is measured, and
-    /// the fetches, not the arithmetic, dominate. Touching the windows of
-    /// all targets first lets the processor fetch many lines at once (the
-    /// loads are independent), and the measurements then find them in the
-    /// cache. (A prefetch instruction would not wait for the lines at all,
-    /// but it needs `unsafe`, which the workspace denies.) Changes no
-    /// result.
-    pub fn warm(&self, image: &ImageView<'_>, e: &Expected) {
+    /// Asks the processor to fetch the cache lines that measuring `e` in
+    /// `image` will read (the core window, which holds the rows the
+    /// centroid reads), without waiting for them. Tracking mode reads small
+    /// windows scattered over a frame that is mostly not in the cache: asked
+    /// for a few targets ahead of the one being measured, the fetches
+    /// overlap the measurements instead of stalling them. Changes no result.
+    pub fn prefetch(&self, image: &ImageView<'_>, e: &Expected) {
         if !(e.col.is_finite() && e.row.is_finite() && e.gate_px >= 0.0) {
             return;
         }
-        // The core window (see `run`), which holds the rows the centroid reads.
         let half = e.core_half();
-        let sum = match image.pixels() {
-            ViewPixels::Mono8(data) => touch(image, data, e, half),
-            ViewPixels::Mono16(data) => touch(image, data, e, half),
-        };
-        std::hint::black_box(sum);
+        match image.pixels() {
+            ViewPixels::Mono8(data) => prefetch(image, data, e, half),
+            ViewPixels::Mono16(data) => prefetch(image, data, e, half),
+        }
     }
 
     fn run<P: Pixel>(
@@ -326,12 +319,11 @@ fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>)
     }
 }
 
-/// [`Plane::touch`] of the square of half-width `half` around `e`.
-fn touch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) -> u32 {
-    let Some(plane) = sub_plane(image, data, e.col, e.row, half) else {
-        return 0;
-    };
-    plane.touch(plane.col0, plane.row0, plane.last_col(), plane.last_row())
+/// [`Plane::prefetch`] of the square of half-width `half` around `e`.
+fn prefetch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) {
+    if let Some(plane) = sub_plane(image, data, e.col, e.row, half) {
+        plane.prefetch(plane.col0, plane.row0, plane.last_col(), plane.last_row());
+    }
 }
 
 /// The square of half-width `half` px around `(col, row)`, clipped to

@@ -45,20 +45,21 @@ pub(super) fn copy_frame(buffer: &Buffer, slot: &mut Slot) -> Result<bool, Copy>
     if pixels == 0 || bytes.len() < need {
         return Err(Copy::Incomplete);
     }
-    let fits = slot.image.width() == width
-        && slot.image.height() == height
+    let image = slot.image_mut();
+    let fits = image.width() == width
+        && image.height() == height
         && matches!(
-            (slot.image.pixels(), wide),
+            (image.pixels(), wide),
             (Pixels::Mono8(_), false) | (Pixels::Mono16(_), true)
         );
     if !fits {
-        slot.image = if wide {
+        *image = if wide {
             Image::new_mono16(width, height, u16::MAX)
         } else {
             Image::new_mono8(width, height)
         };
     }
-    match slot.image.pixels_mut() {
+    match image.pixels_mut() {
         Pixels::Mono8(dst) => dst.copy_from_slice(&bytes[..need]),
         Pixels::Mono16(dst) => {
             for (d, s) in dst.iter_mut().zip(bytes[..need].chunks_exact(2)) {

@@ -363,7 +363,7 @@ impl GigeSource {
         match copied {
             Ok(resized) => {
                 if resized && !self.resized_logged {
-                    tracing::warn!(source = %self.name, width = slot.image.width(), height = slot.image.height(),
+                    tracing::warn!(source = %self.name, width = slot.image().width(), height = slot.image().height(),
                         "frame size differs from the ring's slots: slot reallocated (size the ring from the camera)");
                     self.resized_logged = true;
                 }

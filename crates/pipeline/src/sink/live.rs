@@ -243,7 +243,7 @@ impl LiveTap {
         }
         let (scale, sums) = (self.scale, &mut self.sums);
         let sent = sender.send_image(|image: &mut LiveImage| {
-            let (w, h) = downscale_box(&slot.image, scale, sums, &mut image.data);
+            let (w, h) = downscale_box(slot.image(), scale, sums, &mut image.data);
             image.width = w;
             image.height = h;
             image.seq = slot.meta.seq;

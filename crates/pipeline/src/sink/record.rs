@@ -315,7 +315,7 @@ impl RecordLink {
             return;
         };
         pixels.clear();
-        let image = &slot.image;
+        let image = slot.image();
         let bytes_per_pixel = match image.pixels() {
             Pixels::Mono8(p) => {
                 pixels.extend_from_slice(p);

@@ -564,7 +564,7 @@ impl FrameSource for CellSource {
         // The rendered image becomes the slot's; the slot's old one goes
         // back to the render thread (no copy, no allocation once warm).
         ensure_mono8(slot, sensor.width, sensor.height);
-        std::mem::swap(&mut slot.image, &mut image);
+        std::mem::swap(slot.image_mut(), &mut image);
         let w = &self.workers[(self.next % self.workers.len() as u64) as usize];
         let _ = w.free.try_send(image);
         self.next += 1;

@@ -253,11 +253,12 @@ impl FrameSource for Limited {
 /// Makes `slot`'s image an 8-bit `width`×`height` one (allocates only if
 /// it was not: slots are built at the camera's size).
 pub(crate) fn ensure_mono8(slot: &mut Slot, width: u32, height: u32) {
-    if slot.image.width() != width
-        || slot.image.height() != height
-        || !matches!(slot.image.pixels(), Pixels::Mono8(_))
+    let image = slot.image_mut();
+    if image.width() != width
+        || image.height() != height
+        || !matches!(image.pixels(), Pixels::Mono8(_))
     {
-        slot.image = Image::new_mono8(width, height);
+        *image = Image::new_mono8(width, height);
     }
 }
 

@@ -146,6 +146,8 @@ pub struct ReplaySource {
     next: usize,
     start: Option<(Instant, u64)>,
     fixed_latency: Option<Duration>,
+    /// The camera's frame size, every frame's.
+    size: (u32, u32),
 }
 
 /// Why a replay cannot start.
@@ -207,6 +209,7 @@ impl ReplaySource {
             next: 0,
             start: None,
             fixed_latency: config.fixed_latency,
+            size: (camera.sensor.width, camera.sensor.height),
         })
     }
 
@@ -248,12 +251,20 @@ impl FrameSource for ReplaySource {
         }
         let index = self.next;
         self.next += 1;
-        let meta = self
-            .recording
-            .copy_into(index, &mut slot.image)
-            .map_err(|e| SourceError::Frame {
-                reason: e.to_string(),
-            })?;
+        // The recorded frame is lent to the slot, not copied (the
+        // recording holds it unchanged for the whole replay).
+        let (meta, width, height) = self.recording.meta(index);
+        if (width, height) != self.size {
+            return Err(SourceError::Frame {
+                reason: format!(
+                    "{}: frame {index} is {width}×{height}, the camera is {}×{}",
+                    self.recording.path(),
+                    self.size.0,
+                    self.size.1
+                ),
+            });
+        }
+        slot.share(self.recording.shared(index).clone());
         slot.meta.seq = meta.seq + seq_offset;
         slot.meta.camera_frame_id = meta.seq;
         slot.meta.camera_time_ns = meta.camera_time_ns + time_offset;
@@ -264,11 +275,12 @@ impl FrameSource for ReplaySource {
         let (latency, exposure) = match self.fixed_latency {
             Some(l) => (l.as_nanos() as u64, 0),
             None => {
-                let per_pixel = match slot.image.pixels() {
+                let per_pixel = match slot.image().pixels() {
                     photopose_frame::Pixels::Mono8(_) => 1,
                     _ => 2,
                 };
-                let bytes = slot.image.width() as usize * slot.image.height() as usize * per_pixel;
+                let bytes =
+                    slot.image().width() as usize * slot.image().height() as usize * per_pixel;
                 (
                     MODEL_EXPOSURE_NS / 2
                         + photopose_acquire::clock_map::bytes_at_gigabit_ns(bytes),

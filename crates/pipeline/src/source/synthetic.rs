@@ -325,7 +325,7 @@ impl FrameSource for SyntheticSource {
         let rendered = self
             .renderer
             .set_options(options)
-            .and_then(|()| self.renderer.render(&pose, &mut slot.image).map(|_| ()));
+            .and_then(|()| self.renderer.render(&pose, slot.image_mut()).map(|_| ()));
         if let Err(e) = rendered {
             return Err(SourceError::Frame {
                 reason: format!("synthetic frame {seq}: {e}"),
