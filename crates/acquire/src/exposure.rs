@@ -3,7 +3,8 @@
 //! ([`ExposureLaw`], pure: the caller passes each measurement and the
 //! exposure in effect; no IO, no clock), the per-frame measurement it is
 //! fed (the 90th percentile of the identified targets' peaks,
-//! [`frame_peak`]; each target's peak read near its centre, [`peak_near`]),
+//! [`frame_peak`]; each target's peak is its blob's brightest pixel, which
+//! the detector measures),
 //! and the lock-free link between the detection workers that measure and
 //! the source that steers ([`ExposureLink`]: the newest frame's
 //! measurement, the exposure in effect and the counts of feature writes,
@@ -25,7 +26,6 @@
 //! without targets gives no measurement, and a non-finite or absurd input
 //! changes nothing (and is not counted).
 
-use photopose_frame::Image;
 use photopose_telemetry::{Collect, Counter, Gauge, Scrape};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use thiserror::Error;
@@ -276,28 +276,6 @@ pub fn frame_peak(peaks: &mut [f32]) -> Option<f32> {
     let rank = ((PEAK_QUANTILE * n as f64).ceil() as usize).clamp(1, n) - 1;
     let (_, q, _) = peaks.select_nth_unstable_by(rank, f32::total_cmp);
     Some(*q)
-}
-
-/// The largest grey value of `image` within one pixel of (`col`, `row`)
-/// (pixel coordinates, integer = pixel centre), `None` when that pixel is
-/// outside the image. A target's centre is its brightest part under a
-/// ring light, so this reads its peak without the blob.
-pub fn peak_near(image: &Image, col: f64, row: f64) -> Option<u16> {
-    let (w, h) = (i64::from(image.width()), i64::from(image.height()));
-    if !(col.is_finite() && row.is_finite()) {
-        return None;
-    }
-    let (c, r) = (col.round() as i64, row.round() as i64);
-    if c < 0 || r < 0 || c >= w || r >= h {
-        return None;
-    }
-    let mut peak = 0u16;
-    for y in (r - 1).max(0)..=(r + 1).min(h - 1) {
-        for x in (c - 1).max(0)..=(c + 1).min(w - 1) {
-            peak = peak.max(image.get(x as u32, y as u32));
-        }
-    }
-    Some(peak)
 }
 
 /// No measurement (the peak's bits are a NaN).
@@ -678,21 +656,6 @@ mod tests {
         let mut p = vec![0.5f32; 17];
         p.extend([SATURATED_PEAK, f32::NAN, SATURATED_PEAK]);
         assert_eq!(frame_peak(&mut p), Some(SATURATED_PEAK));
-    }
-
-    #[test]
-    fn the_peak_near_a_centre_is_read_inside_the_image() {
-        let mut image = Image::new_mono8(8, 6);
-        if let photopose_frame::Pixels::Mono8(v) = image.pixels_mut() {
-            v[8 + 1] = 200; // (col 1, row 1)
-            v[5 * 8 + 7] = 90; // the bottom-right corner
-        }
-        assert_eq!(peak_near(&image, 2.4, 2.4), Some(200));
-        assert_eq!(peak_near(&image, 3.0, 3.0), Some(0));
-        assert_eq!(peak_near(&image, 7.0, 5.0), Some(90));
-        assert_eq!(peak_near(&image, -0.6, 1.0), None);
-        assert_eq!(peak_near(&image, 8.0, 1.0), None);
-        assert_eq!(peak_near(&image, f64::NAN, 1.0), None);
     }
 
     #[test]

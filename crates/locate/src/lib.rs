@@ -142,6 +142,9 @@ pub struct Identified {
     /// The dot is over-exposed (saturated pixels): its observation is
     /// weighted down ([`LocateOptions::saturated_sigma_factor`]).
     pub saturated: bool,
+    /// The dot's largest grey value (its blob's brightest pixel; the
+    /// exposure control loop's measurement).
+    pub peak: u32,
 }
 
 /// The result of [`Locator::locate`].
@@ -365,6 +368,7 @@ impl Locator {
                 detection: k,
                 used: true,
                 saturated: d.saturated,
+                peak: d.peak,
             });
             self.obs.push(observation(
                 &self.camera,
@@ -514,6 +518,7 @@ impl Locator {
                 detection: k as usize,
                 used: true,
                 saturated: d.saturated,
+                peak: d.peak,
             });
             self.obs.push(observation(
                 &self.camera,

@@ -222,6 +222,7 @@ impl Locator {
                 detection: usize::MAX,
                 used: true,
                 saturated: m.saturated,
+                peak: m.peak,
             });
             let mut o = Observation::from_pixel(&self.camera, t.id, t.position, m.col, m.row);
             let f = self.options.saturated_sigma_factor;

@@ -574,8 +574,9 @@ fn locate(
 }
 
 /// Offers the frame's peak (`photopose_acquire::exposure::frame_peak` of
-/// its identified targets' peaks as shares of full scale, clipped ones
-/// counted above it) to the exposure control loop; a frame without
+/// its identified targets' peaks as shares of full scale — each the
+/// brightest pixel of the target's blob, as the detector found it; clipped
+/// ones counted above it) to the exposure control loop; a frame without
 /// identified targets offers nothing. Allocates nothing: `scratch` has
 /// room for the field's targets.
 fn offer_peak(
@@ -584,22 +585,18 @@ fn offer_peak(
     frame: &Slot,
     identified: &[photopose_locate::Identified],
 ) {
-    use photopose_acquire::exposure::{frame_peak, peak_near, SATURATED_PEAK};
+    use photopose_acquire::exposure::{frame_peak, SATURATED_PEAK};
     scratch.clear();
     let full = f32::from(frame.image().max_value().max(1));
     for t in identified {
         if scratch.len() == scratch.capacity() {
             break;
         }
-        let peak = if t.saturated {
+        scratch.push(if t.saturated {
             SATURATED_PEAK
         } else {
-            match peak_near(frame.image(), t.blob_col, t.blob_row) {
-                Some(v) => f32::from(v) / full,
-                None => continue,
-            }
-        };
-        scratch.push(peak);
+            t.peak as f32 / full
+        });
     }
     if let Some(peak) = frame_peak(scratch) {
         link.offer(frame.meta.seq, peak);
