@@ -140,7 +140,8 @@ fn the_benchmark_configurations_check() {
         if path.extension().is_some_and(|e| e == "toml") && !path.ends_with("hand-eye.toml") {
             let text = std::fs::read_to_string(&path)
                 .unwrap()
-                .replace("target/bench/rec200.mcap", &recording.display().to_string());
+                .replace("target/bench/rec200.mcap", &recording.display().to_string())
+                .replace("target/bench/cell.mcap", &recording.display().to_string());
             let copy = dir.join(path.file_name().unwrap());
             std::fs::write(&copy, text).unwrap();
             let out = bin()
