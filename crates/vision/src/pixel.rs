@@ -152,7 +152,7 @@ impl<'a, P: Pixel> Plane<'a, P> {
 
     /// Asks the processor to fetch every cache line of the full-frame box
     /// `col0..=col1 × row0..=row1` (clipped to the window) without waiting
-    /// for them ([`crate::prefetch`]): the box is then read from the cache
+    /// for them (a prefetch hint): the box is then read from the cache
     /// when it is measured a little later. Changes nothing.
     pub fn prefetch(&self, col0: usize, row0: usize, col1: usize, row1: usize) {
         let (c0, r0) = (col0.max(self.col0), row0.max(self.row0));
