@@ -441,6 +441,20 @@ fn histogram_rows<P: Pixel>(
     histogram_any(plane, step, shift, max_value, hist, row_seen)
 }
 
+/// Sampled rows ahead of the one read whose lines the histogram asks for.
+/// The histogram's pass is the first to read a frame, which is mostly not
+/// in the cache: reading only every `step`-th row, it waits for each row
+/// from memory unless the row was asked for before (`photopose bench`:
+/// the threshold stage 88–117 µs → 52–58 µs with 2 to 4 rows ahead).
+const SAMPLED_ROWS_AHEAD: usize = 3;
+
+/// Asks for the lines of full-frame row `row` of `plane` (nothing past its
+/// last row).
+#[inline]
+fn prefetch_row<P: Pixel>(plane: &Plane<'_, P>, row: usize) {
+    plane.prefetch(plane.col0, row, plane.last_col(), row);
+}
+
 /// [`histogram_rows`] for any pixel type, step and binning.
 #[inline(always)]
 fn histogram_any<P: Pixel>(
@@ -456,6 +470,7 @@ fn histogram_any<P: Pixel>(
     let mut row = plane.row0 + grid_start(plane.row0, step);
     let col_start = grid_start(plane.col0, step);
     while row <= plane.last_row() {
+        prefetch_row(plane, row + SAMPLED_ROWS_AHEAD * step);
         let line = plane.row(row);
         row_seen(row, line);
         let mut col = col_start;
@@ -486,6 +501,7 @@ fn histogram_8bit<P: Pixel, const STEP: usize>(
     let mut row = plane.row0 + grid_start(plane.row0, STEP);
     let col_start = grid_start(plane.col0, STEP);
     while row <= plane.last_row() {
+        prefetch_row(plane, row + SAMPLED_ROWS_AHEAD * STEP);
         let whole = plane.row(row);
         row_seen(row, whole);
         let line = &whole[col_start.min(plane.width)..];
