@@ -634,14 +634,18 @@ pub(crate) fn centroid<P: Pixel>(
     o: &DetectorOptions,
     max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    tested_centre(
-        plane,
+    shape_tested(
+        centre_in(
+            plane,
+            blob,
+            t,
+            o,
+            max_value,
+            measure::GROW,
+            measure::MAX_SCALE,
+        ),
         blob,
-        t,
         o,
-        max_value,
-        measure::GROW,
-        measure::MAX_SCALE,
     )
 }
 
@@ -654,29 +658,17 @@ pub(crate) fn coded_centroid<P: Pixel>(
     o: &DetectorOptions,
     max_value: u32,
 ) -> Result<Measurement, RejectReason> {
-    tested_centre(
-        plane,
-        blob,
-        t,
-        o,
-        max_value,
-        measure::CODED_GROW,
-        measure::CODED_MAX_SCALE,
-    )
+    shape_tested(coded_centre(plane, blob, t, o, max_value), blob, o)
 }
 
-/// [`centre_in`] and the fourth-moment test (a filled ellipse's).
-fn tested_centre<P: Pixel>(
-    plane: &Plane<'_, P>,
+/// A centre of `blob` (`None`: no signal) with the test of its fourth
+/// moment (a filled ellipse's).
+fn shape_tested(
+    m: Option<Measurement>,
     blob: &Blob,
-    t: &ThresholdResult,
     o: &DetectorOptions,
-    max_value: u32,
-    grow: f64,
-    max_scale: f64,
 ) -> Result<Measurement, RejectReason> {
-    let m =
-        centre_in(plane, blob, t, o, max_value, grow, max_scale).ok_or(RejectReason::NoSignal)?;
+    let m = m.ok_or(RejectReason::NoSignal)?;
     if (m.kurtosis - 2.0).abs() > o.kurtosis_tolerance + 5.0 / blob.area as f64 {
         return Err(RejectReason::Shape);
     }

@@ -538,6 +538,7 @@ impl Labeller {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testutil::window;
 
     fn label(img: &[&str]) -> Vec<Blob> {
         let h = img.len();
@@ -694,14 +695,7 @@ mod tests {
             LabelOutcome::Complete
         );
         // Columns 1..=6, rows 1..=3: the left blob whole, the right one cut off.
-        let plane = Plane {
-            data: &data[10 + 1..],
-            width: 6,
-            height: 3,
-            stride: 10,
-            col0: 1,
-            row0: 1,
-        };
+        let plane = window(&data, 10, (1, 1, 6, 3));
         let mut win = Labeller::new(100, 10);
         assert_eq!(win.label(&plane, t, 255), LabelOutcome::Complete);
         assert_eq!(win.blobs().len(), 1);

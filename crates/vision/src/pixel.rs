@@ -265,6 +265,7 @@ impl<'a, P: Pixel> Plane<'a, P> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testutil::window;
 
     #[test]
     fn bilinear_interpolates_between_centres() {
@@ -308,14 +309,7 @@ mod tests {
             (x >> 11) as f64 / (1u64 << 53) as f64
         };
         for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 20, 13), (2, 1, 7, 9), (3, 3, 2, 2)] {
-            let win = Plane {
-                data: &data[r0 * w + c0..],
-                width: ww,
-                height: hh,
-                stride: w,
-                col0: c0,
-                row0: r0,
-            };
+            let win = window(&data, w, (c0, r0, ww, hh));
             let (cl, rl) = (win.last_col() as f64, win.last_row() as f64);
             for k in 0..4000 {
                 let (mut c, mut r) = (
@@ -353,14 +347,7 @@ mod tests {
             .collect();
         let whole = Plane::whole(&data, 5, 4);
         // The window 3 × 2 at (1, 2), rows 5 apart.
-        let win = Plane {
-            data: &data[2 * 5 + 1..],
-            width: 3,
-            height: 2,
-            stride: 5,
-            col0: 1,
-            row0: 2,
-        };
+        let win = window(&data, 5, (1, 2, 3, 2));
         assert_eq!(win.row(3), &data[16..19]);
         assert_eq!(win.at(3, 2), whole.at(3, 2));
         for (c, r) in [

@@ -279,20 +279,14 @@ impl SeedLabeller {
 mod tests {
     use super::*;
     use crate::label::{LabelOutcome, Labeller};
+    use crate::testutil::window;
     use proptest::prelude::*;
 
     /// Every blob the labeller finds in a window, grown from each of its
     /// pixels, is the labeller's blob, bit for bit.
-    fn check(data: &[u8], width: usize, window: (usize, usize, usize, usize)) {
-        let (c0, r0, w, h) = window;
-        let plane = Plane {
-            data: &data[r0 * width + c0..],
-            width: w,
-            height: h,
-            stride: width,
-            col0: c0,
-            row0: r0,
-        };
+    fn check(data: &[u8], width: usize, area: (usize, usize, usize, usize)) {
+        let (c0, r0, w, h) = area;
+        let plane = window(data, width, area);
         let t = Threshold::global(100);
         let mut labeller = Labeller::new(10_000, 10_000);
         assert_eq!(labeller.label(&plane, t, 250), LabelOutcome::Complete);

@@ -250,3 +250,20 @@ impl Scene {
         Image::from_pixels(self.w as u32, self.h as u32, max, Pixels::Mono16(px)).unwrap()
     }
 }
+
+/// The window `width × height` whose first pixel is full-frame
+/// `(col0, row0)` of a row-major frame with rows `stride` pixels apart.
+pub fn window<P>(
+    frame: &[P],
+    stride: usize,
+    (col0, row0, width, height): (usize, usize, usize, usize),
+) -> crate::pixel::Plane<'_, P> {
+    crate::pixel::Plane {
+        data: &frame[row0 * stride + col0..],
+        width,
+        height,
+        stride,
+        col0,
+        row0,
+    }
+}

@@ -190,11 +190,9 @@ impl LocalLevels {
     pub fn sample_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>) {
         self.layout(plane);
         self.clear_peaks();
-        let mut row = plane.row0 + grid_start(plane.row0, PEAK_STEP);
-        while row <= plane.last_row() {
-            self.add_row_peaks(plane, row, plane.row(row));
-            row += PEAK_STEP;
-        }
+        for_sampled_rows(plane, PEAK_STEP, |row, line| {
+            self.add_row_peaks(plane, row, line)
+        });
     }
 
     /// The sub-sampled histogram of the window `plane` ([`histogram`], same
@@ -448,11 +446,18 @@ fn histogram_rows<P: Pixel>(
 /// the threshold stage 88–117 µs → 52–58 µs with 2 to 4 rows ahead).
 const SAMPLED_ROWS_AHEAD: usize = 3;
 
-/// Asks for the lines of full-frame row `row` of `plane` (nothing past its
-/// last row).
-#[inline]
-fn prefetch_row<P: Pixel>(plane: &Plane<'_, P>, row: usize) {
-    plane.prefetch(plane.col0, row, plane.last_col(), row);
+/// Calls `f(row, pixels)` with every sampled full-frame row of `plane`
+/// (every `step`-th row of the frame's grid, [`grid_start`]), having asked
+/// for the lines of the row `SAMPLED_ROWS_AHEAD` samples on.
+#[inline(always)]
+fn for_sampled_rows<P: Pixel>(plane: &Plane<'_, P>, step: usize, mut f: impl FnMut(usize, &[P])) {
+    let mut row = plane.row0 + grid_start(plane.row0, step);
+    while row <= plane.last_row() {
+        let ahead = row + SAMPLED_ROWS_AHEAD * step;
+        plane.prefetch(plane.col0, ahead, plane.last_col(), ahead);
+        f(row, plane.row(row));
+        row += step;
+    }
 }
 
 /// [`histogram_rows`] for any pixel type, step and binning.
@@ -467,11 +472,8 @@ fn histogram_any<P: Pixel>(
 ) -> u32 {
     let top = (max_value >> shift) as usize;
     let mut n = 0u32;
-    let mut row = plane.row0 + grid_start(plane.row0, step);
     let col_start = grid_start(plane.col0, step);
-    while row <= plane.last_row() {
-        prefetch_row(plane, row + SAMPLED_ROWS_AHEAD * step);
-        let line = plane.row(row);
+    for_sampled_rows(plane, step, |row, line| {
         row_seen(row, line);
         let mut col = col_start;
         while col < line.len() {
@@ -480,8 +482,7 @@ fn histogram_any<P: Pixel>(
             n += 1;
             col += step;
         }
-        row += step;
-    }
+    });
     n
 }
 
@@ -498,11 +499,8 @@ fn histogram_8bit<P: Pixel, const STEP: usize>(
     let mut part = [[0u32; 256]; 4];
     let mut n = 0u32;
     let bin = |p: P| p.value() as u8 as usize;
-    let mut row = plane.row0 + grid_start(plane.row0, STEP);
     let col_start = grid_start(plane.col0, STEP);
-    while row <= plane.last_row() {
-        prefetch_row(plane, row + SAMPLED_ROWS_AHEAD * STEP);
-        let whole = plane.row(row);
+    for_sampled_rows(plane, STEP, |row, whole| {
         row_seen(row, whole);
         let line = &whole[col_start.min(plane.width)..];
         let mut chunks = line.chunks_exact(4 * STEP);
@@ -516,8 +514,7 @@ fn histogram_8bit<P: Pixel, const STEP: usize>(
             part[0][bin(*p)] += 1;
         }
         n += line.len().div_ceil(STEP) as u32;
-        row += STEP;
-    }
+    });
     for (i, h) in hist.iter_mut().take(256).enumerate() {
         *h = part[0][i] + part[1][i] + part[2][i] + part[3][i];
     }
@@ -627,6 +624,7 @@ pub fn threshold(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testutil::window;
 
     const P: ThresholdParams = ThresholdParams {
         step: 1,
@@ -684,14 +682,7 @@ mod tests {
         let data: Vec<u16> = (0..63u16).map(|v| 1000 + 37 * v).collect();
         for step in [2usize, 3] {
             for (c0, r0, ww, hh) in [(0, 0, 9, 7), (1, 2, 5, 4), (2, 1, 6, 5), (3, 3, 1, 1)] {
-                let plane = Plane {
-                    data: &data[r0 * w + c0..],
-                    width: ww,
-                    height: hh,
-                    stride: w,
-                    col0: c0,
-                    row0: r0,
-                };
+                let plane = window(&data, w, (c0, r0, ww, hh));
                 let mut h = vec![0u32; MAX_BINS];
                 let n = histogram(&plane, step, 4, 65535, &mut h);
                 // The frame's grid: rows and columns ≡ step / 2 (mod step).
@@ -708,14 +699,7 @@ mod tests {
         }
         // The 8-bit path (step 2, no binning) likewise.
         let data8: Vec<u8> = (0..63u8).map(|v| 3 * v).collect();
-        let plane = Plane {
-            data: &data8[w + 2..],
-            width: 6,
-            height: 5,
-            stride: w,
-            col0: 2,
-            row0: 1,
-        };
+        let plane = window(&data8, w, (2, 1, 6, 5));
         let mut h = vec![0u32; MAX_BINS];
         let n = histogram(&plane, 2, 0, 255, &mut h);
         let odd: Vec<usize> = (1..6)
@@ -774,14 +758,7 @@ mod tests {
         assert!(!l.any_local());
         // A window not aligned to the tiles: the same levels in full-frame
         // coordinates.
-        let win = Plane {
-            data: &v[100 * w + 200..],
-            width: 110,
-            height: 80,
-            stride: w,
-            col0: 200,
-            row0: 100,
-        };
+        let win = window(&v, w, (200, 100, 110, 80));
         l.compute(&win, &t, 0.3, 10.0);
         assert_eq!(l.at(290, 160).level(), 32);
         assert_eq!(l.row(&win, 160).at(90).level(), 32);
@@ -803,36 +780,9 @@ mod tests {
                 }
             }
             let mut got = vec![0u32; MAX_BINS];
-            let start = r0 * w + c0;
-            let n = histogram(
-                &Plane {
-                    data: &data8[start..],
-                    width: ww,
-                    height: hh,
-                    stride: w,
-                    col0: c0,
-                    row0: r0,
-                },
-                4,
-                0,
-                255,
-                &mut got,
-            );
+            let n = histogram(&window(&data8, w, (c0, r0, ww, hh)), 4, 0, 255, &mut got);
             assert_eq!((n, &got), (m, &want), "8-bit window at ({c0}, {r0})");
-            let n = histogram(
-                &Plane {
-                    data: &data[start..],
-                    width: ww,
-                    height: hh,
-                    stride: w,
-                    col0: c0,
-                    row0: r0,
-                },
-                4,
-                0,
-                4095,
-                &mut got,
-            );
+            let n = histogram(&window(&data, w, (c0, r0, ww, hh)), 4, 0, 4095, &mut got);
             assert_eq!((n, &got), (m, &want), "16-bit window at ({c0}, {r0})");
         }
     }
@@ -862,14 +812,7 @@ mod tests {
             let shift = bin_shift(max);
             for step in [1usize, 2, 3, 4, 5] {
                 for (c0, r0, ww, hh) in [(0, 0, w, h), (3, 5, 200, 150), (64, 63, 130, 70)] {
-                    let plane = Plane {
-                        data: &data[r0 * w + c0..],
-                        width: ww,
-                        height: hh,
-                        stride: w,
-                        col0: c0,
-                        row0: r0,
-                    };
+                    let plane = window(&data, w, (c0, r0, ww, hh));
                     let mut plain = LocalLevels::new(w, h);
                     let mut fused = LocalLevels::new(w, h);
                     let (mut h1, mut h2) = (vec![7u32; MAX_BINS], vec![9u32; MAX_BINS]);

@@ -238,22 +238,19 @@ impl FrameSource for ReplaySource {
             self.next = 0;
         }
         let (seq_offset, time_offset) = (self.span.0 * self.pass, self.span.1 * self.pass);
-        let (mut meta, _, _) = self.recording.meta(self.next);
-        meta.camera_time_ns += time_offset;
+        let index = self.next;
+        let (meta, width, height) = self.recording.meta(index);
+        let camera_time_ns = meta.camera_time_ns + time_offset;
         if let Speed::Factor(f) = self.speed {
-            let (t0, c0) = *self
-                .start
-                .get_or_insert((Instant::now(), meta.camera_time_ns));
-            let offset = meta.camera_time_ns.saturating_sub(c0) as f64 / 1e9 / f;
+            let (t0, c0) = *self.start.get_or_insert((Instant::now(), camera_time_ns));
+            let offset = camera_time_ns.saturating_sub(c0) as f64 / 1e9 / f;
             if !wait_until(t0 + Duration::from_secs_f64(offset), timeout) {
                 return Err(SourceError::Timeout(timeout));
             }
         }
-        let index = self.next;
         self.next += 1;
         // The recorded frame is lent to the slot, not copied (the
         // recording holds it unchanged for the whole replay).
-        let (meta, width, height) = self.recording.meta(index);
         if (width, height) != self.size {
             return Err(SourceError::Frame {
                 reason: format!(
@@ -267,7 +264,7 @@ impl FrameSource for ReplaySource {
         slot.share(self.recording.shared(index).clone());
         slot.meta.seq = meta.seq + seq_offset;
         slot.meta.camera_frame_id = meta.seq;
-        slot.meta.camera_time_ns = meta.camera_time_ns + time_offset;
+        slot.meta.camera_time_ns = camera_time_ns;
         // The recorded reception time, shifted like the camera time: the
         // replay's clock is the recording's.
         slot.meta.host_time_ns = meta.host_time_ns + time_offset;
