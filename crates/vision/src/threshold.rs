@@ -812,7 +812,7 @@ mod tests {
             let shift = bin_shift(max);
             for step in [1usize, 2, 3, 4, 5] {
                 for (c0, r0, ww, hh) in [(0, 0, w, h), (3, 5, 200, 150), (64, 63, 130, 70)] {
-                    let plane = window(&data, w, (c0, r0, ww, hh));
+                    let plane = window(data, w, (c0, r0, ww, hh));
                     let mut plain = LocalLevels::new(w, h);
                     let mut fused = LocalLevels::new(w, h);
                     let (mut h1, mut h2) = (vec![7u32; MAX_BINS], vec![9u32; MAX_BINS]);
