@@ -41,6 +41,9 @@ pub enum DetectStage {
 #[derive(Debug, Clone, Copy)]
 struct Candidate {
     blob: u32,
+    /// The blob's binary centre `(col, row)` (where the ring-part
+    /// suppression places it).
+    at: (f64, f64),
     m: Measurement,
     frame: Option<RingFrame>,
     /// Deblurred moments of the dot.
@@ -61,6 +64,13 @@ pub struct Detector {
     order: Vec<u32>,
     /// The candidates by row (ring-part suppression).
     by_row: Vec<u32>,
+    /// The ring zones of the decoded targets examined so far whose rows
+    /// the blobs still to come may reach ([`DecodedZone`]).
+    zones: Vec<DecodedZone>,
+    /// Whether ring parts are found before measuring (off: every blob is
+    /// measured and read, the reference the tests compare with).
+    #[cfg(test)]
+    early_parts: bool,
     tables: RingTables,
     /// The window's local levels (all at the global level unless
     /// [`DetectorOptions::local_threshold`] found dim surroundings).
@@ -107,6 +117,9 @@ impl Detector {
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
             by_row: Vec::with_capacity(options.max_targets),
+            zones: Vec::with_capacity(options.max_targets),
+            #[cfg(test)]
+            early_parts: true,
             tables: RingTables::default(),
             levels: LocalLevels::new(max_width as usize, max_height as usize),
             held: None,
@@ -226,6 +239,7 @@ impl Detector {
         self.out.clear();
         self.candidates.clear();
         self.order.clear();
+        self.zones.clear();
         // 1. Threshold (and the tile peaks of the local levels, from the
         // same pass over the rows).
         let local = given.is_none() && self.options.local_threshold > 0.0;
@@ -355,6 +369,7 @@ impl Detector {
             candidates,
             tables,
             levels,
+            zones,
             out,
             ..
         } = self;
@@ -375,6 +390,24 @@ impl Detector {
             // 3. Tests on the binary statistics.
             if let Err(reason) = blob_tests(plane, blob, o) {
                 out.reject(blob, reason);
+                continue;
+            }
+            // A part of the ring of a decoded target examined before it
+            // (blobs come in the order of their first row, so a zone whose
+            // rows end above this blob is done with): the suppression would
+            // remove it whatever its centre and reading, so it is neither
+            // measured nor read.
+            zones.retain(|z| z.last_row >= blob.row0 as f64);
+            #[cfg(test)]
+            let early = self.early_parts;
+            #[cfg(not(test))]
+            let early = true;
+            if early && zones.iter().any(|z| z.holds(blob)) {
+                if candidates.len() >= candidates.capacity() {
+                    out.n_dropped += 1;
+                } else {
+                    candidates.push(Candidate::ring_part(i as u32, blob));
+                }
                 continue;
             }
             // The blob's level: its tile's (the global one but in dim
@@ -418,6 +451,9 @@ impl Detector {
                 out.reject(blob, reason);
                 continue;
             }
+            if let (Some(_), Some(f)) = (ring.reading.status.id(), ring.frame) {
+                zones.push(DecodedZone::new(f));
+            }
             let m = if ring.reading.ring_present {
                 let m = coded_centre(plane, blob, t, o, max_value).unwrap_or(m);
                 probe(DetectStage::Measure);
@@ -427,6 +463,7 @@ impl Detector {
             };
             candidates.push(Candidate {
                 blob: i as u32,
+                at: blob.centre(),
                 m,
                 frame: ring.frame,
                 moments: ring.moments,
@@ -497,6 +534,75 @@ impl Detector {
 /// The ring zone of a target with a ring, in units of its dot's radius.
 const RING_ZONE: std::ops::RangeInclusive<f64> = 1.6..=3.8;
 
+/// The ring zone of a decoded target, for finding its ring parts before
+/// they are measured: the suppression ([`suppress_ring_parts`]) places a
+/// blob at its binary centre, and a decoded target suppresses everything
+/// in its zone but another decoded target, so a blob there is a ring part
+/// whatever it would read (only a second decoded target in the first's
+/// zone could act before it, which a plate never shows).
+#[derive(Debug, Clone, Copy)]
+struct DecodedZone {
+    frame: RingFrame,
+    /// The zone's last row.
+    last_row: f64,
+}
+
+impl DecodedZone {
+    fn new(frame: RingFrame) -> Self {
+        DecodedZone {
+            frame,
+            last_row: frame.row + ring_reach(&frame),
+        }
+    }
+
+    /// Whether the binary centre of `blob` lies in the zone.
+    fn holds(&self, blob: &Blob) -> bool {
+        let (col, row) = blob.centre();
+        RING_ZONE.contains(&self.frame.radius_of(col, row))
+    }
+}
+
+/// How far in rows the ring zone of `f` reaches from its centre: a point
+/// at radius ρ lies at most ρ times the norm of E's second row away (with
+/// a margin for rounding).
+fn ring_reach(f: &RingFrame) -> f64 {
+    let reach = RING_ZONE.end() * (f.e[1] * f.e[1] + f.e[2] * f.e[2]).sqrt();
+    reach * (1.0 + 1e-6) + 1e-6
+}
+
+impl Candidate {
+    /// A ring part found before measuring ([`DecodedZone`]): suppressed,
+    /// never measured (its binary centre stands in for the centre).
+    fn ring_part(blob: u32, b: &Blob) -> Self {
+        let (col, row) = b.centre();
+        Candidate {
+            blob,
+            at: (col, row),
+            m: Measurement {
+                col,
+                row,
+                cxx: 0.0,
+                cyy: 0.0,
+                cxy: 0.0,
+                signal: 0.0,
+                background: 0.0,
+                kurtosis: 0.0,
+            },
+            frame: None,
+            moments: (0.0, 0.0, 0.0),
+            reading: Reading {
+                gap: Gap::NotDark,
+                status: CodeStatus::NoRing,
+                ring_present: false,
+                raw: 0,
+                bright: 0.0,
+                dark: 0.0,
+            },
+            suppressed: true,
+        }
+    }
+}
+
 /// Ring parts: blobs in the ring zone of a target with a ring. Decoded
 /// targets come first, then rings with dark surroundings (whatever their
 /// reading), then the rest by decreasing area; the first two suppress
@@ -533,7 +639,7 @@ fn suppress_ring_parts(
     if let Some(b) = by_row.as_mut() {
         b.clear();
         b.extend(0..cands.len() as u32);
-        b.sort_unstable_by(|&x, &y| cands[x as usize].m.row.total_cmp(&cands[y as usize].m.row));
+        b.sort_unstable_by(|&x, &y| cands[x as usize].at.1.total_cmp(&cands[y as usize].at.1));
     }
     for &i in order.iter() {
         let i = i as usize;
@@ -554,19 +660,15 @@ fn suppress_ring_parts(
             if x.reading.status.id().is_some() && y_rank > 0 {
                 return;
             }
-            if RING_ZONE.contains(&f.radius_of(x.m.col, x.m.row)) {
+            if RING_ZONE.contains(&f.radius_of(x.at.0, x.at.1)) {
                 x.suppressed = true;
             }
         };
         match by_row.as_deref() {
             Some(by_row) => {
-                // A point at radius ρ of the ring's frame lies at most ρ
-                // times the norm of E's second row away in rows (with a
-                // margin for rounding).
-                let reach = RING_ZONE.end() * (f.e[1] * f.e[1] + f.e[2] * f.e[2]).sqrt();
-                let reach = reach * (1.0 + 1e-6) + 1e-6;
+                let reach = ring_reach(&f);
                 let (lo, hi) = (f.row - reach, f.row + reach);
-                let row = |j: &u32| cands[*j as usize].m.row;
+                let row = |j: &u32| cands[*j as usize].at.1;
                 let first = by_row.partition_point(|j| row(j).total_cmp(&lo).is_lt());
                 let last = by_row.partition_point(|j| row(j).total_cmp(&hi).is_le());
                 for &j in &by_row[first..last.max(first)] {
@@ -918,5 +1020,76 @@ mod tests {
             suppressed += flags(&plain).iter().filter(|&&s| s).count();
         }
         assert!(suppressed > 20, "ring parts were suppressed: {suppressed}");
+    }
+
+    /// Finding ring parts before measuring them changes no target, and no
+    /// rejection but to a ring part (whose reading would have rejected it
+    /// otherwise), on rendered frames of the default plate: near, far,
+    /// oblique, 8- and 16-bit, with motion blur.
+    #[test]
+    fn ring_parts_found_before_measuring_change_no_target() {
+        let cam = Camera::reference();
+        let field = default_plate();
+        let mut early = Detector::new(1300, 1030, DetectorOptions::for_field(&field)).unwrap();
+        let mut reference = Detector::new(1300, 1030, DetectorOptions::for_field(&field)).unwrap();
+        reference.early_parts = false;
+        let (mut parts, mut targets) = (0, 0);
+        let mut renderer = Renderer::new(cam, &field, RenderOptions::default()).unwrap();
+        // Distance, tilt, azimuth, motion during the exposure (mm), 16-bit.
+        for (k, &(d, tilt, az, shift, sixteen)) in [
+            (600.0, 45.0, 30.0, 0.0, false),
+            (900.0, 10.0, 200.0, 0.0, false),
+            (1300.0, 30.0, 100.0, 0.0, true),
+            (1000.0, 5.0, 300.0, 1.5, false),
+            (750.0, 25.0, 0.0, 0.7, true),
+        ]
+        .iter()
+        .enumerate()
+        {
+            renderer
+                .set_options(RenderOptions {
+                    seed: k as u64 + 11,
+                    ..RenderOptions::default()
+                })
+                .unwrap();
+            let mut image = if sixteen {
+                photopose_frame::Image::new_mono16(1300, 1030, 4095)
+            } else {
+                renderer.new_image()
+            };
+            let (t, a) = (f64::to_radians(tilt), f64::to_radians(az));
+            let eye = Vector3::new(t.sin() * a.cos(), t.sin() * a.sin(), t.cos()) * d;
+            let up = Vector3::new(-a.sin(), a.cos(), 0.0);
+            let e = Exterior::look_at(eye, Vector3::zeros(), up).unwrap();
+            let moved = Vector3::new(shift, 0.0, 0.0);
+            let end = Exterior::look_at(eye + moved, moved, up).unwrap();
+            renderer.render_moving(&e, &end, &mut image).unwrap();
+            let got = early.detect(image.view()).unwrap().clone();
+            let want = reference.detect(image.view()).unwrap().clone();
+            assert_eq!(got.targets, want.targets, "frame {k}");
+            assert_eq!(got.status, want.status, "frame {k}");
+            // The same rejected blobs; a blob's reason differs only where
+            // it was found as a ring part before its reading.
+            assert_eq!(got.rejected.len(), want.rejected.len(), "frame {k}");
+            for w in &want.rejected {
+                let g = got
+                    .rejected
+                    .iter()
+                    .find(|g| g.bbox == w.bbox && g.area == w.area)
+                    .unwrap_or_else(|| panic!("frame {k}: {w:?} not rejected"));
+                assert!(
+                    g.reason == w.reason || g.reason == RejectReason::CodeRing,
+                    "frame {k}: {g:?} against {w:?}"
+                );
+            }
+            parts += early
+                .candidates
+                .iter()
+                .filter(|c| c.frame.is_none() && c.suppressed)
+                .count();
+            targets += got.targets.len();
+        }
+        assert!(targets > 800, "targets: {targets}");
+        assert!(parts > 40, "ring parts found before measuring: {parts}");
     }
 }
