@@ -64,8 +64,15 @@ pub struct Detector {
     order: Vec<u32>,
     /// The candidates by row (ring-part suppression).
     by_row: Vec<u32>,
-    /// The ring zones of the decoded targets examined so far whose rows
-    /// the blobs still to come may reach ([`DecodedZone`]).
+    /// The blobs that passed the blob tests, as sort keys (largest
+    /// first), then the examined candidates' keys (in the blobs' order).
+    pending: Vec<u64>,
+    /// The candidates in the order they were examined.
+    examined: Vec<Candidate>,
+    /// The blobs rejected while examining them, with the reason.
+    verdicts: Vec<(u32, RejectReason)>,
+    /// The ring zones of the decoded targets examined so far
+    /// ([`DecodedZone`]).
     zones: Vec<DecodedZone>,
     /// Whether ring parts are found before measuring (off: every blob is
     /// measured and read, the reference the tests compare with).
@@ -117,6 +124,9 @@ impl Detector {
             candidates: Vec::with_capacity(options.max_targets),
             order: Vec::with_capacity(options.max_targets),
             by_row: Vec::with_capacity(options.max_targets),
+            pending: Vec::with_capacity(options.max_blobs),
+            examined: Vec::with_capacity(options.max_targets),
+            verdicts: Vec::with_capacity(options.max_blobs),
             zones: Vec::with_capacity(options.max_targets),
             #[cfg(test)]
             early_parts: true,
@@ -239,7 +249,6 @@ impl Detector {
         self.out.clear();
         self.candidates.clear();
         self.order.clear();
-        self.zones.clear();
         // 1. Threshold (and the tile peaks of the local levels, from the
         // same pass over the rows).
         let local = given.is_none() && self.options.local_threshold > 0.0;
@@ -353,9 +362,15 @@ impl Detector {
         }
     }
 
-    /// Stages 3 to 5 for every blob, in the order the blobs start: the
-    /// blob tests, the centroid, the code ring; blobs that pass become
-    /// candidates, the others rejections (with their reason).
+    /// Stages 3 to 5 for every blob: the blob tests, the centroid, the
+    /// code ring; blobs that pass become candidates, the others rejections
+    /// (with their reason), both in the order the blobs start.
+    ///
+    /// The blobs that pass the tests are measured largest first: a coded
+    /// target's dot is larger than the parts of its ring that pass them,
+    /// so once the dot is decoded, its ring parts are found from their
+    /// binary centre ([`DecodedZone`]) and neither measured nor read (the
+    /// suppression would remove them whatever they read).
     fn examine_blobs<P: Pixel>(
         &mut self,
         plane: &Plane<'_, P>,
@@ -363,16 +378,24 @@ impl Detector {
         max_value: u32,
         probe: &mut dyn FnMut(DetectStage),
     ) {
+        #[cfg(test)]
+        let early = self.early_parts;
+        #[cfg(not(test))]
+        let early = true;
         let Detector {
             options: o,
             labeller,
             candidates,
             tables,
             levels,
+            pending,
+            examined,
+            verdicts,
             zones,
             out,
             ..
         } = self;
+        let blobs = labeller.blobs();
         let min_read = (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64);
         let min_local = (o.local_noise_factor * t.noise).max(o.min_contrast * max_value as f64);
         let mut code_params = CodeParams {
@@ -382,31 +405,31 @@ impl Detector {
             sample_margin: o.sample_margin,
             dark_tolerance: o.dark_tolerance,
         };
-        for (i, blob) in labeller.blobs().iter().enumerate() {
+        pending.clear();
+        examined.clear();
+        verdicts.clear();
+        zones.clear();
+        // 3. Tests on the binary statistics; the blobs that pass, keyed
+        // largest first (ties in the blobs' order).
+        for (i, blob) in blobs.iter().enumerate() {
             if blob.area < o.min_area {
                 out.n_small += 1;
                 continue;
             }
-            // 3. Tests on the binary statistics.
-            if let Err(reason) = blob_tests(plane, blob, o) {
-                out.reject(blob, reason);
-                continue;
+            match blob_tests(plane, blob, o) {
+                Err(reason) => verdicts.push((i as u32, reason)),
+                Ok(()) => pending.push(((u32::MAX - blob.area) as u64) << 32 | i as u64),
             }
-            // A part of the ring of a decoded target examined before it
-            // (blobs come in the order of their first row, so a zone whose
-            // rows end above this blob is done with): the suppression would
-            // remove it whatever its centre and reading, so it is neither
-            // measured nor read.
-            zones.retain(|z| z.last_row >= blob.row0 as f64);
-            #[cfg(test)]
-            let early = self.early_parts;
-            #[cfg(not(test))]
-            let early = true;
+        }
+        pending.sort_unstable();
+        for &key in pending.iter() {
+            let i = key as u32;
+            let blob = &blobs[i as usize];
             if early && zones.iter().any(|z| z.holds(blob)) {
-                if candidates.len() >= candidates.capacity() {
+                if examined.len() >= examined.capacity() {
                     out.n_dropped += 1;
                 } else {
-                    candidates.push(Candidate::ring_part(i as u32, blob));
+                    examined.push(Candidate::ring_part(i, blob));
                 }
                 continue;
             }
@@ -435,11 +458,11 @@ impl Detector {
             let m = match centroid(plane, blob, t, o, max_value) {
                 Ok(m) => m,
                 Err(reason) => {
-                    out.reject(blob, reason);
+                    verdicts.push((i, reason));
                     continue;
                 }
             };
-            if candidates.len() >= candidates.capacity() {
+            if examined.len() >= examined.capacity() {
                 out.n_dropped += 1;
                 continue;
             }
@@ -448,7 +471,7 @@ impl Detector {
             let ring = read_ring(plane, &m, &code_params, o, tables);
             probe(DetectStage::Decode);
             if let Err(reason) = ring_verdict(&ring.reading) {
-                out.reject(blob, reason);
+                verdicts.push((i, reason));
                 continue;
             }
             if let (Some(_), Some(f)) = (ring.reading.status.id(), ring.frame) {
@@ -461,8 +484,8 @@ impl Detector {
             } else {
                 m
             };
-            candidates.push(Candidate {
-                blob: i as u32,
+            examined.push(Candidate {
+                blob: i,
                 at: blob.centre(),
                 m,
                 frame: ring.frame,
@@ -470,6 +493,20 @@ impl Detector {
                 reading: ring.reading,
                 suppressed: false,
             });
+        }
+        // Back to the blobs' order.
+        pending.clear();
+        pending.extend(
+            examined
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (c.blob as u64) << 32 | k as u64),
+        );
+        pending.sort_unstable();
+        candidates.extend(pending.iter().map(|&key| examined[key as u32 as usize]));
+        verdicts.sort_unstable_by_key(|v| v.0);
+        for &(i, reason) in verdicts.iter() {
+            out.reject(&blobs[i as usize], reason);
         }
     }
 
@@ -543,22 +580,27 @@ const RING_ZONE: std::ops::RangeInclusive<f64> = 1.6..=3.8;
 #[derive(Debug, Clone, Copy)]
 struct DecodedZone {
     frame: RingFrame,
-    /// The zone's last row.
-    last_row: f64,
+    /// How far the zone reaches from its centre in columns and rows.
+    reach: (f64, f64),
 }
 
 impl DecodedZone {
     fn new(frame: RingFrame) -> Self {
+        let [a, b, _] = frame.e;
+        let cols = RING_ZONE.end() * (a * a + b * b).sqrt() * (1.0 + 1e-6) + 1e-6;
         DecodedZone {
             frame,
-            last_row: frame.row + ring_reach(&frame),
+            reach: (cols, ring_reach(&frame)),
         }
     }
 
     /// Whether the binary centre of `blob` lies in the zone.
     fn holds(&self, blob: &Blob) -> bool {
         let (col, row) = blob.centre();
-        RING_ZONE.contains(&self.frame.radius_of(col, row))
+        let f = &self.frame;
+        (col - f.col).abs() <= self.reach.0
+            && (row - f.row).abs() <= self.reach.1
+            && RING_ZONE.contains(&f.radius_of(col, row))
     }
 }
 
@@ -1090,6 +1132,6 @@ mod tests {
             targets += got.targets.len();
         }
         assert!(targets > 800, "targets: {targets}");
-        assert!(parts > 40, "ring parts found before measuring: {parts}");
+        assert!(parts > 150, "ring parts found before measuring: {parts}");
     }
 }
