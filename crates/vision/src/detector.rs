@@ -62,8 +62,8 @@ pub struct Detector {
     labeller: Labeller,
     candidates: Vec<Candidate>,
     order: Vec<u32>,
-    /// The candidates by row (ring-part suppression).
-    by_row: Vec<u32>,
+    /// The candidates' rows and indices by row (ring-part suppression).
+    by_row: Vec<(f64, u32)>,
     /// The blobs that passed the blob tests, as sort keys (largest
     /// first), then the examined candidates' keys (in the blobs' order).
     pending: Vec<u64>,
@@ -660,10 +660,15 @@ fn suppress_ring_parts(
     cands: &mut [Candidate],
     rejected: &mut [crate::Rejection],
     order: &mut Vec<u32>,
-    mut by_row: Option<&mut Vec<u32>>,
+    mut by_row: Option<&mut Vec<(f64, u32)>>,
 ) {
+    // Only a candidate with a ring suppresses: those, in their order.
     order.clear();
-    order.extend(0..cands.len() as u32);
+    order.extend(
+        (0..cands.len() as u32).filter(|&i| {
+            cands[i as usize].reading.ring_present && cands[i as usize].frame.is_some()
+        }),
+    );
     let rank = |c: &Candidate| -> u8 {
         if c.reading.status.id().is_some() {
             0
@@ -680,8 +685,8 @@ fn suppress_ring_parts(
     });
     if let Some(b) = by_row.as_mut() {
         b.clear();
-        b.extend(0..cands.len() as u32);
-        b.sort_unstable_by(|&x, &y| cands[x as usize].at.1.total_cmp(&cands[y as usize].at.1));
+        b.extend(cands.iter().enumerate().map(|(j, c)| (c.at.1, j as u32)));
+        b.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
     }
     for &i in order.iter() {
         let i = i as usize;
@@ -710,10 +715,9 @@ fn suppress_ring_parts(
             Some(by_row) => {
                 let reach = ring_reach(&f);
                 let (lo, hi) = (f.row - reach, f.row + reach);
-                let row = |j: &u32| cands[*j as usize].at.1;
-                let first = by_row.partition_point(|j| row(j).total_cmp(&lo).is_lt());
-                let last = by_row.partition_point(|j| row(j).total_cmp(&hi).is_le());
-                for &j in &by_row[first..last.max(first)] {
+                let first = by_row.partition_point(|(r, _)| r.total_cmp(&lo).is_lt());
+                let last = by_row.partition_point(|(r, _)| r.total_cmp(&hi).is_le());
+                for &(_, j) in &by_row[first..last.max(first)] {
                     consider(j as usize, &mut cands[j as usize]);
                 }
             }
