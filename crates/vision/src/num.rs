@@ -3,12 +3,17 @@
 //! per-target paths (centroid windows, tracking windows) would make
 //! thousands of times per frame.
 
-/// Nearest integer (ties to even) for `|x| < 2³¹`, with an add and a move:
-/// adding 1.5 · 2⁵² leaves the integer in the low bits of the mantissa.
+use wide::f64x2;
+
+/// Nearest integers (ties to even) of both lanes for `|x| < 2³¹`, with an
+/// add and a move: adding 1.5 · 2⁵² leaves the integer in the low bits of
+/// the mantissa.
 #[inline(always)]
-pub(crate) fn near_i64(x: f64) -> i64 {
+pub(crate) fn near_i32x2(x: f64x2) -> [i32; 2] {
     const ROUND: f64 = 6_755_399_441_055_744.0;
-    (x + ROUND).to_bits() as u32 as i32 as i64
+    (x + f64x2::splat(ROUND))
+        .to_array()
+        .map(|r| r.to_bits() as u32 as i32)
 }
 
 /// `floor` for values well inside the `i64` range (no libm call on
@@ -39,7 +44,11 @@ mod tests {
     #[test]
     fn rounding_helpers() {
         for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
-            assert_eq!(near_i64(x), x.round_ties_even() as i64, "{x}");
+            assert_eq!(
+                near_i32x2(f64x2::new([x, -x])),
+                [x, -x].map(|x| x.round_ties_even() as i32),
+                "{x}"
+            );
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
         }

@@ -5,7 +5,7 @@
 //! position a [`Plane`] takes is in full-frame pixel coordinates.
 
 use crate::threshold::Threshold;
-use wide::u8x16;
+use wide::{i16x8, i32x4, u8x16, CmpGt};
 
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
@@ -26,6 +26,26 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         m
     }
+    /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
+    /// running from `k0`: a row's grey-value moments.
+    #[inline]
+    fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
+        scalar_moment_sums(&line[a..a + n], k0, |p| p.value() as i64)
+    }
+}
+
+/// `[Σ w, Σ w k, Σ w k²]` over `px` with `w` the weight of a pixel and `k`
+/// running from `k0` (see [`Pixel::moment_sums`]).
+#[inline(always)]
+pub(crate) fn scalar_moment_sums<P: Pixel>(px: &[P], k0: i64, w: impl Fn(P) -> i64) -> [i64; 3] {
+    let (mut t0, mut t1, mut t2) = (0i64, 0i64, 0i64);
+    for (k, &p) in (k0..).zip(px) {
+        let v = w(p);
+        t0 += v;
+        t1 += v * k;
+        t2 += v * k * k;
+    }
+    [t0, t1, t2]
 }
 
 impl Pixel for u8 {
@@ -80,6 +100,68 @@ impl Pixel for u8 {
             m |= (threshold.is_foreground(p as u32) as u64) << (shift + i);
         }
         m
+    }
+
+    /// Sixteen pixels at a time in 16-bit lanes (SSE2 `pmaddwd` sums the
+    /// products in pairs into 32-bit lanes) about the run's first pixel
+    /// (`j = k − k0`), moved to `k0` exactly in integers; so the same as one
+    /// pixel at a time. A run of at most sixteen pixels is one block from
+    /// its first pixel; otherwise the last block is the sixteen pixels
+    /// ending at the row's end when fewer are left (lanes outside the
+    /// pixels not yet summed masked off). For `n ≤ 128` every lane's `j²`
+    /// (`|j| < 144`) fits 16 bits and the 32-bit lane sums cannot overflow.
+    #[inline]
+    fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
+        const LANES: usize = 16;
+        if n > 128 || line.len() < LANES {
+            return scalar_moment_sums(&line[a..a + n], k0, |p| p as i64);
+        }
+        const LO: i16x8 = i16x8::new([0, 1, 2, 3, 4, 5, 6, 7]);
+        const HI: i16x8 = i16x8::new([8, 9, 10, 11, 12, 13, 14, 15]);
+        let (mut s0, mut s1, mut s2) = (i16x8::ZERO, i32x4::ZERO, i32x4::ZERO);
+        let end = i16x8::splat(n as i16);
+        let mut s = 0;
+        if n <= LANES && a + LANES <= line.len() {
+            // One block from the row's first pixel (most rows): `j` is the
+            // lane, `j²` a constant too.
+            const LO2: i16x8 = i16x8::new([0, 1, 4, 9, 16, 25, 36, 49]);
+            const HI2: i16x8 = i16x8::new([64, 81, 100, 121, 144, 169, 196, 225]);
+            let Ok(&block) = <&[u8; LANES]>::try_from(&line[a..a + LANES]) else {
+                unreachable!()
+            };
+            let v = u8x16::new(block);
+            let lo = i16x8::from_u8x16_low(v) & end.cmp_gt(LO);
+            let hi = i16x8::from_u8x16_high(v) & end.cmp_gt(HI);
+            s0 = lo + hi;
+            s1 = lo.dot(LO) + hi.dot(HI);
+            s2 = lo.dot(LO2) + hi.dot(HI2);
+            s = n;
+        }
+        while s < n {
+            let p = (a + s).min(line.len() - LANES);
+            let Ok(&block) = <&[u8; LANES]>::try_from(&line[p..p + LANES]) else {
+                unreachable!()
+            };
+            let v = u8x16::new(block);
+            // `j` of lane 0; the lanes with `j < s` were summed before.
+            let j0 = i16x8::splat((p as isize - a as isize) as i16);
+            let first = i16x8::splat(s as i16 - 1);
+            for (v, lane) in [
+                (i16x8::from_u8x16_low(v), LO),
+                (i16x8::from_u8x16_high(v), HI),
+            ] {
+                let j = j0 + lane;
+                let v = v & (j.cmp_gt(first) & end.cmp_gt(j));
+                s0 += v;
+                s1 += v.dot(j);
+                s2 += v.dot(j * j);
+            }
+            s += LANES;
+        }
+        let s0 = s0.dot(i16x8::splat(1)).reduce_add() as i64;
+        let s1 = s1.reduce_add() as i64;
+        let s2 = s2.reduce_add() as i64;
+        [s0, s1 + k0 * s0, s2 + 2 * k0 * s1 + k0 * k0 * s0]
     }
 }
 
