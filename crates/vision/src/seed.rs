@@ -9,6 +9,12 @@
 //! runs of the window, its statistics are added in the labeller's
 //! (row-major) order, so that its centre and moments are bit for bit the
 //! ones the whole-window labeller gives it.
+//!
+//! A window at most 64 pixels wide and high (tracking's windows) is grown
+//! on bit masks, one 64-bit word per row: a row's foreground pixels are
+//! found sixteen at a time, a blob spreads from row to row by shifts and
+//! ands, and its runs are read off its rows' words. Wider windows are grown
+//! run by run, with a list of the runs found per row.
 
 use crate::label::{Blob, Run};
 use crate::pixel::{Pixel, Plane};
@@ -16,6 +22,9 @@ use crate::threshold::Threshold;
 
 /// No run (end of a row's list).
 const NONE: u32 = u32::MAX;
+
+/// Largest width and height of a window grown on row masks.
+const MASK_SIDE: usize = 64;
 
 /// Why growing stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,6 +54,25 @@ pub struct SeedLabeller {
     /// The window: full-frame first row and column, last column.
     row0: usize,
     col0: usize,
+    /// The window is grown on row masks ([`MASK_SIDE`]).
+    masked: bool,
+    /// Mask path: per window row, its foreground pixels (bit `i`: column
+    /// `col0 + i`), valid for the rows set in `known`, at `level`.
+    fg: [u64; MASK_SIDE],
+    known: u64,
+    level: Option<Threshold>,
+    /// Mask path: per window row, the pixels of the blobs grown so far.
+    taken: [u64; MASK_SIDE],
+    /// Mask path: the blob being grown, per window row.
+    grown: [u64; MASK_SIDE],
+    /// Mask path: the grown blobs' rows: blob `k` holds window rows
+    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
+    spans: Vec<(u32, u32, u32)>,
+    rows: Vec<u64>,
+    /// Mask path: rows whose neighbours are still to be searched.
+    todo: Vec<u32>,
+    /// Mask path: runs counted against the capacity.
+    n_runs: usize,
 }
 
 impl SeedLabeller {
@@ -62,6 +90,18 @@ impl SeedLabeller {
             max_blobs,
             row0: 0,
             col0: 0,
+            masked: false,
+            fg: [0; MASK_SIDE],
+            known: 0,
+            level: None,
+            taken: [0; MASK_SIDE],
+            grown: [0; MASK_SIDE],
+            spans: Vec::with_capacity(max_blobs),
+            // (Every row of a blob holds a pixel no other blob holds, and
+            // every row pushed gained one.)
+            rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
+            todo: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
+            n_runs: 0,
         }
     }
 
@@ -74,10 +114,21 @@ impl SeedLabeller {
         self.owner.clear();
         self.stack.clear();
         self.blobs.clear();
-        self.head.clear();
-        self.head.resize(plane.height, NONE);
         self.row0 = plane.row0;
         self.col0 = plane.col0;
+        self.masked =
+            (1..=MASK_SIDE).contains(&plane.width) && (1..=MASK_SIDE).contains(&plane.height);
+        if self.masked {
+            self.known = 0;
+            self.level = None;
+            self.taken[..plane.height].fill(0);
+            self.spans.clear();
+            self.rows.clear();
+            self.n_runs = 0;
+        } else {
+            self.head.clear();
+            self.head.resize(plane.height, NONE);
+        }
     }
 
     /// The blobs grown in this window, in the order they were grown.
@@ -88,6 +139,17 @@ impl SeedLabeller {
     /// The blob holding full-frame pixel `(col, row)` of the window, if one
     /// was grown.
     pub fn blob_at(&self, col: usize, row: usize) -> Option<usize> {
+        if self.masked {
+            let r = row.checked_sub(self.row0)?;
+            let bit = 1u64 << col.checked_sub(self.col0).filter(|&c| c < MASK_SIDE)?;
+            if r >= MASK_SIDE || self.taken[r] & bit == 0 {
+                return None;
+            }
+            return self.spans.iter().position(|&(first, a, b)| {
+                let k = r.wrapping_sub(first as usize);
+                k < (b - a) as usize && self.rows[a as usize + k] & bit != 0
+            });
+        }
         self.run_at(col, row).map(|k| self.owner[k] as usize)
     }
 
@@ -125,6 +187,9 @@ impl SeedLabeller {
         if col < plane.col0 || col > plane.last_col() || row < plane.row0 || row > plane.last_row()
         {
             return Ok(None);
+        }
+        if self.masked {
+            return self.grow_masked(plane, threshold, saturation, col, row);
         }
         if !threshold.is_foreground(plane.row(row)[col - plane.col0].value()) {
             return Ok(None);
@@ -203,6 +268,21 @@ impl SeedLabeller {
         }
         let lo = col_lo.max(plane.col0);
         let hi = col_hi.min(plane.last_col());
+        if self.masked {
+            if lo > hi {
+                return Ok(());
+            }
+            let r = row - self.row0;
+            let (a, b) = (lo - self.col0, hi - self.col0);
+            let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+            let mut open = self.fg_row(plane, threshold, r) & cols & !self.taken[r];
+            while open != 0 {
+                let col = self.col0 + open.trailing_zeros() as usize;
+                self.grow_masked(plane, threshold, saturation, col, row)?;
+                open &= !self.taken[r];
+            }
+            return Ok(());
+        }
         let line = plane.row(row);
         let mut col = lo;
         while col <= hi {
@@ -220,6 +300,115 @@ impl SeedLabeller {
             };
         }
         Ok(())
+    }
+
+    /// The foreground mask of window row `r` at `threshold` (found once
+    /// per window and threshold).
+    #[inline]
+    fn fg_row<P: Pixel>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
+        if self.level != Some(threshold) {
+            self.level = Some(threshold);
+            self.known = 0;
+        }
+        if self.known & (1 << r) == 0 {
+            self.known |= 1 << r;
+            // A whole block of 64 pixels from the row's start where the
+            // frame holds them (the mask of the pixels past the window's
+            // width cleared), else the row alone (its last pixels then
+            // one at a time).
+            let start = r * plane.stride;
+            self.fg[r] = match plane.data.get(start..start + MASK_SIDE) {
+                Some(block) => {
+                    threshold.foreground_mask(block) & (u64::MAX >> (MASK_SIDE - plane.width))
+                }
+                None => threshold.foreground_mask(plane.row(self.row0 + r)),
+            };
+        }
+        self.fg[r]
+    }
+
+    /// [`SeedLabeller::grow`] on row masks (a window of at most
+    /// [`MASK_SIDE`] pixels each way, position inside it).
+    fn grow_masked<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        saturation: u32,
+        col: usize,
+        row: usize,
+    ) -> Result<Option<usize>, SeedOverflow> {
+        let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
+        if self.fg_row(plane, threshold, r) & bit == 0 {
+            return Ok(None);
+        }
+        if self.taken[r] & bit != 0 {
+            return Ok(self.blob_at(col, row));
+        }
+        if self.spans.len() >= self.max_blobs {
+            return Err(SeedOverflow::Blobs);
+        }
+        // The runs of each row that touch the blob's pixels of the row
+        // above or below (8-connectivity: within one column), row after
+        // row until no row gains a pixel.
+        let last = plane.height - 1;
+        self.grown[r] = fill_runs(self.fg[r], bit);
+        let (mut lo, mut hi) = (r, r);
+        self.todo.clear();
+        self.todo.push(r as u32);
+        while let Some(k) = self.todo.pop() {
+            let k = k as usize;
+            let reach = {
+                let g = self.grown[k];
+                g | g << 1 | g >> 1
+            };
+            for n in [k.wrapping_sub(1), k + 1] {
+                if n > last {
+                    continue;
+                }
+                let (below, above) = (n < lo, n > hi);
+                let before = if below || above { 0 } else { self.grown[n] };
+                let f = self.fg_row(plane, threshold, n);
+                let add = fill_runs(f, reach & f) & !before;
+                if add != 0 {
+                    self.grown[n] = before | add;
+                    lo = lo.min(n);
+                    hi = hi.max(n);
+                    self.todo.push(n as u32);
+                }
+            }
+        }
+        // The statistics in the labeller's order: row by row, each row's
+        // runs by column.
+        let mut b = Blob::empty();
+        let first = self.rows.len() as u32;
+        for k in lo..=hi {
+            let g = self.grown[k];
+            let line = plane.row(self.row0 + k);
+            let mut m = g;
+            while m != 0 {
+                let start = m.trailing_zeros() as usize;
+                let len = (!(m >> start)).trailing_zeros() as usize;
+                if self.n_runs >= self.max_runs {
+                    return Err(SeedOverflow::Runs);
+                }
+                self.n_runs += 1;
+                let end = start + len;
+                b.add_run(&Run::of(
+                    line,
+                    (self.row0 + k) as u32,
+                    self.col0 as u32,
+                    start,
+                    end,
+                    saturation,
+                ));
+                m &= !(u64::MAX >> (MASK_SIDE - end));
+            }
+            self.taken[k] |= g;
+            self.rows.push(g);
+        }
+        self.spans.push((lo as u32, first, self.rows.len() as u32));
+        self.blobs.push(b);
+        Ok(Some(self.blobs.len() - 1))
     }
 
     /// One past the last column of the run of row `row` holding column
@@ -272,6 +461,20 @@ impl SeedLabeller {
         }
         self.stack.push(k);
         Ok(end)
+    }
+}
+
+/// The runs of `f` (a row's foreground bits) that hold a bit of `seeds`:
+/// the seeds spread one bit either way within `f` until nothing changes.
+#[inline(always)]
+fn fill_runs(f: u64, seeds: u64) -> u64 {
+    let mut x = seeds & f;
+    loop {
+        let y = (x | x << 1 | x >> 1) & f;
+        if y == x {
+            return x;
+        }
+        x = y;
     }
 }
 
@@ -375,10 +578,42 @@ mod tests {
             bits in proptest::collection::vec(0u8..3, 12 * 10),
             c0 in 0usize..3, r0 in 0usize..3, dw in 0usize..3, dh in 0usize..3,
         ) {
-            // About a third of the pixels bright, some saturated.
+            // About a third of the pixels bright, some saturated (windows
+            // grown on row masks).
             let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
             let (w, h) = (12 - c0 - dw, 10 - r0 - dh);
             check(&data, 12, (c0, r0, w, h));
+        }
+
+        #[test]
+        fn random_wide_or_tall_frames_grow_as_the_labeller_labels_them(
+            bits in proptest::collection::vec(0u8..3, 70 * 8),
+            c0 in 0usize..3, dw in 0usize..3, tall in any::<bool>(),
+        ) {
+            // Windows wider or taller than 64 pixels are grown run by run;
+            // one of exactly 64 on row masks.
+            let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
+            if tall {
+                check(&data, 8, (0, c0, 8, 70 - c0 - dw));
+            } else {
+                check(&data, 70, (c0, 0, 70 - c0 - dw, 8));
+                check(&data, 70, (3, 0, 64, 8));
+            }
+        }
+    }
+
+    #[test]
+    fn the_window_decides_the_path() {
+        let data = [10u8; 70 * 70];
+        let mut s = SeedLabeller::new(8, 8, 70);
+        for (w, h, masked) in [
+            (64, 64, true),
+            (65, 10, false),
+            (10, 65, false),
+            (1, 1, true),
+        ] {
+            s.start(&Plane::whole(&data[..w * h], w, h));
+            assert_eq!(s.masked, masked, "{w} × {h}");
         }
     }
 }
