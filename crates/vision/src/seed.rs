@@ -304,26 +304,43 @@ impl SeedLabeller {
 
     /// The foreground mask of window row `r` at `threshold` (found once
     /// per window and threshold).
-    #[inline]
+    #[inline(always)]
     fn fg_row<P: Pixel>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
+        if self.known & (1 << r) != 0 && self.level == Some(threshold) {
+            return self.fg[r];
+        }
+        self.find_fg_row(plane, threshold, r)
+    }
+
+    /// [`SeedLabeller::fg_row`] of a row not yet seen at `threshold`.
+    #[inline(never)]
+    fn find_fg_row<P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        r: usize,
+    ) -> u64 {
         if self.level != Some(threshold) {
             self.level = Some(threshold);
             self.known = 0;
         }
-        if self.known & (1 << r) == 0 {
-            self.known |= 1 << r;
-            // A whole block of 64 pixels from the row's start where the
-            // frame holds them (the mask of the pixels past the window's
-            // width cleared), else the row alone (its last pixels then
-            // one at a time).
-            let start = r * plane.stride;
-            self.fg[r] = match plane.data.get(start..start + MASK_SIDE) {
-                Some(block) => {
-                    threshold.foreground_mask(block) & (u64::MAX >> (MASK_SIDE - plane.width))
-                }
-                None => threshold.foreground_mask(plane.row(self.row0 + r)),
-            };
-        }
+        self.known |= 1 << r;
+        // 8-bit pixels: a whole block of 64 from the row's start where the
+        // frame holds them (sixteen at a time; the mask of the pixels past
+        // the window's width cleared), else the row alone (its last pixels
+        // then one at a time).
+        let start = r * plane.stride;
+        let block = if P::MAX == u8::MAX as u32 {
+            plane.data.get(start..start + MASK_SIDE)
+        } else {
+            None
+        };
+        self.fg[r] = match block {
+            Some(block) => {
+                threshold.foreground_mask(block) & (u64::MAX >> (MASK_SIDE - plane.width))
+            }
+            None => threshold.foreground_mask(plane.row(self.row0 + r)),
+        };
         self.fg[r]
     }
 
