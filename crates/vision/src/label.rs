@@ -60,7 +60,6 @@ pub(crate) struct Run {
     pub(crate) start: u32,
     /// One past the last column.
     pub(crate) end: u32,
-    pub(crate) sum: u32,
     pub(crate) max: u16,
     pub(crate) saturated: u16,
 }
@@ -78,10 +77,9 @@ impl Run {
         end: usize,
         saturation: u32,
     ) -> Run {
-        let (mut sum, mut max, mut sat) = (0u32, 0u32, 0u32);
+        let (mut max, mut sat) = (0u32, 0u32);
         for p in &line[start..end] {
             let v = p.value();
-            sum += v;
             max = max.max(v);
             sat += (v >= saturation) as u32;
         }
@@ -89,7 +87,6 @@ impl Run {
             row,
             start: col0 + start as u32,
             end: col0 + end as u32,
-            sum,
             max: max.min(u16::MAX as u32) as u16,
             saturated: sat.min(u16::MAX as u32) as u16,
         }
@@ -109,8 +106,6 @@ pub struct Blob {
     pub col1: u32,
     /// Last row.
     pub row1: u32,
-    /// Sum of grey values.
-    pub sum: u64,
     /// Largest grey value.
     pub max: u32,
     /// Pixels at or above the saturation level.
@@ -132,7 +127,6 @@ impl Blob {
             row0: u32::MAX,
             col1: 0,
             row1: 0,
-            sum: 0,
             max: 0,
             saturated: 0,
             m: [0.0; 5],
@@ -181,7 +175,6 @@ impl Blob {
         m4[7] += sx * y3;
         m4[8] += n * y3 * y;
         self.area += run.end - run.start;
-        self.sum += run.sum as u64;
         self.max = self.max.max(run.max as u32);
         self.saturated += run.saturated as u32;
         self.col0 = self.col0.min(run.start);
