@@ -325,13 +325,19 @@ impl SeedLabeller {
             self.known = 0;
         }
         self.known |= 1 << r;
-        // 8-bit pixels: a whole block of 64 from the row's start where the
-        // frame holds them (sixteen at a time; the mask of the pixels past
-        // the window's width cleared), else the row alone (its last pixels
-        // then one at a time).
+        // 8-bit pixels: a whole block of 32 or 64 from the row's start
+        // where the frame holds them (sixteen at a time; the mask of the
+        // pixels past the window's width cleared), else the row alone (its
+        // last pixels then one at a time).
         let start = r * plane.stride;
         let block = if P::MAX == u8::MAX as u32 {
-            plane.data.get(start..start + MASK_SIDE)
+            // (32 pixels when they hold the window: two blocks of sixteen.)
+            let n = if plane.width <= MASK_SIDE / 2 {
+                MASK_SIDE / 2
+            } else {
+                MASK_SIDE
+            };
+            plane.data.get(start..start + n)
         } else {
             None
         };
@@ -608,13 +614,15 @@ mod tests {
             c0 in 0usize..3, dw in 0usize..3, tall in any::<bool>(),
         ) {
             // Windows wider or taller than 64 pixels are grown run by run;
-            // one of exactly 64 on row masks.
+            // ones of 64 and of at most 32 in a wider frame on row masks
+            // read in blocks past their width.
             let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
             if tall {
                 check(&data, 8, (0, c0, 8, 70 - c0 - dw));
             } else {
                 check(&data, 70, (c0, 0, 70 - c0 - dw, 8));
                 check(&data, 70, (3, 0, 64, 8));
+                check(&data, 70, (c0 + 5, 0, 30 - dw, 8));
             }
         }
     }
