@@ -28,6 +28,7 @@
 
 use crate::pixel::{Pixel, Plane};
 use photopose_field::{codes, Field, TargetKind};
+use wide::f64x2;
 
 /// The set of code ids a detector accepts (those of the field's coded targets).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -315,7 +316,20 @@ const HARMONIC: [(f64, f64); 6] = [
     (0.866_025_403_784_438_6, -0.5),
 ];
 
-/// Cosines and sines of the fixed sampling angles, computed once.
+/// Cosines and sines of two sampling angles, one to a lane: `(cos, sin)`.
+type CsPair = (f64x2, f64x2);
+
+/// The angles of `cs` two to a [`CsPair`], in order.
+fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
+    debug_assert_eq!(cs.len(), 2 * N);
+    std::array::from_fn(|i| {
+        let ((c0, s0), (c1, s1)) = (cs[2 * i], cs[2 * i + 1]);
+        (f64x2::new([c0, c1]), f64x2::new([s0, s1]))
+    })
+}
+
+/// Cosines and sines of the fixed sampling angles, computed once; also
+/// two to a lane pair for [`circle_inside`].
 #[derive(Debug, Clone)]
 pub struct RingTables {
     phase: [(f64, f64); PHASE_SAMPLES],
@@ -323,6 +337,13 @@ pub struct RingTables {
     bright: [(f64, f64); 8],
     /// Sector `k`, sample `i`: angle `15° + 30° k + offset_i` from the boundary.
     sector: [[(f64, f64); SECTOR_OFFSETS.len()]; 12],
+    /// The phase angles `j = 0, 3, 6 …` (the first pass).
+    phase_first: [CsPair; PHASE_SAMPLES / 6],
+    /// The phase angles `3j + 1, 3j + 2` (the second pass).
+    phase_rest: [CsPair; PHASE_SAMPLES / 3],
+    zone_x2: [CsPair; ZONE_SAMPLES / 2],
+    bright_x2: [CsPair; 4],
+    sector_x2: [[CsPair; SECTOR_OFFSETS.len() / 2]; 12],
 }
 
 impl Default for RingTables {
@@ -331,11 +352,17 @@ impl Default for RingTables {
             let (s, c) = (deg * DEG).sin_cos();
             (c, s)
         };
+        let zero = (f64x2::ZERO, f64x2::ZERO);
         let mut t = RingTables {
             phase: [(0.0, 0.0); PHASE_SAMPLES],
             zone: [(0.0, 0.0); ZONE_SAMPLES],
             bright: [(0.0, 0.0); 8],
             sector: [[(0.0, 0.0); SECTOR_OFFSETS.len()]; 12],
+            phase_first: [zero; PHASE_SAMPLES / 6],
+            phase_rest: [zero; PHASE_SAMPLES / 3],
+            zone_x2: [zero; ZONE_SAMPLES / 2],
+            bright_x2: [zero; 4],
+            sector_x2: [[zero; SECTOR_OFFSETS.len() / 2]; 12],
         };
         for (j, v) in t.phase.iter_mut().enumerate() {
             *v = cs(j as f64 * (360.0 / PHASE_SAMPLES as f64));
@@ -351,24 +378,64 @@ impl Default for RingTables {
                 *v = cs(15.0 + 30.0 * k as f64 + d);
             }
         }
+        let first: Vec<_> = t.phase.iter().copied().step_by(3).collect();
+        t.phase_first = pairs(&first);
+        let rest: Vec<_> = (0..PHASE_SAMPLES)
+            .filter(|j| j % 3 != 0)
+            .map(|j| t.phase[j])
+            .collect();
+        t.phase_rest = pairs(&rest);
+        t.zone_x2 = pairs(&t.zone);
+        t.bright_x2 = pairs(&t.bright);
+        for (x2, row) in t.sector_x2.iter_mut().zip(&t.sector) {
+            *x2 = pairs(row);
+        }
         t
     }
 }
 
-/// Rotates `(cos a, sin a)` by `(cos b, sin b)`.
+/// Rotates `(cos a, sin a)` by `(cos b, sin b)` (`f64` or two lanes).
 #[inline(always)]
-fn rotate_cs((ca, sa): (f64, f64), (cb, sb): (f64, f64)) -> (f64, f64) {
+fn rotate_cs<T>((ca, sa): (T, T), (cb, sb): (T, T)) -> (T, T)
+where
+    T: Copy + std::ops::Mul<Output = T> + std::ops::Add<Output = T> + std::ops::Sub<Output = T>,
+{
     (ca * cb - sa * sb, sa * cb + ca * sb)
 }
 
+/// The values at `f.point_cs(k, cs)` for the angles of `cs`, two at a time
+/// into `out` (lane `l` of `out[i]` from lane `l` of `cs[i]`), for a ring
+/// that lies inside the window ([`Sampler`]'s `inside`). Each lane does the
+/// scalar [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations
+/// in the same order: the values are theirs bit for bit, in fewer
+/// instructions (the arithmetic of two samples in one vector operation).
+#[inline(always)]
+fn circle_inside<P: Pixel>(
+    plane: &Plane<'_, P>,
+    f: &RingFrame,
+    k: f64,
+    cs: &[CsPair],
+    out: &mut [f64x2],
+) {
+    let (kc, ks) = (f64x2::splat(k), f64x2::splat(-k));
+    let (col, row) = (f64x2::splat(f.col), f64x2::splat(f.row));
+    let [e0, e1, e2] = f.e.map(f64x2::splat);
+    for (&(c, s), v) in cs.iter().zip(out) {
+        let (x, y) = (kc * c, ks * s);
+        *v = plane.bilinear_inside_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y);
+    }
+}
+
 /// Bilinear sampling for one ring: when the whole target (out to its
-/// quiet zone) lies inside the image, every sample skips the range checks.
-struct Sampler<'p, 'a, P> {
+/// quiet zone) lies inside the image, every sample skips the range checks
+/// (and whole circles of samples go two at a time, [`circle_inside`]).
+/// `FAST` off: one sample at a time even then (the reference for tests).
+struct Sampler<'p, 'a, P, const FAST: bool> {
     plane: &'p Plane<'a, P>,
     inside: bool,
 }
 
-impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
+impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
     fn new(plane: &'p Plane<'a, P>, f: &RingFrame) -> Self {
         // Farthest reach of the samples (the quiet zone), with a margin for
         // rounding: |E·(cos t, −sin t)| ≤ the norm of E's rows.
@@ -387,6 +454,12 @@ impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
         Sampler { plane, inside }
     }
 
+    /// Whether whole circles go through [`circle_inside`].
+    #[inline(always)]
+    fn fast(&self) -> bool {
+        FAST && self.inside
+    }
+
     #[inline(always)]
     fn at(&self, col: f64, row: f64) -> Option<f64> {
         if self.inside {
@@ -400,8 +473,8 @@ impl<'p, 'a, P: Pixel> Sampler<'p, 'a, P> {
 /// Samples the ring's middle at phase angle `j` into `ring[j]`; whether it
 /// is bright, `None` outside the image.
 #[inline(always)]
-fn phase_sample<P: Pixel>(
-    plane: &Sampler<'_, '_, P>,
+fn phase_sample<P: Pixel, const FAST: bool>(
+    plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     tables: &RingTables,
     thr: f64,
@@ -415,14 +488,28 @@ fn phase_sample<P: Pixel>(
     })
 }
 
-fn zone<P: Pixel>(
-    plane: &Sampler<'_, '_, P>,
+fn zone<P: Pixel, const FAST: bool>(
+    plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     k: f64,
     tables: &RingTables,
 ) -> Option<(f64, f64)> {
     let mut sum = 0.0;
     let mut max = f64::MIN;
+    if plane.fast() {
+        let mut v = [f64x2::ZERO; ZONE_SAMPLES / 2];
+        circle_inside(plane.plane, f, k, &tables.zone_x2, &mut v);
+        // In the samples' order, as below.
+        for v in &v {
+            for v in v.to_array() {
+                sum += v;
+                if v > max {
+                    max = v;
+                }
+            }
+        }
+        return Some((sum / ZONE_SAMPLES as f64, max));
+    }
     for &cs in &tables.zone {
         let (x, y) = f.point_cs(k, cs);
         let v = plane.at(x, y)?;
@@ -442,6 +529,18 @@ pub fn read<P: Pixel>(
     accepted: &CodeSet,
     tables: &RingTables,
 ) -> Reading {
+    read_with::<P, true>(plane, f, params, accepted, tables)
+}
+
+/// [`read`], with whole circles of samples two at a time (`FAST`) or one
+/// at a time (the reference: the same reading bit for bit).
+fn read_with<P: Pixel, const FAST: bool>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    params: &CodeParams,
+    accepted: &CodeSet,
+    tables: &RingTables,
+) -> Reading {
     let mut out = Reading {
         gap: Gap::Outside,
         status: CodeStatus::Uncertain(Uncertainty::OutsideImage),
@@ -451,16 +550,26 @@ pub fn read<P: Pixel>(
         dark: 0.0,
     };
     // Bright level: the dot's centre and eight points at 0.3 r.
-    let plane = &Sampler::new(plane, f);
+    let plane = &Sampler::<P, FAST>::new(plane, f);
     let mut bright = match plane.at(f.col, f.row) {
         Some(v) => v,
         None => return out,
     };
-    for &cs in &tables.bright {
-        let (x, y) = f.point_cs(0.3, cs);
-        match plane.at(x, y) {
-            Some(v) => bright += v,
-            None => return out,
+    if plane.fast() {
+        let mut v = [f64x2::ZERO; 4];
+        circle_inside(plane.plane, f, 0.3, &tables.bright_x2, &mut v);
+        for v in &v {
+            let [a, b] = v.to_array();
+            bright += a;
+            bright += b;
+        }
+    } else {
+        for &cs in &tables.bright {
+            let (x, y) = f.point_cs(0.3, cs);
+            match plane.at(x, y) {
+                Some(v) => bright += v,
+                None => return out,
+            }
         }
     }
     bright /= 9.0;
@@ -484,18 +593,40 @@ pub fn read<P: Pixel>(
     let mut outside = false;
     let sample =
         |j: usize, ring: &mut [f64; PHASE_SAMPLES]| phase_sample(plane, f, tables, thr, j, ring);
-    for j in (0..PHASE_SAMPLES).step_by(3) {
-        match sample(j, &mut ring) {
-            Some(b) => n_bright += b as usize,
-            None => outside = true,
+    if plane.fast() {
+        let mut v = [f64x2::ZERO; PHASE_SAMPLES / 6];
+        circle_inside(plane.plane, f, 2.5, &tables.phase_first, &mut v);
+        for (j, v) in v.iter().enumerate() {
+            let [a, b] = v.to_array();
+            ring[6 * j] = a;
+            ring[6 * j + 3] = b;
+            n_bright += (a > thr) as usize + (b > thr) as usize;
+        }
+    } else {
+        for j in (0..PHASE_SAMPLES).step_by(3) {
+            match sample(j, &mut ring) {
+                Some(b) => n_bright += b as usize,
+                None => outside = true,
+            }
         }
     }
     if n_bright > 0 {
-        for j in 0..PHASE_SAMPLES / 3 {
-            for j in [3 * j + 1, 3 * j + 2] {
-                match sample(j, &mut ring) {
-                    Some(b) => n_bright += b as usize,
-                    None => outside = true,
+        if plane.fast() {
+            let mut v = [f64x2::ZERO; PHASE_SAMPLES / 3];
+            circle_inside(plane.plane, f, 2.5, &tables.phase_rest, &mut v);
+            for (j, v) in v.iter().enumerate() {
+                let [a, b] = v.to_array();
+                ring[3 * j + 1] = a;
+                ring[3 * j + 2] = b;
+                n_bright += (a > thr) as usize + (b > thr) as usize;
+            }
+        } else {
+            for j in 0..PHASE_SAMPLES / 3 {
+                for j in [3 * j + 1, 3 * j + 2] {
+                    match sample(j, &mut ring) {
+                        Some(b) => n_bright += b as usize,
+                        None => outside = true,
+                    }
                 }
             }
         }
@@ -560,22 +691,38 @@ pub fn read<P: Pixel>(
     // The sample angles turned to the ring's phase: at the middle radius,
     // then reused at the inner and outer ones.
     let mut turned = [[(0.0f64, 0.0f64); SECTOR_OFFSETS.len()]; 12];
+    // The same two to a lane pair.
+    let mut turned_x2 = [[(f64x2::ZERO, f64x2::ZERO); SECTOR_OFFSETS.len() / 2]; 12];
+    let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
         let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
         let mut word = 0u16;
-        for (angles, turned) in tables.sector.iter().zip(turned.iter_mut()) {
-            if ri == 0 {
-                for (t, &a) in turned.iter_mut().zip(angles) {
-                    *t = rotate_cs(a, boundary_cs);
-                }
-            }
+        for (sector, (turned, turned_x2)) in turned.iter_mut().zip(&mut turned_x2).enumerate() {
             let mut s = [0.0f64; SECTOR_OFFSETS.len()];
-            for (v, &cs) in s.iter_mut().zip(turned.iter()) {
-                let (x, y) = f.point_cs(k, cs);
-                match plane.at(x, y) {
-                    Some(g) => *v = g,
-                    None => return out,
+            if plane.fast() {
+                if ri == 0 {
+                    for (t, &a) in turned_x2.iter_mut().zip(&tables.sector_x2[sector]) {
+                        *t = rotate_cs(a, boundary_x2);
+                    }
+                }
+                let mut v = [f64x2::ZERO; SECTOR_OFFSETS.len() / 2];
+                circle_inside(plane.plane, f, k, turned_x2, &mut v);
+                for (s, v) in s.chunks_exact_mut(2).zip(&v) {
+                    s.copy_from_slice(v.as_array_ref());
+                }
+            } else {
+                if ri == 0 {
+                    for (t, &a) in turned.iter_mut().zip(&tables.sector[sector]) {
+                        *t = rotate_cs(a, boundary_cs);
+                    }
+                }
+                for (v, &cs) in s.iter_mut().zip(turned.iter()) {
+                    let (x, y) = f.point_cs(k, cs);
+                    match plane.at(x, y) {
+                        Some(g) => *v = g,
+                        None => return out,
+                    }
                 }
             }
             let mean = s.iter().sum::<f64>() / s.len() as f64;
@@ -656,6 +803,124 @@ mod tests {
         let s = CodeSet::from_field(&f);
         assert_eq!(s.len(), 30);
         assert!(f.coded().all(|t| s.contains(t.id)));
+    }
+
+    /// Reads the ring in `f` both ways and checks the readings agree bit
+    /// for bit; the reading, and whether whole circles went two at a time.
+    fn read_both<P: Pixel>(
+        plane: &Plane<P>,
+        f: &RingFrame,
+        params: &CodeParams,
+        tables: &RingTables,
+    ) -> (Reading, bool) {
+        let accepted = CodeSet::all();
+        let fast = read_with::<P, true>(plane, f, params, &accepted, tables);
+        let one = read_with::<P, false>(plane, f, params, &accepted, tables);
+        assert_eq!(fast.status, one.status, "{f:?}");
+        assert_eq!(
+            (fast.gap, fast.ring_present, fast.raw),
+            (one.gap, one.ring_present, one.raw)
+        );
+        assert_eq!(fast.bright.to_bits(), one.bright.to_bits(), "{f:?}");
+        assert_eq!(fast.dark.to_bits(), one.dark.to_bits(), "{f:?}");
+        (fast, Sampler::<P, true>::new(plane, f).inside)
+    }
+
+    /// Whole circles of samples two at a time read every ring exactly as
+    /// one sample at a time: coded targets and dots under tilted views,
+    /// frames off their centres and of other sizes, and frames anywhere
+    /// (wholly inside, near and across the window's edges); 8 and 16 bits,
+    /// the whole frame and a window.
+    #[test]
+    fn circles_two_at_a_time_read_as_one_at_a_time() {
+        use crate::testutil::{window, Drawn, Rng, Scene, View};
+        let (w, h) = (210usize, 150usize);
+        let mut scene = Scene::new(w, h, 15.0);
+        let mut rng = Rng::new(5);
+        let ids: Vec<u64> = codes::even_ids().step_by(11).collect();
+        let mut targets = Vec::new();
+        for k in 0..15 {
+            let (col, row) = (16.0 + 40.0 * (k % 5) as f64, 30.0 + 45.0 * (k / 5) as f64);
+            let radius = rng.range(3.0, 4.5);
+            let m = View::tilted(1.0, rng.range(0.0, 0.9), rng.range(0.0, 6.3), 0.0).m;
+            let code = (k % 4 != 3).then(|| codes::value_of(ids[k % ids.len()]).unwrap());
+            let view = View { m };
+            let phase = rng.range(0.0, 6.3);
+            scene.draw(
+                &Drawn {
+                    col,
+                    row,
+                    radius,
+                    view,
+                    code,
+                    phase,
+                },
+                190.0,
+            );
+            // The second moments of the dot: (r²/4) M Mᵀ.
+            let q = radius * radius / 4.0;
+            let (cxx, cyy) = (
+                q * (m[0] * m[0] + m[1] * m[1]),
+                q * (m[2] * m[2] + m[3] * m[3]),
+            );
+            targets.push((col, row, cxx, cyy, q * (m[0] * m[2] + m[1] * m[3])));
+        }
+        scene.blur(0.7);
+        scene.noise(2.0, &mut rng);
+        let px8: Vec<u8> = scene
+            .v
+            .iter()
+            .map(|v| v.round().clamp(0.0, 255.0) as u8)
+            .collect();
+        let px16: Vec<u16> = scene
+            .v
+            .iter()
+            .map(|v| (v * 13.0).round().clamp(0.0, 4095.0) as u16)
+            .collect();
+        let params = CodeParams {
+            min_contrast: 20.0,
+            min_isolation_contrast: 10.0,
+            sector_margin: 0.15,
+            sample_margin: 0.05,
+            dark_tolerance: 0.25,
+        };
+        let tables = RingTables::default();
+        let mut frames = Vec::new();
+        for &(col, row, cxx, cyy, cxy) in &targets {
+            frames.push(RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap());
+            for _ in 0..6 {
+                let s = rng.range(0.9, 1.1);
+                let (dc, dr) = (rng.range(-0.4, 0.4), rng.range(-0.4, 0.4));
+                let f = RingFrame::from_moments(col + dc, row + dr, s * cxx, s * cyy, s * cxy);
+                frames.push(f.unwrap());
+            }
+        }
+        for _ in 0..300 {
+            let (col, row) = (
+                rng.range(-5.0, w as f64 + 5.0),
+                rng.range(-5.0, h as f64 + 5.0),
+            );
+            let (a, c) = (rng.range(1.0, 6.0), rng.range(1.0, 6.0));
+            let b = rng.range(-0.9, 0.9) * (a * c).sqrt();
+            frames.push(RingFrame::from_moments(col, row, a, c, b).unwrap());
+        }
+        let (mut read, mut fast, mut slow) = (0, 0, 0);
+        for f in &frames {
+            for (reading, inside) in [
+                read_both(&Plane::whole(&px8, w, h), f, &params, &tables),
+                read_both(&window(&px8, w, (13, 7, 170, 121)), f, &params, &tables),
+                read_both(&Plane::whole(&px16, w, h), f, &params, &tables),
+                read_both(&window(&px16, w, (2, 31, 201, 95)), f, &params, &tables),
+            ] {
+                read += matches!(reading.status, CodeStatus::Read { .. }) as usize;
+                fast += inside as usize;
+                slow += !inside as usize;
+            }
+        }
+        assert!(
+            read > 40 && fast > 200 && slow > 200,
+            "{read} {fast} {slow}"
+        );
     }
 
     #[test]

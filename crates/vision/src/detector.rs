@@ -21,6 +21,7 @@ use crate::{
     VisionError,
 };
 use photopose_frame::{ImageView, ViewPixels};
+use wide::f64x2;
 
 /// The stages of [`Detector::detect_probed`]; each is reported when it ends.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -945,8 +946,20 @@ pub(crate) fn read_ring<P: Pixel>(
         }
     };
     let mut amplitude = at(m.col, m.row);
-    for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-        amplitude += at(m.col + dx, m.row + dy);
+    if inside {
+        // The four neighbours two at a time (the same values, in the same
+        // order of the sum).
+        let (col, row) = (f64x2::splat(m.col), f64x2::splat(m.row));
+        for (dx, dy) in [([0.5, -0.5], [0.0; 2]), ([0.0; 2], [0.5, -0.5])] {
+            let v = plane.bilinear_inside_x2(col + f64x2::new(dx), row + f64x2::new(dy));
+            let [a, b] = v.to_array();
+            amplitude += a;
+            amplitude += b;
+        }
+    } else {
+        for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+            amplitude += at(m.col + dx, m.row + dy);
+        }
     }
     amplitude = amplitude / 5.0 - m.background;
     let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);

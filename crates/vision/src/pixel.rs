@@ -5,7 +5,7 @@
 //! position a [`Plane`] takes is in full-frame pixel coordinates.
 
 use crate::threshold::Threshold;
-use wide::{i16x8, i32x4, u8x16, CmpGt};
+use wide::{f64x2, i16x8, i32x4, u8x16, CmpGt};
 
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
@@ -25,6 +25,20 @@ pub trait Pixel: Copy + Send + Sync + 'static {
             m |= (threshold.is_foreground(p.value()) as u64) << i;
         }
         m
+    }
+    /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
+    /// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the
+    /// first two pixels of a slice, `p10`, `p11` the two from `s` (the
+    /// row stride; both slices hold at least `s + 2` pixels).
+    #[inline(always)]
+    fn corners_x2(a: &[Self], b: &[Self], s: usize) -> [f64x2; 4] {
+        let v = |p: Self| p.value() as f64;
+        [
+            f64x2::new([v(a[0]), v(b[0])]),
+            f64x2::new([v(a[1]), v(b[1])]),
+            f64x2::new([v(a[s]), v(b[s])]),
+            f64x2::new([v(a[s + 1]), v(b[s + 1])]),
+        ]
     }
     /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
     /// running from `k0`: a row's grey-value moments.
@@ -342,6 +356,50 @@ impl<'a, P: Pixel> Plane<'a, P> {
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
     }
+
+    /// [`Plane::bilinear_inside`] at two positions at once (lane `l` of
+    /// `col` and `row` is a position): each lane does exactly the scalar's
+    /// floating-point operations in the same order, so the two values are
+    /// those of two scalar calls bit for bit. Only the index of the cell is
+    /// formed otherwise, in floating point: `ri · stride + ci` (an integer
+    /// below 2⁵¹, so exact) is offset by 1.5 · 2⁵² once and taken from the
+    /// low mantissa bits of both lanes.
+    #[inline(always)]
+    pub fn bilinear_inside_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
+        const ROUND: f64 = 6_755_399_441_055_744.0;
+        const LOW_51: u64 = (1 << 51) - 1;
+        let (w, h) = (self.width, self.height);
+        let (c0, r0) = (self.col0 as u32 as f64, self.row0 as u32 as f64);
+        let (c_lo, r_lo) = (ROUND + c0, ROUND + r0);
+        let c_hi = ROUND + c0 + w.saturating_sub(2) as u32 as f64;
+        let r_hi = ROUND + r0 + h.saturating_sub(2) as u32 as f64;
+        let round = f64x2::splat(ROUND);
+        let half = f64x2::splat(0.5);
+        // `fast_max`/`fast_min` are SSE2's `maxpd`/`minpd`: `v > lo ? v :
+        // lo` and `v < hi ? v : hi`, the scalar's clamp (also for NaN; on
+        // targets without SSE2 the same except for NaN).
+        let cc = ((col - half) + round)
+            .fast_max(f64x2::splat(c_lo))
+            .fast_min(f64x2::splat(c_hi));
+        let rc = ((row - half) + round)
+            .fast_max(f64x2::splat(r_lo))
+            .fast_min(f64x2::splat(r_hi));
+        let fx = col - (cc - round);
+        let fy = row - (rc - round);
+        let s = self.stride;
+        let i =
+            (rc - f64x2::splat(r_lo)) * f64x2::splat(s as f64) + (cc - f64x2::splat(c_lo)) + round;
+        let [ia, ib] = i.to_array().map(|v| (v.to_bits() & LOW_51) as usize);
+        // Two range checks per cell (its start, then its length; the
+        // length not wrapping is checked once, out of the loops).
+        let n = s.checked_add(2).expect("stride");
+        let a = &self.data[ia..][..n];
+        let b = &self.data[ib..][..n];
+        let [p00, p01, p10, p11] = P::corners_x2(a, b, s);
+        let top = p00 + fx * (p01 - p00);
+        let bottom = p10 + fx * (p11 - p10);
+        top + fy * (bottom - top)
+    }
 }
 
 #[cfg(test)]
@@ -417,6 +475,65 @@ mod tests {
                 (1e12, -1e12),
             ] {
                 let _ = win.bilinear_inside(c, r);
+            }
+        }
+    }
+
+    /// Two positions at a time equal one at a time bit for bit (8 and 16
+    /// bits, windows at even and odd origins, integer, half-integer and
+    /// other positions, the hull's edges); outside the hull, still values.
+    #[test]
+    fn bilinear_inside_x2_equals_bilinear_in_the_hull() {
+        let (w, h) = (23usize, 17usize);
+        let d16: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 65536) as u16).collect();
+        let d8: Vec<u8> = (0..w * h).map(|i| ((i * 7919) % 256) as u8).collect();
+        let mut x = 7u64;
+        let mut unit = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        fn check<P: Pixel>(win: &Plane<P>, a: (f64, f64), b: (f64, f64)) {
+            let v = win.bilinear_inside_x2(f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
+            let [va, vb] = v.to_array();
+            assert_eq!(
+                va.to_bits(),
+                win.bilinear(a.0, a.1).unwrap().to_bits(),
+                "{a:?}"
+            );
+            assert_eq!(
+                vb.to_bits(),
+                win.bilinear(b.0, b.1).unwrap().to_bits(),
+                "{b:?}"
+            );
+        }
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 20, 13), (2, 1, 7, 9), (3, 3, 2, 2)] {
+            let (win8, win16) = (
+                window(&d8, w, (c0, r0, ww, hh)),
+                window(&d16, w, (c0, r0, ww, hh)),
+            );
+            let (cl, rl) = (win8.last_col() as f64, win8.last_row() as f64);
+            let (c0, r0) = (c0 as f64, r0 as f64);
+            let mut pos = |k: usize| {
+                let (c, r) = (c0 + unit() * (cl - c0), r0 + unit() * (rl - r0));
+                match k % 4 {
+                    0 => ((2.0 * c).round() / 2.0, (2.0 * r).round() / 2.0),
+                    1 => ([c0, cl][k / 4 % 2], r),
+                    2 => (c, [r0, rl][k / 4 % 2]),
+                    _ => (c, r),
+                }
+            };
+            for k in 0..4000 {
+                let (a, b) = (pos(k), pos(k + 1));
+                check(&win8, a, b);
+                check(&win16, a, b);
+            }
+            for (c, r) in [
+                (-3.0, 0.5),
+                (cl + 4.0, rl + 9.0),
+                (f64::NAN, 1.0),
+                (1e12, -1e12),
+            ] {
+                let _ = win16.bilinear_inside_x2(f64x2::new([c, c0]), f64x2::new([r, r0]));
             }
         }
     }
