@@ -371,7 +371,9 @@ impl Detector {
     /// target's dot is larger than the parts of its ring that pass them,
     /// so once the dot is decoded, its ring parts are found from their
     /// binary centre ([`DecodedZone`]) and neither measured nor read (the
-    /// suppression would remove them whatever they read).
+    /// suppression would remove them whatever they read). When more blobs
+    /// pass than the detector holds candidates (`max_targets`), the
+    /// smallest are the ones dropped.
     fn examine_blobs<P: Pixel>(
         &mut self,
         plane: &Plane<'_, P>,
