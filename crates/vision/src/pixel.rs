@@ -26,6 +26,17 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         m
     }
+    /// Bit `k` (of four) set unless the 64 pixels `block[64 k..64 k + 64]`
+    /// are all background: which quarters of a stretch of 256 pixels of a
+    /// row hold foreground.
+    #[inline]
+    fn lit_quarters(block: &[Self; 256], threshold: Threshold) -> u32 {
+        let mut lit = 0;
+        for (k, q) in block.chunks_exact(64).enumerate() {
+            lit |= (!threshold.all_background(q) as u32) << k;
+        }
+        lit
+    }
     /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
     /// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the
     /// first two pixels of a slice, `p10`, `p11` the two from `s` (the
@@ -114,6 +125,40 @@ impl Pixel for u8 {
             m |= (threshold.is_foreground(p as u32) as u64) << (shift + i);
         }
         m
+    }
+
+    /// Sixteen pixels at a time: the largest value of each quarter, and of
+    /// those four, compared with the level once each (no horizontal maximum);
+    /// a dark stretch (most of a frame) costs the first comparison only.
+    #[inline]
+    fn lit_quarters(block: &[Self; 256], threshold: Threshold) -> u32 {
+        let level = threshold.level();
+        if level >= u8::MAX as u32 {
+            return 0;
+        }
+        let t = u8x16::splat(level as u8);
+        let zero = u8x16::splat(0);
+        // Nonzero where some lane is above `t`.
+        let lit = |v: u8x16| !v.saturating_sub(t).cmp_eq(zero).move_mask() & 0xffff;
+        let v = |k: usize| {
+            let Ok(&c) = <&[u8; 16]>::try_from(&block[16 * k..16 * k + 16]) else {
+                unreachable!()
+            };
+            u8x16::new(c)
+        };
+        let q = |k: usize| {
+            v(4 * k)
+                .max(v(4 * k + 1))
+                .max(v(4 * k + 2).max(v(4 * k + 3)))
+        };
+        let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
+        if lit(q0.max(q1).max(q2.max(q3))) == 0 {
+            return 0;
+        }
+        (lit(q0) != 0) as u32
+            | ((lit(q1) != 0) as u32) << 1
+            | ((lit(q2) != 0) as u32) << 2
+            | ((lit(q3) != 0) as u32) << 3
     }
 
     /// Sixteen pixels at a time in 16-bit lanes (SSE2 `pmaddwd` sums the
