@@ -78,12 +78,7 @@ impl Run {
         end: usize,
         saturation: u32,
     ) -> Run {
-        let (mut max, mut sat) = (0u32, 0u32);
-        for p in &line[start..end] {
-            let v = p.value();
-            max = max.max(v);
-            sat += (v >= saturation) as u32;
-        }
+        let (max, sat) = P::run_stats(line, start, end, saturation);
         Run {
             row,
             start: col0 + start as u32,
@@ -152,18 +147,21 @@ impl Blob {
         let a = run.start as f64 - ox;
         let e = run.end as f64 - ox;
         let sx = (a + e - 1.0) * n / 2.0;
-        let sxx = sum_sq_below(e) - sum_sq_below(a);
+        // The power sums up to the run's ends (`a`, `e` as integers).
+        let origin = self.origin_col as i64;
+        let (pa, pe) = (
+            pow_sums(run.start as i64 - origin),
+            pow_sums(run.end as i64 - origin),
+        );
+        let sxx = pe[0] - pa[0];
         let y = run.row as f64 - oy;
         self.m[0] += sx;
         self.m[1] += n * y;
         self.m[2] += sxx;
         self.m[3] += n * y * y;
         self.m[4] += sx * y;
-        // Σx³ and Σx⁴ over the run, from the power sums up to its ends.
-        let (p3, p4) = (
-            sum_pow3_below(e) - sum_pow3_below(a),
-            sum_pow4_below(e) - sum_pow4_below(a),
-        );
+        // Σx³ and Σx⁴ over the run.
+        let (p3, p4) = (pe[1] - pa[1], pe[2] - pa[2]);
         let (y2, y3) = (y * y, y * y * y);
         let m4 = &mut self.m4;
         m4[0] += p3;
@@ -314,22 +312,52 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 
 /// `Σ_{x=0}^{k-1} x²`.
 #[inline]
-fn sum_sq_below(k: f64) -> f64 {
+const fn sum_sq_below(k: f64) -> f64 {
     (k - 1.0) * k * (2.0 * k - 1.0) / 6.0
 }
 
 /// `Σ_{x=0}^{k-1} x³` (for negative `k` too: the polynomial telescopes).
 #[inline]
-fn sum_pow3_below(k: f64) -> f64 {
+const fn sum_pow3_below(k: f64) -> f64 {
     let h = (k - 1.0) * k / 2.0;
     h * h
 }
 
 /// `Σ_{x=0}^{k-1} x⁴` (for negative `k` too).
 #[inline]
-fn sum_pow4_below(k: f64) -> f64 {
+const fn sum_pow4_below(k: f64) -> f64 {
     let m = k - 1.0;
     m * (m + 1.0) * (2.0 * m + 1.0) * (3.0 * m * m + 3.0 * m - 1.0) / 30.0
+}
+
+/// [`POW_SUMS`] holds `k` from `−POW_HALF` to `POW_HALF − 1`.
+const POW_HALF: usize = 128;
+
+/// `[Σx², Σx³, Σx⁴]` below `k` for the run ends near a blob's origin
+/// (entry `k + POW_HALF`): the same functions evaluated at compile time
+/// (IEEE arithmetic, the same operations: the same values bit for bit),
+/// so that a run costs two look-ups instead of six polynomials.
+static POW_SUMS: [[f64; 3]; 2 * POW_HALF] = {
+    let mut t = [[0.0; 3]; 2 * POW_HALF];
+    let mut i = 0;
+    while i < 2 * POW_HALF {
+        let k = i as f64 - POW_HALF as f64;
+        t[i] = [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)];
+        i += 1;
+    }
+    t
+};
+
+/// `[Σx², Σx³, Σx⁴]` for `x` below `k` (from [`POW_SUMS`] near 0).
+#[inline(always)]
+fn pow_sums(k: i64) -> [f64; 3] {
+    match POW_SUMS.get(k.wrapping_add(POW_HALF as i64) as usize) {
+        Some(&s) => s,
+        None => {
+            let k = k as f64;
+            [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)]
+        }
+    }
 }
 
 /// Length of the dark stretches that [`Labeller`] skips with one test
@@ -503,13 +531,24 @@ impl Labeller {
                 known = 4 - dark;
             }
             let m = if known > 0 {
+                if lit & 1 == 0 && open == NONE {
+                    // Past this block and the dark ones after it.
+                    let dark = lit.trailing_zeros().min(known);
+                    base += 64 * dark as usize;
+                    lit >>= dark;
+                    known -= dark;
+                    continue;
+                }
                 known -= 1;
                 let here = lit & 1;
                 lit >>= 1;
                 if here == 0 {
                     0
                 } else {
-                    levels.at(base).foreground_mask(&line[base..base + 64])
+                    let Ok(block) = <&[P; 64]>::try_from(&line[base..base + 64]) else {
+                        unreachable!()
+                    };
+                    P::lit_mask(block, levels.at(base))
                 }
             } else {
                 block_mask(line, base, n, levels.at(base))
@@ -725,15 +764,16 @@ mod tests {
                 while c < w && fg(c, r) {
                     c += 1;
                 }
-                let line = plane.row(plane.row0 + r);
-                runs.push(Run::of(
-                    line,
-                    (plane.row0 + r) as u32,
-                    plane.col0 as u32,
-                    s,
-                    c,
-                    saturation,
-                ));
+                let px = &plane.row(plane.row0 + r)[s..c];
+                let max = px.iter().map(|p| p.value()).max().unwrap_or(0);
+                let sat = px.iter().filter(|p| p.value() >= saturation).count();
+                runs.push(Run {
+                    row: (plane.row0 + r) as u32,
+                    start: (plane.col0 + s) as u32,
+                    end: (plane.col0 + c) as u32,
+                    max: max.min(u16::MAX as u32) as u16,
+                    saturated: sat.min(u16::MAX as usize) as u16,
+                });
             }
         }
         let mut label = vec![usize::MAX; w * h];
@@ -864,6 +904,19 @@ mod tests {
             let d16: Vec<u16> = v.iter().map(|&x| (x * 257) as u16).collect();
             check(&d16, fw, win, &mut rng, 65535);
         }
+    }
+
+    /// The table of power sums equals the functions evaluated at run time
+    /// bit for bit, and beyond it they are evaluated.
+    #[test]
+    fn power_sums_from_the_table_are_the_functions() {
+        for k in -3 * POW_HALF as i64..3 * POW_HALF as i64 {
+            let x = k as f64;
+            let want = [sum_sq_below(x), sum_pow3_below(x), sum_pow4_below(x)];
+            assert_eq!(pow_sums(k).map(f64::to_bits), want.map(f64::to_bits), "{k}");
+        }
+        assert_eq!(pow_sums(3)[0], 5.0);
+        assert_eq!(pow_sums(-2)[2], -17.0); // −(1 + 16): telescoped
     }
 
     #[test]
