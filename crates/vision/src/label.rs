@@ -282,12 +282,13 @@ pub enum LabelOutcome {
 pub struct Labeller {
     runs: Vec<Run>,
     parent: Vec<u32>,
-    blob_of: Vec<u32>,
     blobs: Vec<Blob>,
     max_runs: usize,
     max_blobs: usize,
 }
 
+/// The root of run `i` (path halving). Every run's parent is itself or
+/// an older run (here and in [`union`]), which resolving relies on.
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         let p = parent[i as usize];
@@ -387,7 +388,6 @@ impl Labeller {
         Labeller {
             runs: Vec::with_capacity(max_runs),
             parent: Vec::with_capacity(max_runs),
-            blob_of: Vec::with_capacity(max_runs),
             blobs: Vec::with_capacity(max_blobs),
             max_runs,
             max_blobs,
@@ -429,7 +429,6 @@ impl Labeller {
     ) -> LabelOutcome {
         self.runs.clear();
         self.parent.clear();
-        self.blob_of.clear();
         self.blobs.clear();
         let mut prev_start = 0usize; // runs of the previous row: prev_start..row_start
         let mut prev_end = 0usize;
@@ -441,17 +440,18 @@ impl Labeller {
                 return LabelOutcome::TooManyRuns;
             }
             let row_end = self.runs.len();
-            for k in row_start..row_end {
-                self.parent.push(k as u32);
-            }
+            self.parent.extend(row_start as u32..row_end as u32);
             // Connect with the previous row (8-connectivity: overlap or touch diagonally).
             if prev_end > prev_start && row_end > row_start {
-                let (mut i, mut j) = (prev_start, row_start);
-                while i < prev_end && j < row_end {
-                    let a = self.runs[i];
-                    let b = self.runs[j];
+                let (prev, cur) = self.runs[prev_start..row_end].split_at(row_start - prev_start);
+                let (mut i, mut j) = (0, 0);
+                while let (Some(a), Some(b)) = (prev.get(i), cur.get(j)) {
                     if a.start <= b.end && b.start <= a.end {
-                        union(&mut self.parent, i as u32, j as u32);
+                        union(
+                            &mut self.parent,
+                            (prev_start + i) as u32,
+                            (row_start + j) as u32,
+                        );
                     }
                     // Advance the run that ends first.
                     if a.end < b.end {
@@ -464,25 +464,24 @@ impl Labeller {
             prev_start = row_start;
             prev_end = row_end;
         }
-        // Resolve labels and accumulate statistics.
-        for k in 0..self.runs.len() {
-            let root = find(&mut self.parent, k as u32) as usize;
-            let b = if root == k {
+        // Resolve labels and accumulate statistics. A run's parent is
+        // itself (the first run of its component) or an older run of the
+        // same component (union and find only ever point to older runs),
+        // whose entry already holds its blob: so blob indices replace the
+        // parents in one pass, with no find.
+        for (k, run) in self.runs.iter().enumerate() {
+            let p = self.parent[k] as usize;
+            let b = if p == k {
                 if self.blobs.len() >= self.max_blobs {
                     return LabelOutcome::TooManyBlobs;
                 }
                 self.blobs.push(Blob::empty());
-                let b = self.blobs.len() as u32 - 1;
-                self.blob_of.push(b);
-                b
+                self.blobs.len() - 1
             } else {
-                // Roots have smaller indices, so theirs is already set.
-                let b = self.blob_of[root];
-                self.blob_of.push(b);
-                b
+                self.parent[p] as usize
             };
-            let run = self.runs[k];
-            self.blobs[b as usize].add_run(&run);
+            self.parent[k] = b as u32;
+            self.blobs[b].add_run(run);
         }
         LabelOutcome::Complete
     }
