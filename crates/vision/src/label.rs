@@ -19,7 +19,8 @@ pub trait BlockLevels: Copy {
     /// The lowest threshold over row offsets `a..b`.
     fn lowest(&self, a: usize, b: usize) -> Threshold;
     /// Where the block that starts at offset `i` ends (at most 64 pixels,
-    /// at most `width`).
+    /// at most `width`). Blocks lie on a grid of 64 pixels: after a whole
+    /// block (64 pixels) come whole blocks up to the last 64 of the row.
     fn block_end(&self, i: usize, width: usize) -> usize;
 }
 
@@ -77,12 +78,7 @@ impl Run {
         end: usize,
         saturation: u32,
     ) -> Run {
-        let (mut max, mut sat) = (0u32, 0u32);
-        for p in &line[start..end] {
-            let v = p.value();
-            max = max.max(v);
-            sat += (v >= saturation) as u32;
-        }
+        let (max, sat) = P::run_stats(line, start, end, saturation);
         Run {
             row,
             start: col0 + start as u32,
@@ -151,18 +147,21 @@ impl Blob {
         let a = run.start as f64 - ox;
         let e = run.end as f64 - ox;
         let sx = (a + e - 1.0) * n / 2.0;
-        let sxx = sum_sq_below(e) - sum_sq_below(a);
+        // The power sums up to the run's ends (`a`, `e` as integers).
+        let origin = self.origin_col as i64;
+        let (pa, pe) = (
+            pow_sums(run.start as i64 - origin),
+            pow_sums(run.end as i64 - origin),
+        );
+        let sxx = pe[0] - pa[0];
         let y = run.row as f64 - oy;
         self.m[0] += sx;
         self.m[1] += n * y;
         self.m[2] += sxx;
         self.m[3] += n * y * y;
         self.m[4] += sx * y;
-        // Σx³ and Σx⁴ over the run, from the power sums up to its ends.
-        let (p3, p4) = (
-            sum_pow3_below(e) - sum_pow3_below(a),
-            sum_pow4_below(e) - sum_pow4_below(a),
-        );
+        // Σx³ and Σx⁴ over the run.
+        let (p3, p4) = (pe[1] - pa[1], pe[2] - pa[2]);
         let (y2, y3) = (y * y, y * y * y);
         let m4 = &mut self.m4;
         m4[0] += p3;
@@ -283,12 +282,13 @@ pub enum LabelOutcome {
 pub struct Labeller {
     runs: Vec<Run>,
     parent: Vec<u32>,
-    blob_of: Vec<u32>,
     blobs: Vec<Blob>,
     max_runs: usize,
     max_blobs: usize,
 }
 
+/// The root of run `i` (path halving). Every run's parent is itself or
+/// an older run (here and in [`union`]), which resolving relies on.
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         let p = parent[i as usize];
@@ -313,26 +313,74 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 
 /// `Σ_{x=0}^{k-1} x²`.
 #[inline]
-fn sum_sq_below(k: f64) -> f64 {
+const fn sum_sq_below(k: f64) -> f64 {
     (k - 1.0) * k * (2.0 * k - 1.0) / 6.0
 }
 
 /// `Σ_{x=0}^{k-1} x³` (for negative `k` too: the polynomial telescopes).
 #[inline]
-fn sum_pow3_below(k: f64) -> f64 {
+const fn sum_pow3_below(k: f64) -> f64 {
     let h = (k - 1.0) * k / 2.0;
     h * h
 }
 
 /// `Σ_{x=0}^{k-1} x⁴` (for negative `k` too).
 #[inline]
-fn sum_pow4_below(k: f64) -> f64 {
+const fn sum_pow4_below(k: f64) -> f64 {
     let m = k - 1.0;
     m * (m + 1.0) * (2.0 * m + 1.0) * (3.0 * m * m + 3.0 * m - 1.0) / 30.0
 }
 
-/// Length of the dark stretches that [`Labeller`] skips with one test.
+/// [`POW_SUMS`] holds `k` from `−POW_HALF` to `POW_HALF − 1`.
+const POW_HALF: usize = 128;
+
+/// `[Σx², Σx³, Σx⁴]` below `k` for the run ends near a blob's origin
+/// (entry `k + POW_HALF`): the same functions evaluated at compile time
+/// (IEEE arithmetic, the same operations: the same values bit for bit),
+/// so that a run costs two look-ups instead of six polynomials.
+static POW_SUMS: [[f64; 3]; 2 * POW_HALF] = {
+    let mut t = [[0.0; 3]; 2 * POW_HALF];
+    let mut i = 0;
+    while i < 2 * POW_HALF {
+        let k = i as f64 - POW_HALF as f64;
+        t[i] = [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)];
+        i += 1;
+    }
+    t
+};
+
+/// `[Σx², Σx³, Σx⁴]` for `x` below `k` (from [`POW_SUMS`] near 0).
+#[inline(always)]
+fn pow_sums(k: i64) -> [f64; 3] {
+    match POW_SUMS.get(k.wrapping_add(POW_HALF as i64) as usize) {
+        Some(&s) => s,
+        None => {
+            let k = k as f64;
+            [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)]
+        }
+    }
+}
+
+/// Length of the dark stretches that [`Labeller`] skips with one test
+/// (four whole blocks).
 const DARK_SKIP: usize = 256;
+
+/// The foreground mask of the block `line[base..base + n]` (`n ≤ 64`) at
+/// `threshold`. A block shorter than 64 pixels (at a row's ends) is read
+/// as the 64 pixels that start at it, or else end with it, when the row
+/// has them (the vector path, not one pixel at a time), and the bits of
+/// the other pixels dropped.
+#[inline(always)]
+fn block_mask<P: Pixel>(line: &[P], base: usize, n: usize, threshold: Threshold) -> u64 {
+    let width = line.len();
+    if n == 64 || width < 64 {
+        threshold.foreground_mask(&line[base..base + n])
+    } else if base + 64 <= width {
+        threshold.foreground_mask(&line[base..base + 64]) & ((1u64 << n) - 1)
+    } else {
+        threshold.foreground_mask(&line[width - 64..]) >> (64 - n)
+    }
+}
 
 impl Labeller {
     /// A labeller for at most `max_runs` runs and `max_blobs` blobs per frame.
@@ -340,7 +388,6 @@ impl Labeller {
         Labeller {
             runs: Vec::with_capacity(max_runs),
             parent: Vec::with_capacity(max_runs),
-            blob_of: Vec::with_capacity(max_runs),
             blobs: Vec::with_capacity(max_blobs),
             max_runs,
             max_blobs,
@@ -382,7 +429,6 @@ impl Labeller {
     ) -> LabelOutcome {
         self.runs.clear();
         self.parent.clear();
-        self.blob_of.clear();
         self.blobs.clear();
         let mut prev_start = 0usize; // runs of the previous row: prev_start..row_start
         let mut prev_end = 0usize;
@@ -394,17 +440,18 @@ impl Labeller {
                 return LabelOutcome::TooManyRuns;
             }
             let row_end = self.runs.len();
-            for k in row_start..row_end {
-                self.parent.push(k as u32);
-            }
+            self.parent.extend(row_start as u32..row_end as u32);
             // Connect with the previous row (8-connectivity: overlap or touch diagonally).
             if prev_end > prev_start && row_end > row_start {
-                let (mut i, mut j) = (prev_start, row_start);
-                while i < prev_end && j < row_end {
-                    let a = self.runs[i];
-                    let b = self.runs[j];
+                let (prev, cur) = self.runs[prev_start..row_end].split_at(row_start - prev_start);
+                let (mut i, mut j) = (0, 0);
+                while let (Some(a), Some(b)) = (prev.get(i), cur.get(j)) {
                     if a.start <= b.end && b.start <= a.end {
-                        union(&mut self.parent, i as u32, j as u32);
+                        union(
+                            &mut self.parent,
+                            (prev_start + i) as u32,
+                            (row_start + j) as u32,
+                        );
                     }
                     // Advance the run that ends first.
                     if a.end < b.end {
@@ -417,35 +464,36 @@ impl Labeller {
             prev_start = row_start;
             prev_end = row_end;
         }
-        // Resolve labels and accumulate statistics.
-        for k in 0..self.runs.len() {
-            let root = find(&mut self.parent, k as u32) as usize;
-            let b = if root == k {
+        // Resolve labels and accumulate statistics. A run's parent is
+        // itself (the first run of its component) or an older run of the
+        // same component (union and find only ever point to older runs),
+        // whose entry already holds its blob: so blob indices replace the
+        // parents in one pass, with no find.
+        for (k, run) in self.runs.iter().enumerate() {
+            let p = self.parent[k] as usize;
+            let b = if p == k {
                 if self.blobs.len() >= self.max_blobs {
                     return LabelOutcome::TooManyBlobs;
                 }
                 self.blobs.push(Blob::empty());
-                let b = self.blobs.len() as u32 - 1;
-                self.blob_of.push(b);
-                b
+                self.blobs.len() - 1
             } else {
-                // Roots have smaller indices, so theirs is already set.
-                let b = self.blob_of[root];
-                self.blob_of.push(b);
-                b
+                self.parent[p] as usize
             };
-            let run = self.runs[k];
-            self.blobs[b as usize].add_run(&run);
+            self.parent[k] = b as u32;
+            self.blobs[b].add_run(run);
         }
         LabelOutcome::Complete
     }
 
     /// Appends the runs of one row of a window whose first column is
     /// `col0`; false if the capacity is exceeded. The row is scanned in
-    /// blocks of 64 pixels, each turned into a bit mask of the foreground
-    /// pixels (16 at a time for 8-bit frames); runs are the mask's
-    /// stretches of ones, so dark stretches cost a few instructions per
-    /// block.
+    /// blocks of up to 64 pixels, each turned into a bit mask of the
+    /// foreground pixels (16 at a time for 8-bit frames); runs are the
+    /// mask's stretches of ones. Outside runs, four whole blocks at a time
+    /// are first tested against the lowest of their levels
+    /// ([`Pixel::lit_quarters`]): dark ones (most of a frame) need no mask,
+    /// and a stretch of four dark blocks costs one test.
     #[inline]
     fn extract_runs<P: Pixel, L: BlockLevels>(
         &mut self,
@@ -459,19 +507,51 @@ impl Labeller {
         let width = line.len();
         let mut open = NONE;
         let mut base = 0usize;
+        // Of the next `known` blocks (whole ones), which hold foreground
+        // (bit 0: the block at `base`).
+        let (mut lit, mut known) = (0u32, 0u32);
         while base < width {
-            // Dark stretches (most of a frame) in steps of 256 pixels.
-            if open == NONE
-                && width - base >= DARK_SKIP
-                && levels
-                    .lowest(base, base + DARK_SKIP)
-                    .all_background(&line[base..base + DARK_SKIP])
-            {
-                base += DARK_SKIP;
-                continue;
-            }
             let n = levels.block_end(base, width) - base;
-            let m = levels.at(base).foreground_mask(&line[base..base + n]);
+            if known == 0 && open == NONE && n == 64 && width - base >= DARK_SKIP {
+                // A whole block: so are the next three (the blocks are 64
+                // pixels apart), and a block dark at the lowest of their
+                // levels is dark at its own.
+                let Ok(stretch) = <&[P; DARK_SKIP]>::try_from(&line[base..base + DARK_SKIP]) else {
+                    unreachable!()
+                };
+                lit = P::lit_quarters(stretch, levels.lowest(base, base + DARK_SKIP));
+                if lit == 0 {
+                    base += DARK_SKIP;
+                    continue;
+                }
+                let dark = lit.trailing_zeros();
+                base += 64 * dark as usize;
+                lit >>= dark;
+                known = 4 - dark;
+            }
+            let m = if known > 0 {
+                if lit & 1 == 0 && open == NONE {
+                    // Past this block and the dark ones after it.
+                    let dark = lit.trailing_zeros().min(known);
+                    base += 64 * dark as usize;
+                    lit >>= dark;
+                    known -= dark;
+                    continue;
+                }
+                known -= 1;
+                let here = lit & 1;
+                lit >>= 1;
+                if here == 0 {
+                    0
+                } else {
+                    let Ok(block) = <&[P; 64]>::try_from(&line[base..base + 64]) else {
+                        unreachable!()
+                    };
+                    P::lit_mask(block, levels.at(base))
+                }
+            } else {
+                block_mask(line, base, n, levels.at(base))
+            };
             if m == 0 && open == NONE {
                 base += n;
                 continue;
@@ -655,6 +735,187 @@ mod tests {
         assert!((got[1] - 1.8).abs() < 0.05, "bar {}", got[1]);
         assert!(got[2] < 1.75, "two discs {}", got[2]);
         assert!(got[3] > 2.1, "a dot with a tail {}", got[3]);
+    }
+
+    /// The plain labelling: each pixel against its own level, runs read
+    /// one pixel at a time, components by flood fill (8-connectivity),
+    /// blobs in the order of their first pixel, their statistics added
+    /// run by run in raster order.
+    fn plain<P: Pixel>(
+        plane: &Plane<'_, P>,
+        level: impl Fn(usize, usize) -> u32,
+        saturation: u32,
+    ) -> (Vec<Run>, Vec<Blob>) {
+        let (w, h) = (plane.width, plane.height);
+        let fg = |c: usize, r: usize| {
+            let (col, row) = (plane.col0 + c, plane.row0 + r);
+            plane.row(row)[c].value() > level(col, row)
+        };
+        let mut runs = Vec::new();
+        for r in 0..h {
+            let mut c = 0;
+            while c < w {
+                if !fg(c, r) {
+                    c += 1;
+                    continue;
+                }
+                let s = c;
+                while c < w && fg(c, r) {
+                    c += 1;
+                }
+                let px = &plane.row(plane.row0 + r)[s..c];
+                let max = px.iter().map(|p| p.value()).max().unwrap_or(0);
+                let sat = px.iter().filter(|p| p.value() >= saturation).count();
+                runs.push(Run {
+                    row: (plane.row0 + r) as u32,
+                    start: (plane.col0 + s) as u32,
+                    end: (plane.col0 + c) as u32,
+                    max: max.min(u16::MAX as u32) as u16,
+                    saturated: sat.min(u16::MAX as usize) as u16,
+                });
+            }
+        }
+        let mut label = vec![usize::MAX; w * h];
+        let mut n = 0;
+        for start in 0..w * h {
+            if label[start] != usize::MAX || !fg(start % w, start / w) {
+                continue;
+            }
+            let mut stack = vec![start];
+            label[start] = n;
+            while let Some(i) = stack.pop() {
+                let (c, r) = ((i % w) as isize, (i / w) as isize);
+                for (dc, dr) in [
+                    (-1, -1),
+                    (0, -1),
+                    (1, -1),
+                    (-1, 0),
+                    (1, 0),
+                    (-1, 1),
+                    (0, 1),
+                    (1, 1),
+                ] {
+                    let (cc, rr) = (c + dc, r + dr);
+                    if cc < 0 || rr < 0 || cc >= w as isize || rr >= h as isize {
+                        continue;
+                    }
+                    let j = rr as usize * w + cc as usize;
+                    if label[j] == usize::MAX && fg(cc as usize, rr as usize) {
+                        label[j] = n;
+                        stack.push(j);
+                    }
+                }
+            }
+            n += 1;
+        }
+        let mut blobs = vec![Blob::empty(); n];
+        for run in &runs {
+            let (c, r) = (
+                run.start as usize - plane.col0,
+                run.row as usize - plane.row0,
+            );
+            blobs[label[r * w + c]].add_run(run);
+        }
+        (runs, blobs)
+    }
+
+    fn same_runs(a: &[Run], b: &[Run]) -> bool {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(x, y)| {
+                (x.row, x.start, x.end, x.max, x.saturated)
+                    == (y.row, y.start, y.end, y.max, y.saturated)
+            })
+    }
+
+    /// The labeller (dark stretches, masks, partial blocks at both ends of
+    /// a row, known-dark blocks) equals the plain labelling on random
+    /// frames: 8 and 16 bits, one level and a level per tile, whole frames
+    /// and windows at odd origins, runs across block edges and through
+    /// the last pixel of a row, sparse and dense foreground.
+    #[test]
+    fn equals_the_plain_labelling_on_random_frames() {
+        use crate::testutil::Rng;
+        fn check<P: Pixel>(
+            data: &[P],
+            fw: usize,
+            win: (usize, usize, usize, usize),
+            rng: &mut Rng,
+            top: u32,
+        ) {
+            let plane = window(data, fw, win);
+            let sat = top - (rng.next_u64() % 3) as u32;
+            let global = (rng.next_u64() % (top as u64 / 2)) as u32 + top / 4;
+            let mut tiles = [[0u32; 8]; 8];
+            for t in tiles.iter_mut().flatten() {
+                *t = global - (rng.next_u64() % (top as u64 / 4)) as u32;
+            }
+            let mut l = Labeller::new(100_000, 100_000);
+            assert_eq!(
+                l.label(&plane, Threshold::global(global), sat),
+                LabelOutcome::Complete
+            );
+            let (runs, blobs) = plain(&plane, |_, _| global, sat);
+            assert!(same_runs(&l.runs, &runs), "{win:?}");
+            assert_eq!(l.blobs(), &blobs[..], "{win:?}");
+            let mut levels = LocalLevels::new(fw, data.len() / fw);
+            levels.set_each(&plane, |tc, tr| tiles[tc][tr]);
+            let level = |c: usize, r: usize| tiles[c / 64][r / 64];
+            assert_eq!(l.label_local(&plane, &levels, sat), LabelOutcome::Complete);
+            let (runs, blobs) = plain(&plane, level, sat);
+            assert!(same_runs(&l.runs, &runs), "{win:?}");
+            assert_eq!(l.blobs(), &blobs[..], "{win:?}");
+        }
+        let mut rng = Rng::new(5);
+        let (fw, fh) = (333usize, 90usize);
+        for round in 0..24 {
+            // Background noise, dots, and bright columns at the edges of blocks.
+            let density = [0.0005, 0.003, 0.02][round % 3];
+            let mut v = vec![0u32; fw * fh];
+            for x in v.iter_mut() {
+                *x = (rng.next_u64() % 40) as u32;
+            }
+            for _ in 0..(density * (fw * fh) as f64) as usize {
+                let (c, r) = (
+                    (rng.next_u64() % fw as u64) as usize,
+                    (rng.next_u64() % fh as u64) as usize,
+                );
+                let len = 1 + (rng.next_u64() % 9) as usize;
+                for k in 0..len.min(fw - c) {
+                    for rr in r..(r + 1 + (rng.next_u64() % 3) as usize).min(fh) {
+                        v[rr * fw + c + k] = 100 + (rng.next_u64() % 156) as u32;
+                    }
+                }
+            }
+            for &c in &[0usize, 63, 64, 127, 128, 255, 256, 320, 331, 332] {
+                let r = (rng.next_u64() % fh as u64) as usize;
+                for rr in r..(r + 4).min(fh) {
+                    v[rr * fw + c] = 255;
+                }
+            }
+            let win = [
+                (0, 0, fw, fh),
+                (1 + round, 3, fw - 1 - round - round % 5, fh - 5),
+                (64, 2, 256, 40),
+                (70, 0, 63, fh),
+            ][round % 4];
+            let d8: Vec<u8> = v.iter().map(|&x| x as u8).collect();
+            check(&d8, fw, win, &mut rng, 255);
+            let d16: Vec<u16> = v.iter().map(|&x| (x * 257) as u16).collect();
+            check(&d16, fw, win, &mut rng, 65535);
+        }
+    }
+
+    /// The table of power sums equals the functions evaluated at run time
+    /// bit for bit, and beyond it they are evaluated.
+    #[test]
+    fn power_sums_from_the_table_are_the_functions() {
+        for k in -3 * POW_HALF as i64..3 * POW_HALF as i64 {
+            let x = k as f64;
+            let want = [sum_sq_below(x), sum_pow3_below(x), sum_pow4_below(x)];
+            assert_eq!(pow_sums(k).map(f64::to_bits), want.map(f64::to_bits), "{k}");
+        }
+        assert_eq!(pow_sums(3)[0], 5.0);
+        assert_eq!(pow_sums(-2)[2], -17.0); // −(1 + 16): telescoped
     }
 
     #[test]

@@ -26,6 +26,29 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         m
     }
+    /// [`Pixel::above_mask`] of a whole block that likely holds foreground
+    /// (no test for a dark block first).
+    #[inline]
+    fn lit_mask(block: &[Self; 64], threshold: Threshold) -> u64 {
+        Self::above_mask(block, threshold)
+    }
+    /// The largest value of `line[start..end]` (0 if empty) and how
+    /// many of its pixels are at or above `saturation`: a run's statistics.
+    #[inline]
+    fn run_stats(line: &[Self], start: usize, end: usize, saturation: u32) -> (u32, u32) {
+        scalar_run_stats(&line[start..end], saturation)
+    }
+    /// Bit `k` (of four) set unless the 64 pixels `block[64 k..64 k + 64]`
+    /// are all background: which quarters of a stretch of 256 pixels of a
+    /// row hold foreground.
+    #[inline]
+    fn lit_quarters(block: &[Self; 256], threshold: Threshold) -> u32 {
+        let mut lit = 0;
+        for (k, q) in block.chunks_exact(64).enumerate() {
+            lit |= (!threshold.all_background(q) as u32) << k;
+        }
+        lit
+    }
     /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
     /// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the
     /// first two pixels of a slice, `p10`, `p11` the two from `s` (the
@@ -46,6 +69,18 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
         scalar_moment_sums(&line[a..a + n], k0, |p| p.value() as i64)
     }
+}
+
+/// [`Pixel::run_stats`] one pixel at a time.
+#[inline(always)]
+fn scalar_run_stats<P: Pixel>(px: &[P], saturation: u32) -> (u32, u32) {
+    let (mut max, mut sat) = (0u32, 0u32);
+    for p in px {
+        let v = p.value();
+        max = max.max(v);
+        sat += (v >= saturation) as u32;
+    }
+    (max, sat)
 }
 
 /// `[Σ w, Σ w k, Σ w k²]` over `px` with `w` the weight of a pixel and `k`
@@ -114,6 +149,102 @@ impl Pixel for u8 {
             m |= (threshold.is_foreground(p as u32) as u64) << (shift + i);
         }
         m
+    }
+
+    #[inline]
+    fn lit_mask(block: &[Self; 64], threshold: Threshold) -> u64 {
+        let level = threshold.level();
+        if level >= u8::MAX as u32 {
+            return 0;
+        }
+        let t = u8x16::splat(level as u8);
+        let zero = u8x16::splat(0);
+        let mut m = 0u64;
+        for (k, c) in block.chunks_exact(16).enumerate() {
+            let Ok(&c) = <&[u8; 16]>::try_from(c) else {
+                unreachable!()
+            };
+            let dark = u8x16::new(c).saturating_sub(t).cmp_eq(zero).move_mask() as u32;
+            m |= ((!dark & 0xffff) as u64) << (16 * k);
+        }
+        m
+    }
+
+    /// Sixteen pixels at a time (from the run's next pixel, or the row's
+    /// last sixteen), the lanes outside the run masked off: their maximum
+    /// as one vector, reduced once at the end; the saturated lanes counted
+    /// from a bit mask.
+    #[inline]
+    fn run_stats(line: &[Self], start: usize, end: usize, saturation: u32) -> (u32, u32) {
+        const LANES: usize = 16;
+        const IDX: u8x16 = u8x16::new([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]);
+        let len = line.len();
+        if len < LANES {
+            return scalar_run_stats(&line[start..end], saturation);
+        }
+        debug_assert!(start <= end && end <= len);
+        // `v ≥ saturation` where `max(v, saturation) = v` (none above 255).
+        let sat_level = u8x16::splat(saturation.min(255) as u8);
+        let (mut max, mut sat) = (u8x16::splat(0), 0u32);
+        let mut s = start;
+        while s < end {
+            let p = s.min(len - LANES);
+            let Ok(&c) = <&[u8; LANES]>::try_from(&line[p..p + LANES]) else {
+                unreachable!()
+            };
+            let v = u8x16::new(c);
+            // The run's lanes: `lo..hi`.
+            let (lo, hi) = (s - p, (end - p).min(LANES));
+            let run = IDX.max(u8x16::splat(lo as u8)).cmp_eq(IDX)
+                & IDX.min(u8x16::splat(hi as u8 - 1)).cmp_eq(IDX);
+            max = max.max(v & run);
+            let bits = (v.max(sat_level).cmp_eq(v) & run).move_mask() as u32 & 0xffff;
+            if bits != 0 {
+                sat += bits.count_ones();
+            }
+            s = p + hi;
+        }
+        if saturation > u8::MAX as u32 {
+            sat = 0;
+        }
+        let max = i16x8::from_u8x16_low(max)
+            .max(i16x8::from_u8x16_high(max))
+            .reduce_max();
+        (max as u32, sat)
+    }
+
+    /// Sixteen pixels at a time: the largest value of each quarter, and of
+    /// those four, compared with the level once each (no horizontal maximum);
+    /// a dark stretch (most of a frame) costs the first comparison only.
+    #[inline]
+    fn lit_quarters(block: &[Self; 256], threshold: Threshold) -> u32 {
+        let level = threshold.level();
+        if level >= u8::MAX as u32 {
+            return 0;
+        }
+        let t = u8x16::splat(level as u8);
+        let zero = u8x16::splat(0);
+        // Nonzero where some lane is above `t`.
+        let lit = |v: u8x16| !v.saturating_sub(t).cmp_eq(zero).move_mask() & 0xffff;
+        let v = |k: usize| {
+            let Ok(&c) = <&[u8; 16]>::try_from(&block[16 * k..16 * k + 16]) else {
+                unreachable!()
+            };
+            u8x16::new(c)
+        };
+        let q = |k: usize| {
+            v(4 * k)
+                .max(v(4 * k + 1))
+                .max(v(4 * k + 2).max(v(4 * k + 3)))
+        };
+        let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
+        if lit(q0.max(q1).max(q2.max(q3))) == 0 {
+            return 0;
+        }
+        (lit(q0) != 0) as u32
+            | ((lit(q1) != 0) as u32) << 1
+            | ((lit(q2) != 0) as u32) << 2
+            | ((lit(q3) != 0) as u32) << 3
     }
 
     /// Sixteen pixels at a time in 16-bit lanes (SSE2 `pmaddwd` sums the
@@ -406,6 +537,70 @@ impl<'a, P: Pixel> Plane<'a, P> {
 mod tests {
     use super::*;
     use crate::testutil::window;
+
+    /// The vector paths for 8-bit rows equal the plain ones: a run's
+    /// statistics for every run of rows of 16 to 70 pixels (loads clamped
+    /// to the row's end, runs over several blocks) at saturation levels
+    /// from 0 to above 255; which quarters of 256 pixels hold foreground,
+    /// and the masks of blocks of 64, at levels from 0 to 255.
+    #[test]
+    fn u8_runs_and_quarters_equal_the_plain_ones() {
+        let mut x = 3u64;
+        let mut next = move || {
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1442695040888963407);
+            (x >> 33) as u32
+        };
+        for len in [16usize, 17, 31, 40, 70] {
+            let line: Vec<u8> = (0..len)
+                .map(|_| {
+                    if next() % 4 == 0 {
+                        255
+                    } else {
+                        (next() % 256) as u8
+                    }
+                })
+                .collect();
+            for saturation in [0u32, 1, 100, 200, 254, 255, 256, 1000] {
+                for start in 0..len {
+                    for end in start..=len {
+                        assert_eq!(
+                            u8::run_stats(&line, start, end, saturation),
+                            scalar_run_stats(&line[start..end], saturation),
+                            "{len} {start} {end} {saturation}"
+                        );
+                    }
+                }
+            }
+        }
+        for round in 0..200 {
+            let mut block = [0u8; 256];
+            for v in block.iter_mut() {
+                *v = (next() % 60) as u8;
+            }
+            for _ in 0..round % 4 {
+                block[(next() % 256) as usize] = (next() % 256) as u8;
+            }
+            for level in [0u32, 30, 59, 60, 100, 200, 254, 255] {
+                let t = Threshold::global(level);
+                let plain = block
+                    .chunks_exact(64)
+                    .enumerate()
+                    .map(|(k, q)| (q.iter().any(|&v| t.is_foreground(v as u32)) as u32) << k)
+                    .sum::<u32>();
+                assert_eq!(u8::lit_quarters(&block, t), plain, "{level}");
+                for q in block.chunks_exact(64) {
+                    let q: &[u8; 64] = q.try_into().unwrap();
+                    let plain = (0..64)
+                        .map(|i| (t.is_foreground(q[i] as u32) as u64) << i)
+                        .sum::<u64>();
+                    assert_eq!(u8::lit_mask(q, t), plain, "{level}");
+                    assert_eq!(u8::above_mask(q, t), plain, "{level}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn bilinear_interpolates_between_centres() {

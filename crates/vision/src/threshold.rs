@@ -122,7 +122,12 @@ impl TileRow<'_> {
     pub fn lowest(&self, a: usize, b: usize) -> Threshold {
         let first = (self.col0 + a - self.tile_start) >> TILE_SHIFT;
         let last = (self.col0 + b - 1 - self.tile_start) >> TILE_SHIFT;
-        Threshold::global(self.levels[first..=last].iter().copied().min().unwrap_or(0))
+        let levels = &self.levels[first..=last];
+        // Four tiles (the labeller's dark stretches): no loop.
+        if let Ok(&[l0, l1, l2, l3]) = <&[u32; 4]>::try_from(levels) {
+            return Threshold::global(l0.min(l1).min(l2.min(l3)));
+        }
+        Threshold::global(levels.iter().copied().min().unwrap_or(0))
     }
 
     /// Window offset where the tile after the one holding offset `i` begins.
@@ -163,6 +168,25 @@ impl LocalLevels {
         self.layout(plane);
         self.levels.clear();
         self.levels.resize(self.cols * self.rows, t.level());
+    }
+
+    /// Tests: the window's tiles at the levels `level(tile_col, tile_row)`
+    /// (full-frame tile indices).
+    #[cfg(test)]
+    pub(crate) fn set_each<P>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        level: impl Fn(usize, usize) -> u32,
+    ) {
+        self.layout(plane);
+        self.levels.clear();
+        for r in 0..self.rows {
+            for c in 0..self.cols {
+                self.levels
+                    .push(level(self.tile_col0 + c, self.tile_row0 + r));
+            }
+        }
+        self.any_local = true;
     }
 
     /// The local levels of the window `plane`: per tile, the largest value
