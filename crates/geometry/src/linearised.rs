@@ -51,11 +51,11 @@ pub struct Linearised {
     unit_weights: bool,
 }
 
-/// Accumulates the rows `I` and `I + 1` of `[A | v]ᵀ [A | v]` (upper part)
-/// in one sweep over the points; few enough accumulators to stay in registers.
+/// Accumulates the rows `I` and `K` (`K > I`; only `I` when `K == I`) of
+/// `[A | v]ᵀ [A | v]` (upper part) in one sweep over the points; few
+/// enough accumulators to stay in registers.
 #[inline(always)]
-fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
-    let i1 = (I + 1).min(6);
+fn sweep<const I: usize, const K: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
     let mut acc0 = [f64x2::ZERO; 7];
     let mut acc1 = [f64x2::ZERO; 7];
     for r in rows {
@@ -63,9 +63,9 @@ fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
         for j in I..7 {
             acc0[j] += a[I] * a[j];
         }
-        if I < 6 {
-            for j in i1..7 {
-                acc1[j] += a[i1] * a[j];
+        if K > I {
+            for j in K..7 {
+                acc1[j] += a[K] * a[j];
             }
         }
     }
@@ -73,10 +73,10 @@ fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
         p[I][j] = acc0[j].reduce_add();
         p[j][I] = p[I][j];
     }
-    if I < 6 {
-        for j in i1..7 {
-            p[i1][j] = acc1[j].reduce_add();
-            p[j][i1] = p[i1][j];
+    if K > I {
+        for j in K..7 {
+            p[K][j] = acc1[j].reduce_add();
+            p[j][K] = p[K][j];
         }
     }
 }
@@ -151,10 +151,13 @@ fn linearise_into(
 /// The normal equations of the current Jacobian and residuals. No allocation.
 fn normals_of(rows: &[[f64; 14]]) -> Normals {
     let mut p = [[0.0f64; 7]; 7];
-    sweep::<0>(rows, &mut p);
-    sweep::<2>(rows, &mut p);
-    sweep::<4>(rows, &mut p);
-    sweep::<6>(rows, &mut p);
+    // Rows 0 | 1, 6 | 2, 5 | 3, 4: each sweep holds at most 14 of the 16
+    // SSE registers (accumulators and the columns it reads), none spilled.
+    // Every sum runs over the points in order whatever the grouping.
+    sweep::<0, 0>(rows, &mut p);
+    sweep::<1, 6>(rows, &mut p);
+    sweep::<2, 5>(rows, &mut p);
+    sweep::<3, 4>(rows, &mut p);
     Normals {
         n: Matrix6::from_fn(|i, j| p[i][j]),
         g: Vector6::from_fn(|i, _| p[i][6]),
