@@ -42,7 +42,8 @@ pub struct Linearised {
     /// `U = [[u00, u01], [0, u11]]` of the weight matrix (`W = UᵀU`) of
     /// each used point.
     pts: Vec<[f64; 8]>,
-    /// Interleaved `[A | v]` rows of each point.
+    /// Interleaved `[A | v]` rows of each point (the first `pts.len()`;
+    /// the rest are left from a larger set).
     rows: Vec<[f64; 14]>,
     /// The rows of a candidate being tried ([`Linearised::evaluate_trial`]).
     trial: Vec<[f64; 14]>,
@@ -50,11 +51,11 @@ pub struct Linearised {
     unit_weights: bool,
 }
 
-/// Accumulates the rows `I` and `I + 1` of `[A | v]ᵀ [A | v]` (upper part)
-/// in one sweep over the points; few enough accumulators to stay in registers.
+/// Accumulates the rows `I` and `K` (`K > I`; only `I` when `K == I`) of
+/// `[A | v]ᵀ [A | v]` (upper part) in one sweep over the points; few
+/// enough accumulators to stay in registers.
 #[inline(always)]
-fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
-    let i1 = (I + 1).min(6);
+fn sweep<const I: usize, const K: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
     let mut acc0 = [f64x2::ZERO; 7];
     let mut acc1 = [f64x2::ZERO; 7];
     for r in rows {
@@ -62,9 +63,9 @@ fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
         for j in I..7 {
             acc0[j] += a[I] * a[j];
         }
-        if I < 6 {
-            for j in i1..7 {
-                acc1[j] += a[i1] * a[j];
+        if K > I {
+            for j in K..7 {
+                acc1[j] += a[K] * a[j];
             }
         }
     }
@@ -72,10 +73,10 @@ fn sweep<const I: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 7]) {
         p[I][j] = acc0[j].reduce_add();
         p[j][I] = p[I][j];
     }
-    if I < 6 {
-        for j in i1..7 {
-            p[i1][j] = acc1[j].reduce_add();
-            p[j][i1] = p[i1][j];
+    if K > I {
+        for j in K..7 {
+            p[K][j] = acc1[j].reduce_add();
+            p[j][K] = p[K][j];
         }
     }
 }
@@ -95,28 +96,38 @@ fn linearise_into(
         [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
         [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
     ];
+    // Column k's (r0, r1), (r1, r2) and (r2, r0) as SIMD pairs.
+    let rxy: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[0][k], rr[1][k]]));
+    let ryz: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[1][k], rr[2][k]]));
+    let rzx: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[2][k], rr[0][k]]));
+    let two = f64x2::splat(2.0);
     let mut behind = 0usize;
     for (p, row) in pts.iter().zip(rows.iter_mut()) {
         let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
-        let zx = rr[0][0] * ux + rr[0][1] * uy + rr[0][2] * uz;
-        let zy = rr[1][0] * ux + rr[1][1] * uy + rr[1][2] * uz;
+        // The x and y parts (of the camera point, of the two Jacobian
+        // rows) as SIMD pairs: each lane computes exactly the scalar
+        // expression, operation for operation.
+        let zxy = rxy[0] * f64x2::splat(ux) + rxy[1] * f64x2::splat(uy) + rxy[2] * f64x2::splat(uz);
         let zz = rr[2][0] * ux + rr[2][1] * uy + rr[2][2] * uz;
+        let [zx, zy] = zxy.to_array();
         behind += (zz >= 0.0) as usize;
         let inv = 1.0 / zz;
-        let gx = zx * inv;
-        let gy = zy * inv;
-        let f = -c * inv;
+        let g = zxy * f64x2::splat(inv);
+        let [gx, gy] = g.to_array();
+        let f = f64x2::splat(-c * inv);
+        // (r1, r2) · (zz, zx) − (r2, r0) · (zy, zz): the x and y of
+        // (R e_k) × Z.
+        let (zzx, zyz) = (f64x2::new([zz, zx]), f64x2::new([zy, zz]));
         for k in 0..3 {
             let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
             // Centre: dZ/dC_k = -R e_k.
-            row[2 * k] = f * (gx * r2 - r0);
-            row[2 * k + 1] = f * (gy * r2 - r1);
+            let centre = f * (g * f64x2::splat(r2) - rxy[k]);
             // Rotation increment k: dZ = 2 (R e_k) × Z.
-            let dzx = 2.0 * (r1 * zz - r2 * zy);
-            let dzy = 2.0 * (r2 * zx - r0 * zz);
+            let dzxy = two * (ryz[k] * zzx - rzx[k] * zyz);
             let dzz = 2.0 * (r0 * zy - r1 * zx);
-            row[6 + 2 * k] = f * (dzx - gx * dzz);
-            row[7 + 2 * k] = f * (dzy - gy * dzz);
+            let turn = f * (dzxy - g * f64x2::splat(dzz));
+            [row[2 * k], row[2 * k + 1]] = centre.to_array();
+            [row[6 + 2 * k], row[7 + 2 * k]] = turn.to_array();
         }
         row[12] = p[3] + c * gx;
         row[13] = p[4] + c * gy;
@@ -140,10 +151,13 @@ fn linearise_into(
 /// The normal equations of the current Jacobian and residuals. No allocation.
 fn normals_of(rows: &[[f64; 14]]) -> Normals {
     let mut p = [[0.0f64; 7]; 7];
-    sweep::<0>(rows, &mut p);
-    sweep::<2>(rows, &mut p);
-    sweep::<4>(rows, &mut p);
-    sweep::<6>(rows, &mut p);
+    // Rows 0 | 1, 6 | 2, 5 | 3, 4: each sweep holds at most 14 of the 16
+    // SSE registers (accumulators and the columns it reads), none spilled.
+    // Every sum runs over the points in order whatever the grouping.
+    sweep::<0, 0>(rows, &mut p);
+    sweep::<1, 6>(rows, &mut p);
+    sweep::<2, 5>(rows, &mut p);
+    sweep::<3, 4>(rows, &mut p);
     Normals {
         n: Matrix6::from_fn(|i, j| p[i][j]),
         g: Vector6::from_fn(|i, _| p[i][6]),
@@ -176,9 +190,14 @@ impl Linearised {
                 o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u00, u01, u11,
             ]);
         }
-        // `evaluate` overwrites every row: only grow or shrink.
-        self.rows.resize(self.idx.len(), [0.0; 14]);
-        self.trial.resize(self.idx.len(), [0.0; 14]);
+        // `evaluate` overwrites every row of the loaded points: the rows
+        // only grow (a set of fewer points uses the first rows; growing
+        // them again would zero them again each frame).
+        let n = self.idx.len();
+        if self.rows.len() < n {
+            self.rows.resize(n, [0.0; 14]);
+            self.trial.resize(n, [0.0; 14]);
+        }
     }
 
     /// Number of points loaded.
@@ -193,15 +212,17 @@ impl Linearised {
 
     /// Linearises at `e` (principal distance `c`) and forms the normal equations.
     pub fn evaluate(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
-        linearise_into(&self.pts, self.unit_weights, &mut self.rows, c, e)?;
-        Ok(normals_of(&self.rows))
+        let rows = &mut self.rows[..self.pts.len()];
+        linearise_into(&self.pts, self.unit_weights, rows, c, e)?;
+        Ok(normals_of(rows))
     }
 
     /// Like [`Linearised::evaluate`] for a candidate, into separate rows that
     /// [`Linearised::accept_trial`] makes current.
     pub fn evaluate_trial(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
-        linearise_into(&self.pts, self.unit_weights, &mut self.trial, c, e)?;
-        Ok(normals_of(&self.trial))
+        let rows = &mut self.trial[..self.pts.len()];
+        linearise_into(&self.pts, self.unit_weights, rows, c, e)?;
+        Ok(normals_of(rows))
     }
 
     /// Makes the rows of the last trial the current ones.
@@ -214,7 +235,7 @@ impl Linearised {
     pub fn shift(&mut self, delta: &Vector6<f64>) -> f64 {
         let d: [f64x2; 6] = std::array::from_fn(|k| f64x2::splat(delta[k]));
         let mut cost = f64x2::ZERO;
-        for r in &mut self.rows {
+        for r in &mut self.rows[..self.pts.len()] {
             let mut v = f64x2::new([r[12], r[13]]);
             for (k, dk) in d.iter().enumerate() {
                 v -= f64x2::new([r[2 * k], r[2 * k + 1]]) * *dk;
@@ -238,7 +259,7 @@ impl Linearised {
             }
         }
         let mut worst: Option<(usize, f64)> = None;
-        for (k, r) in self.rows.iter().enumerate() {
+        for (k, r) in self.rows[..self.pts.len()].iter().enumerate() {
             let a: [f64x2; 6] = std::array::from_fn(|i| f64x2::new([r[2 * i], r[2 * i + 1]]));
             let mut quad = f64x2::ZERO;
             let mut t = 0;

@@ -46,12 +46,22 @@ fn main() {
     let mut locator =
         Locator::new(Camera::reference(), field, LocateOptions::default()).expect("locator");
     let (mut ok, mut check) = (0, 0.0f64);
+    // Check values of the poses (final and coarse): centres, rotations, σ0
+    // and covariances.
+    let mut poses = 0.0f64;
     for _ in 0..rounds {
         for img in &images {
             let loc = locator.locate(img.view()).expect("locate");
             ok += loc.targets.len();
             check += loc.targets.iter().map(|t| t.col + t.row).sum::<f64>();
+            for p in [loc.pose, loc.coarse].into_iter().flatten() {
+                poses += p.exterior.center.sum()
+                    + p.exterior.rotation.sum()
+                    + p.sigma0
+                    + p.covariance.sum();
+            }
         }
     }
     println!("{frames} frames × {rounds} rounds, {ok} identified targets, Σ centres {check:.9}");
+    println!("Σ poses {poses:.15e}");
 }

@@ -47,6 +47,9 @@ fn main() {
     let options = TrackOptions::default();
     let (mut tracked, mut targets) = (0usize, 0usize);
     let mut check = 0.0f64;
+    // Further check values: the rotations, σ0, the covariances and the
+    // tracked targets' centres (bit-identical results keep all of them).
+    let (mut rot, mut sig, mut cov, mut cen) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     for _ in 0..rounds {
         let mut motion = Motion {
             last: (0, pose.exterior),
@@ -60,10 +63,18 @@ fn main() {
                 motion_px,
                 threshold,
             };
-            if let Ok(p) = locator.track(img.view(), &prior, &options) {
+            if let Ok(p) = locator.track(img.view(), &prior, &options).copied() {
                 tracked += 1;
                 targets += p.n_points;
                 check += p.exterior.center.sum();
+                rot += p.exterior.rotation.sum();
+                sig += p.sigma0;
+                cov += p.covariance.sum();
+                cen += locator
+                    .identified()
+                    .iter()
+                    .map(|t| t.col * 3.0 + t.row)
+                    .sum::<f64>();
                 motion = Motion {
                     last: (k as u64, p.exterior),
                     before: Some(motion.last),
@@ -74,5 +85,8 @@ fn main() {
     println!(
         "{frames} frames × {rounds} rounds: {tracked} tracked, {:.0} targets each, Σ centres {check:.12}",
         targets as f64 / tracked.max(1) as f64
+    );
+    println!(
+        "Σ rotations {rot:.15e}, Σ σ0 {sig:.15e}, Σ covariances {cov:.15e}, Σ targets {cen:.15e}"
     );
 }

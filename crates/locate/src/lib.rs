@@ -21,7 +21,7 @@ pub mod track;
 use gate::Grid;
 use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
-use photopose_geometry::precision::projection_with_covariance;
+use photopose_geometry::precision::uncertain_projection;
 use photopose_geometry::{
     Camera, GeometryError, Matrix2, Matrix3, Observation, Resection, ResectionOptions,
     ResectionReport, Vector2, Vector3,
@@ -191,14 +191,22 @@ pub struct Locator {
     spacing: Vec<f64>,
     /// Tracking mode's measurer of one target in its window.
     window: WindowMeasurer,
-    /// Tracking mode's windows of one frame: field index, where to look,
-    /// spacing to the nearest neighbour in px, the ideal projection (mm).
-    windows: Vec<(
-        usize,
-        photopose_vision::Expected,
-        f64,
-        photopose_geometry::Vector2<f64>,
-    )>,
+    /// Tracking mode's windows of one frame.
+    windows: Vec<Window>,
+}
+
+/// A tracked target's window, before it is measured.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    field_index: usize,
+    /// Where to look.
+    expected: photopose_vision::Expected,
+    /// Spacing to the nearest neighbour, px.
+    spacing: f64,
+    /// The ideal projection, mm.
+    ideal: Vector2<f64>,
+    /// The target in camera coordinates, mm.
+    camera: Vector3<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -208,6 +216,9 @@ struct Projected {
     row: f64,
     /// The projection in ideal image coordinates, mm.
     ideal: photopose_geometry::Vector2<f64>,
+    /// The target in camera coordinates with the pose projected from, mm
+    /// (`R (P − C)`, kept for the eccentricity).
+    camera: Vector3<f64>,
     sigma_px: f64,
     spacing: f64,
 }
@@ -439,6 +450,27 @@ impl Locator {
         }
     }
 
+    /// [`Locator::correct_eccentricity`] of a tracked frame with the pose
+    /// its targets were projected with: each observation's target comes
+    /// from its projection (no look-up by id) and so does its camera point.
+    fn correct_eccentricity_tracked(&mut self, e: &photopose_geometry::Exterior) {
+        let c = self.camera.interior.c;
+        let ps = self.camera.sensor.pixel_size;
+        let targets = self.field.targets();
+        let all = self.obs.iter_mut().zip(self.identified.iter_mut());
+        for ((o, t), pr) in all.zip(&self.projected) {
+            let target = &targets[pr.field_index];
+            debug_assert_eq!((o.id, t.id), (target.id, target.id));
+            let Some(offset) = eccentricity_seen(c, e, &target.position, &pr.camera, target.radius)
+            else {
+                continue;
+            };
+            o.image -= offset;
+            t.col -= offset.x / ps;
+            t.row += offset.y / ps;
+        }
+    }
+
     fn identify_uncoded(&mut self, coarse: &ResectionReport) {
         let det = self.detector.detections();
         let c = self.camera.interior.c;
@@ -456,11 +488,12 @@ impl Locator {
         self.projected.clear();
         for &(fi, neighbour) in &self.uncoded {
             let t = &self.field.targets()[fi];
-            let Some((ideal, cov)) =
-                projection_with_covariance(c, &coarse.exterior, &coarse.covariance, &t.position)
+            let Some(u) =
+                uncertain_projection(c, &coarse.exterior, &coarse.covariance, &t.position)
             else {
                 continue;
             };
+            let ideal = u.ideal;
             let Some(measured) = self.camera.distort(ideal) else {
                 continue;
             };
@@ -479,7 +512,8 @@ impl Locator {
                 col: p.x,
                 row: p.y,
                 ideal,
-                sigma_px: largest_sigma(&cov) / px,
+                camera: u.camera,
+                sigma_px: largest_sigma(&u.covariance) / px,
                 spacing,
             });
         }
@@ -568,8 +602,22 @@ pub fn eccentricity(
     position: &Vector3<f64>,
     radius: f64,
 ) -> Option<Vector2<f64>> {
+    eccentricity_seen(c, e, position, &e.to_camera(position), radius)
+}
+
+/// [`eccentricity`] given the target's centre in camera coordinates,
+/// `camera = R (P − C)` ([`photopose_geometry::Exterior::to_camera`]).
+fn eccentricity_seen(
+    c: f64,
+    e: &photopose_geometry::Exterior,
+    position: &Vector3<f64>,
+    camera: &Vector3<f64>,
+    radius: f64,
+) -> Option<Vector2<f64>> {
     let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
-    let centre = e.project_ideal(c, position)?;
+    // `Exterior::project_ideal` of the camera point.
+    let q = camera;
+    let centre = (q.z < 0.0).then(|| Vector2::new(-c * q.x / q.z, -c * q.y / q.z))?;
     // Plane (s, t) of a target facing +Z, origin at its centre.
     let plane = Matrix3::from_columns(&[Vector3::x(), Vector3::y(), position - e.center]);
     let m_inv = (k * e.rotation * plane).try_inverse()?;

@@ -18,10 +18,10 @@
 //! [`Motion`] predicts the pose of a later frame from the two latest poses
 //! (constant velocity per frame).
 
-use crate::{Identified, Locator, PoseStatus, Projected};
+use crate::{Identified, Locator, PoseStatus, Projected, Window};
 use photopose_field::TargetKind;
 use photopose_frame::ImageView;
-use photopose_geometry::precision::projection_with_covariance;
+use photopose_geometry::precision::uncertain_projection;
 use photopose_geometry::{
     Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3,
 };
@@ -152,11 +152,10 @@ impl Locator {
         // are measured.
         self.windows.clear();
         for (fi, t) in self.field.targets().iter().enumerate() {
-            let Some((ideal, cov)) =
-                projection_with_covariance(c, e, &prior.covariance, &t.position)
-            else {
+            let Some(u) = uncertain_projection(c, e, &prior.covariance, &t.position) else {
                 continue;
             };
+            let ideal = u.ideal;
             let Some(measured) = self.camera.distort(ideal) else {
                 continue;
             };
@@ -164,8 +163,9 @@ impl Locator {
             if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
                 continue;
             }
-            let sigma_px = crate::largest_sigma(&cov) / px;
-            let depth = (e.rotation * (t.position - e.center)).z.abs();
+            let sigma_px = crate::largest_sigma(&u.covariance) / px;
+            // `R (P − C)` of the projection, not computed again.
+            let depth = u.camera.z.abs();
             let scale = c / (depth * px);
             let spacing = self.spacing[fi] * scale;
             let gate =
@@ -180,14 +180,27 @@ impl Locator {
                 coded,
                 read_code: false,
             };
-            self.windows.push((fi, expected, spacing, ideal));
+            self.windows.push(Window {
+                field_index: fi,
+                expected,
+                spacing,
+                ideal,
+                camera: u.camera,
+            });
         }
-        for (_, expected, _, _) in self.windows.iter().take(PREFETCH_AHEAD) {
-            self.window.prefetch(&image, expected);
+        for w in self.windows.iter().take(PREFETCH_AHEAD) {
+            self.window.prefetch(&image, &w.expected);
         }
-        for (wi, &(fi, mut expected, spacing, ideal)) in self.windows.iter().enumerate() {
-            if let Some((_, ahead, _, _)) = self.windows.get(wi + PREFETCH_AHEAD) {
-                self.window.prefetch(&image, ahead);
+        for (wi, w) in self.windows.iter().enumerate() {
+            let Window {
+                field_index: fi,
+                mut expected,
+                spacing,
+                ideal,
+                camera,
+            } = *w;
+            if let Some(ahead) = self.windows.get(wi + PREFETCH_AHEAD) {
+                self.window.prefetch(&image, &ahead.expected);
             }
             let t = &self.field.targets()[fi];
             expected.read_code = expected.coded && checked < options.verify_codes;
@@ -209,6 +222,7 @@ impl Locator {
                 col: expected.col,
                 row: expected.row,
                 ideal,
+                camera,
                 sigma_px: gate,
                 spacing,
             });
@@ -240,7 +254,7 @@ impl Locator {
             return Err(TrackLost::CodeMismatch);
         }
         if self.options.eccentricity {
-            self.correct_eccentricity(e);
+            self.correct_eccentricity_tracked(e);
         }
         let report = match self.resection.refine(&self.obs, *e) {
             Ok(r) => r,

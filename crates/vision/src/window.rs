@@ -319,15 +319,38 @@ fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>)
     }
 }
 
-/// [`Plane::prefetch`] of the square of half-width `half` around `e`.
+/// Asks for the cache lines of the square of half-width `half` around `e`
+/// (the lines [`crate::pixel::Plane::prefetch`] asks for over the whole
+/// square), straight from the rows of the frame's buffer: each row's first
+/// pixel, one every cache line after it, and its last pixel. Per row only
+/// an index step and a slice check (a row of a tracking window mostly
+/// spans at most two lines).
 fn prefetch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) {
-    if let Some(plane) = sub_plane(image, data, e.col, e.row, half) {
-        plane.prefetch(plane.col0, plane.row0, plane.last_col(), plane.last_row());
+    let Some(plane) = sub_plane(image, data, e.col, e.row, half) else {
+        return;
+    };
+    let step = (64 / std::mem::size_of::<P>()).max(1);
+    let last = plane.width - 1;
+    let mut start = 0;
+    for _ in 0..plane.height {
+        let Some(row) = plane.data.get(start..start + plane.width) else {
+            return;
+        };
+        crate::prefetch::line(row);
+        let mut k = step;
+        while k < last {
+            crate::prefetch::line(&row[k..]);
+            k += step;
+        }
+        crate::prefetch::line(&row[last..]);
+        start += plane.stride;
     }
 }
 
 /// The square of half-width `half` px around `(col, row)`, clipped to
-/// `image`; `None` when nothing of it lies inside.
+/// `image`; `None` when nothing of it lies inside. The bounds are clamped
+/// as integers (conversions from `f64` to `usize` cost a branch and a
+/// dozen instructions each on x86-64; integer clamping is the same).
 fn sub_plane<'a, P>(
     image: &ImageView<'_>,
     data: &'a [P],
@@ -336,29 +359,28 @@ fn sub_plane<'a, P>(
     half: f64,
 ) -> Option<Plane<'a, P>> {
     let (c0, r0) = image.origin();
+    let (c0, r0) = (c0 as i64, r0 as i64);
     let (c1, r1) = (
-        c0 as f64 + image.width() as f64 - 1.0,
-        r0 as f64 + image.height() as f64 - 1.0,
+        c0 + image.width() as i64 - 1,
+        r0 + image.height() as i64 - 1,
     );
-    let lo_c = (floor_i64(col - half) as f64).max(c0 as f64);
-    let lo_r = (floor_i64(row - half) as f64).max(r0 as f64);
-    let hi_c = (ceil_i64(col + half) as f64).min(c1);
-    let hi_r = (ceil_i64(row + half) as f64).min(r1);
+    let lo_c = floor_i64(col - half).max(c0);
+    let lo_r = floor_i64(row - half).max(r0);
+    let hi_c = ceil_i64(col + half).min(c1);
+    let hi_r = ceil_i64(row + half).min(r1);
     if !(lo_c <= hi_c && lo_r <= hi_r) {
         return None;
     }
-    let (lc, lr) = (lo_c as usize, lo_r as usize);
+    // Here c0 <= lo_c <= hi_c <= c1 (and the same for rows): all fit.
     let stride = image.stride();
-    let first = (lr - r0 as usize) * stride + (lc - c0 as usize);
-    let width = hi_c as usize - lc + 1;
-    let height = hi_r as usize - lr + 1;
+    let first = (lo_r - r0) as usize * stride + (lo_c - c0) as usize;
     Some(Plane {
         data: &data[first..],
-        width,
-        height,
+        width: (hi_c - lo_c) as usize + 1,
+        height: (hi_r - lo_r) as usize + 1,
         stride,
-        col0: lc,
-        row0: lr,
+        col0: lo_c as usize,
+        row0: lo_r as usize,
     })
 }
 
