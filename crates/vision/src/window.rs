@@ -319,31 +319,10 @@ fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>)
     }
 }
 
-/// Asks for the cache lines of the square of half-width `half` around `e`
-/// (the lines [`crate::pixel::Plane::prefetch`] asks for over the whole
-/// square), straight from the rows of the frame's buffer: each row's first
-/// pixel, one every cache line after it, and its last pixel. Per row only
-/// an index step and a slice check (a row of a tracking window mostly
-/// spans at most two lines).
+/// [`Plane::prefetch`] of the square of half-width `half` around `e`.
 fn prefetch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) {
-    let Some(plane) = sub_plane(image, data, e.col, e.row, half) else {
-        return;
-    };
-    let step = (64 / std::mem::size_of::<P>()).max(1);
-    let last = plane.width - 1;
-    let mut start = 0;
-    for _ in 0..plane.height {
-        let Some(row) = plane.data.get(start..start + plane.width) else {
-            return;
-        };
-        crate::prefetch::line(row);
-        let mut k = step;
-        while k < last {
-            crate::prefetch::line(&row[k..]);
-            k += step;
-        }
-        crate::prefetch::line(&row[last..]);
-        start += plane.stride;
+    if let Some(plane) = sub_plane(image, data, e.col, e.row, half) {
+        plane.prefetch(plane.col0, plane.row0, plane.last_col(), plane.last_row());
     }
 }
 
