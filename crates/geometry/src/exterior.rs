@@ -82,8 +82,7 @@ impl Exterior {
     /// collinearity equations; `None` if it is not in front of the camera.
     #[inline]
     pub fn project_ideal(&self, c: f64, p: &Vector3<f64>) -> Option<Vector2<f64>> {
-        let q = self.to_camera(p);
-        (q.z < 0.0).then(|| Vector2::new(-c * q.x / q.z, -c * q.y / q.z))
+        ideal_of_camera_point(c, &self.to_camera(p))
     }
 
     /// Pixel position at which `camera` sees the object point `p`.
@@ -92,6 +91,14 @@ impl Exterior {
         let m = camera.project_camera_point(&self.to_camera(p))?;
         Some(camera.image_to_pixel(m))
     }
+}
+
+/// Ideal image coordinates of the camera point `q` (`R (P − C)`, see
+/// [`Exterior::to_camera`]) for principal distance `c`; `None` if it is
+/// not in front of the camera.
+#[inline]
+pub fn ideal_of_camera_point(c: f64, q: &Vector3<f64>) -> Option<Vector2<f64>> {
+    (q.z < 0.0).then(|| Vector2::new(-c * q.x / q.z, -c * q.y / q.z))
 }
 
 #[cfg(test)]

@@ -615,9 +615,7 @@ fn eccentricity_seen(
     radius: f64,
 ) -> Option<Vector2<f64>> {
     let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
-    // `Exterior::project_ideal` of the camera point.
-    let q = camera;
-    let centre = (q.z < 0.0).then(|| Vector2::new(-c * q.x / q.z, -c * q.y / q.z))?;
+    let centre = photopose_geometry::exterior::ideal_of_camera_point(c, camera)?;
     // Plane (s, t) of a target facing +Z, origin at its centre.
     let plane = Matrix3::from_columns(&[Vector3::x(), Vector3::y(), position - e.center]);
     let m_inv = (k * e.rotation * plane).try_inverse()?;

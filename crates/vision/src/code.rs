@@ -329,7 +329,7 @@ fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
 }
 
 /// Cosines and sines of the fixed sampling angles, computed once; also
-/// two to a lane pair for [`circle_inside`].
+/// two to a lane pair for `circle_inside`.
 #[derive(Debug, Clone)]
 pub struct RingTables {
     phase: [(f64, f64); PHASE_SAMPLES],
