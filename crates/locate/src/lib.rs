@@ -441,12 +441,9 @@ impl Locator {
             let Some(target) = self.field.get(t.id) else {
                 continue;
             };
-            let Some(offset) = eccentricity(c, e, &target.position, target.radius) else {
-                continue;
-            };
-            o.image -= offset;
-            t.col -= offset.x / ps;
-            t.row += offset.y / ps;
+            if let Some(offset) = eccentricity(c, e, &target.position, target.radius) {
+                move_by_eccentricity(o, t, offset, ps);
+            }
         }
     }
 
@@ -461,13 +458,11 @@ impl Locator {
         for ((o, t), pr) in all.zip(&self.projected) {
             let target = &targets[pr.field_index];
             debug_assert_eq!((o.id, t.id), (target.id, target.id));
-            let Some(offset) = eccentricity_seen(c, e, &target.position, &pr.camera, target.radius)
-            else {
-                continue;
-            };
-            o.image -= offset;
-            t.col -= offset.x / ps;
-            t.row += offset.y / ps;
+            if let Some(offset) =
+                eccentricity_seen(c, e, &target.position, &pr.camera, target.radius)
+            {
+                move_by_eccentricity(o, t, offset, ps);
+            }
         }
     }
 
@@ -603,6 +598,16 @@ pub fn eccentricity(
     radius: f64,
 ) -> Option<Vector2<f64>> {
     eccentricity_seen(c, e, position, &e.to_camera(position), radius)
+}
+
+/// Moves an observation and its identified target (pixel size `ps`) from
+/// the centre of the imaged ellipse to the image of the circle's centre,
+/// `offset` being the first's offset from the second (ideal image
+/// coordinates, `y'` up).
+fn move_by_eccentricity(o: &mut Observation, t: &mut Identified, offset: Vector2<f64>, ps: f64) {
+    o.image -= offset;
+    t.col -= offset.x / ps;
+    t.row += offset.y / ps;
 }
 
 /// [`eccentricity`] given the target's centre in camera coordinates,

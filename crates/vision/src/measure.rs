@@ -150,15 +150,7 @@ impl Ring for Counts<'_> {
         if n < 4 {
             return None;
         }
-        let k = n * 3 / 10;
-        let mut acc = 0usize;
-        for (v, &c) in dark.iter().enumerate() {
-            acc += c as usize;
-            if acc > k {
-                return Some(v as u32);
-            }
-        }
-        None
+        kth_counted(dark, n * 3 / 10)
     }
 }
 
@@ -413,16 +405,26 @@ fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
         for &v in values.iter() {
             count[v as usize & (SMALL - 1)] += 1;
         }
-        let mut acc = 0usize;
-        for (v, &c) in count.iter().enumerate() {
-            acc += c as usize;
-            if acc > k {
-                return v as u32;
-            }
+        if let Some(q) = kth_counted(&count, k) {
+            return q;
         }
     }
     let (_, &mut q, _) = values.select_nth_unstable(k);
     q
+}
+
+/// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
+/// values equal `v`); `None` if fewer than `k + 1` are counted.
+#[inline]
+fn kth_counted(count: &[u8], k: usize) -> Option<u32> {
+    let mut acc = 0usize;
+    for (v, &c) in count.iter().enumerate() {
+        acc += c as usize;
+        if acc > k {
+            return Some(v as u32);
+        }
+    }
+    None
 }
 
 /// The weight a grey value gets in the centroid sums (in units of

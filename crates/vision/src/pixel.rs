@@ -49,20 +49,6 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         lit
     }
-    /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
-    /// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the
-    /// first two pixels of a slice, `p10`, `p11` the two from `s` (the
-    /// row stride; both slices hold at least `s + 2` pixels).
-    #[inline(always)]
-    fn corners_x2(a: &[Self], b: &[Self], s: usize) -> [f64x2; 4] {
-        let v = |p: Self| p.value() as f64;
-        [
-            f64x2::new([v(a[0]), v(b[0])]),
-            f64x2::new([v(a[1]), v(b[1])]),
-            f64x2::new([v(a[s]), v(b[s])]),
-            f64x2::new([v(a[s + 1]), v(b[s + 1])]),
-        ]
-    }
     /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
     /// running from `k0`: a row's grey-value moments.
     #[inline]
@@ -97,6 +83,54 @@ pub(crate) fn scalar_moment_sums<P: Pixel>(px: &[P], k0: i64, w: impl Fn(P) -> i
     [t0, t1, t2]
 }
 
+/// The corners `[p00, p01, p10, p11]` of two cells of bilinear
+/// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the first
+/// two pixels of a slice, `p10`, `p11` the two from `s` (the row stride;
+/// both slices hold at least `s + 2` pixels).
+#[inline(always)]
+fn corners_x2<P: Pixel>(a: &[P], b: &[P], s: usize) -> [f64x2; 4] {
+    let v = |p: P| p.value() as f64;
+    [
+        f64x2::new([v(a[0]), v(b[0])]),
+        f64x2::new([v(a[1]), v(b[1])]),
+        f64x2::new([v(a[s]), v(b[s])]),
+        f64x2::new([v(a[s + 1]), v(b[s + 1])]),
+    ]
+}
+
+/// Sixteen pixels of an 8-bit row as one vector.
+#[inline(always)]
+fn lanes16(c: &[u8]) -> u8x16 {
+    let Ok(&c) = <&[u8; 16]>::try_from(c) else {
+        unreachable!("sixteen pixels")
+    };
+    u8x16::new(c)
+}
+
+/// The 8-bit level of `threshold` as sixteen lanes; `None` when no 8-bit
+/// value lies above it.
+#[inline(always)]
+fn level16(threshold: Threshold) -> Option<u8x16> {
+    let level = threshold.level();
+    (level < u8::MAX as u32).then(|| u8x16::splat(level as u8))
+}
+
+/// Bit `i` set for each lane of `v` above `t` (the foreground lanes).
+#[inline(always)]
+fn above16(v: u8x16, t: u8x16) -> u32 {
+    !(v.saturating_sub(t).cmp_eq(u8x16::splat(0)).move_mask() as u32) & 0xffff
+}
+
+/// [`Pixel::lit_mask`] of 8-bit pixels given as four vectors.
+#[inline(always)]
+fn mask64(v: [u8x16; 4], t: u8x16) -> u64 {
+    let mut m = 0u64;
+    for (k, &x) in v.iter().enumerate() {
+        m |= (above16(x, t) as u64) << (16 * k);
+    }
+    m
+}
+
 impl Pixel for u8 {
     const MAX: u32 = u8::MAX as u32;
     #[inline(always)]
@@ -112,37 +146,27 @@ impl Pixel for u8 {
     #[inline]
     fn above_mask(block: &[Self], threshold: Threshold) -> u64 {
         debug_assert!(block.len() <= 64);
-        let level = threshold.level();
-        if level >= u8::MAX as u32 {
+        let Some(t) = level16(threshold) else {
             return 0;
-        }
-        let t = u8x16::splat(level as u8);
-        let zero = u8x16::splat(0);
-        // 0xffff where all sixteen are `≤ t`, else the lanes `≤ t`.
-        let dark = |v: u8x16| v.saturating_sub(t).cmp_eq(zero).move_mask() as u32 & 0xffff;
-        let load = |c: &[u8]| u8x16::new(c.try_into().unwrap_or([0; 16]));
+        };
         if let Ok(b) = <&[u8; 64]>::try_from(block) {
             let v = [
-                load(&b[..16]),
-                load(&b[16..32]),
-                load(&b[32..48]),
-                load(&b[48..]),
+                lanes16(&b[..16]),
+                lanes16(&b[16..32]),
+                lanes16(&b[32..48]),
+                lanes16(&b[48..]),
             ];
             // A dark block (most of a frame) costs one test.
-            if dark(v[0].max(v[1]).max(v[2].max(v[3]))) == 0xffff {
+            if above16(v[0].max(v[1]).max(v[2].max(v[3])), t) == 0 {
                 return 0;
             }
-            let mut m = 0u64;
-            for (k, &x) in v.iter().enumerate() {
-                m |= ((!dark(x) & 0xffff) as u64) << (16 * k);
-            }
-            return m;
+            return mask64(v, t);
         }
         let mut chunks = block.chunks_exact(16);
         let mut m = 0u64;
         let mut shift = 0;
         for c in &mut chunks {
-            m |= ((!dark(load(c)) & 0xffff) as u64) << shift;
+            m |= (above16(lanes16(c), t) as u64) << shift;
             shift += 16;
         }
         for (i, &p) in chunks.remainder().iter().enumerate() {
@@ -153,21 +177,13 @@ impl Pixel for u8 {
 
     #[inline]
     fn lit_mask(block: &[Self; 64], threshold: Threshold) -> u64 {
-        let level = threshold.level();
-        if level >= u8::MAX as u32 {
+        let Some(t) = level16(threshold) else {
             return 0;
-        }
-        let t = u8x16::splat(level as u8);
-        let zero = u8x16::splat(0);
-        let mut m = 0u64;
-        for (k, c) in block.chunks_exact(16).enumerate() {
-            let Ok(&c) = <&[u8; 16]>::try_from(c) else {
-                unreachable!()
-            };
-            let dark = u8x16::new(c).saturating_sub(t).cmp_eq(zero).move_mask() as u32;
-            m |= ((!dark & 0xffff) as u64) << (16 * k);
-        }
-        m
+        };
+        mask64(
+            [0, 1, 2, 3].map(|k| lanes16(&block[16 * k..16 * k + 16])),
+            t,
+        )
     }
 
     /// Sixteen pixels at a time (from the run's next pixel, or the row's
@@ -189,10 +205,7 @@ impl Pixel for u8 {
         let mut s = start;
         while s < end {
             let p = s.min(len - LANES);
-            let Ok(&c) = <&[u8; LANES]>::try_from(&line[p..p + LANES]) else {
-                unreachable!()
-            };
-            let v = u8x16::new(c);
+            let v = lanes16(&line[p..p + LANES]);
             // The run's lanes: `lo..hi`.
             let (lo, hi) = (s - p, (end - p).min(LANES));
             let run = IDX.max(u8x16::splat(lo as u8)).cmp_eq(IDX)
@@ -218,20 +231,12 @@ impl Pixel for u8 {
     /// a dark stretch (most of a frame) costs the first comparison only.
     #[inline]
     fn lit_quarters(block: &[Self; 256], threshold: Threshold) -> u32 {
-        let level = threshold.level();
-        if level >= u8::MAX as u32 {
+        let Some(t) = level16(threshold) else {
             return 0;
-        }
-        let t = u8x16::splat(level as u8);
-        let zero = u8x16::splat(0);
-        // Nonzero where some lane is above `t`.
-        let lit = |v: u8x16| !v.saturating_sub(t).cmp_eq(zero).move_mask() & 0xffff;
-        let v = |k: usize| {
-            let Ok(&c) = <&[u8; 16]>::try_from(&block[16 * k..16 * k + 16]) else {
-                unreachable!()
-            };
-            u8x16::new(c)
         };
+        // Nonzero where some lane is above `t`.
+        let lit = |v: u8x16| above16(v, t);
+        let v = |k: usize| lanes16(&block[16 * k..16 * k + 16]);
         let q = |k: usize| {
             v(4 * k)
                 .max(v(4 * k + 1))
@@ -271,10 +276,7 @@ impl Pixel for u8 {
             // lane, `j²` a constant too.
             const LO2: i16x8 = i16x8::new([0, 1, 4, 9, 16, 25, 36, 49]);
             const HI2: i16x8 = i16x8::new([64, 81, 100, 121, 144, 169, 196, 225]);
-            let Ok(&block) = <&[u8; LANES]>::try_from(&line[a..a + LANES]) else {
-                unreachable!()
-            };
-            let v = u8x16::new(block);
+            let v = lanes16(&line[a..a + LANES]);
             let lo = i16x8::from_u8x16_low(v) & end.cmp_gt(LO);
             let hi = i16x8::from_u8x16_high(v) & end.cmp_gt(HI);
             s0 = lo + hi;
@@ -284,10 +286,7 @@ impl Pixel for u8 {
         }
         while s < n {
             let p = (a + s).min(line.len() - LANES);
-            let Ok(&block) = <&[u8; LANES]>::try_from(&line[p..p + LANES]) else {
-                unreachable!()
-            };
-            let v = u8x16::new(block);
+            let v = lanes16(&line[p..p + LANES]);
             // `j` of lane 0; the lanes with `j < s` were summed before.
             let j0 = i16x8::splat((p as isize - a as isize) as i16);
             let first = i16x8::splat(s as i16 - 1);
@@ -537,7 +536,7 @@ impl<'a, P: Pixel> Plane<'a, P> {
         let n = s.checked_add(2).expect("stride");
         let a = &self.data[ia..][..n];
         let b = &self.data[ib..][..n];
-        let [p00, p01, p10, p11] = P::corners_x2(a, b, s);
+        let [p00, p01, p10, p11] = corners_x2(a, b, s);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
