@@ -55,6 +55,12 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
         scalar_moment_sums(&line[a..a + n], k0, |p| p.value() as i64)
     }
+    /// The pixels as bytes if they are 8-bit (for the paths that take an
+    /// 8-bit row sixteen pixels at a time).
+    #[inline(always)]
+    fn bytes(_px: &[Self]) -> Option<&[u8]> {
+        None
+    }
 }
 
 /// [`Pixel::run_stats`] one pixel at a time.
@@ -136,6 +142,10 @@ impl Pixel for u8 {
     #[inline(always)]
     fn value(self) -> u32 {
         self as u32
+    }
+    #[inline(always)]
+    fn bytes(px: &[Self]) -> Option<&[u8]> {
+        Some(px)
     }
     #[inline(always)]
     fn max_of(chunk: &[Self]) -> u32 {
@@ -541,6 +551,48 @@ impl<'a, P: Pixel> Plane<'a, P> {
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
     }
+}
+
+impl<'a, P: Pixel> Plane<'a, P> {
+    /// The same window of an 8-bit frame with its pixels as bytes; `None`
+    /// for wider pixels.
+    #[inline(always)]
+    pub(crate) fn bytes(&self) -> Option<Plane<'a, u8>> {
+        Some(Plane {
+            data: P::bytes(self.data)?,
+            width: self.width,
+            height: self.height,
+            stride: self.stride,
+            col0: self.col0,
+            row0: self.row0,
+        })
+    }
+}
+
+/// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
+/// `≥ lo` (see [`masked16`]).
+const FROM_32: [u8; 64] = {
+    let mut t = [0u8; 64];
+    let mut i = 32;
+    while i < 64 {
+        t[i] = 0xff;
+        i += 1;
+    }
+    t
+};
+
+/// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
+/// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
+/// row as one vector, masked by two unaligned loads from a table instead
+/// of a loop.
+#[inline(always)]
+pub(crate) fn masked16(line: &[u8], p: usize, lo: isize, hi: isize) -> u8x16 {
+    debug_assert!((-16..=31).contains(&lo) && (-16..=31).contains(&hi));
+    // Lane `i` of the first mask is `FROM_32[32 − lo + i]`, set for
+    // `i ≥ lo`; of the second `!FROM_32[32 − hi − 1 + i]`, set for `i ≤ hi`.
+    let ge = lanes16(&FROM_32[(32 - lo) as usize..][..16]);
+    let gt = lanes16(&FROM_32[(31 - hi) as usize..][..16]);
+    lanes16(&line[p..p + 16]) & ge & !gt
 }
 
 #[cfg(test)]
