@@ -27,7 +27,7 @@ use crate::label::Blob;
 use crate::num::{ceil_i64, floor_i64, near_i32x2, round_i64};
 use crate::pixel::{masked16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, u8x16};
+use wide::{f64x2, i16x8, i32x4};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -564,11 +564,8 @@ struct Lanes<const B: usize> {
     jw: i32x4,
     j2w: i32x4,
     jlw: i32x4,
-    /// The pixel counts: per lane `Σ_j 1` (bytes) and `Σ_j j`, and `Σ j² n`
-    /// (`n` a row's pixels).
-    count: [u8x16; B],
-    jcount: [[i16x8; 2]; B],
-    j2n: i64,
+    /// `(Σ1, Σl, Σl², Σj, Σj², Σl j)` of the pixel counts.
+    n: [i64; 6],
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -591,9 +588,7 @@ impl<const B: usize> Lanes<B> {
             jw: i32x4::ZERO,
             j2w: i32x4::ZERO,
             jlw: i32x4::ZERO,
-            count: [u8x16::ZERO; B],
-            jcount: [[i16x8::ZERO; 2]; B],
-            j2n: 0,
+            n: [0; 6],
         }
     }
 }
@@ -607,17 +602,12 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
         let jv = i16x8::splat(j);
         let mut sum = i16x8::ZERO;
         let mut jl = i32x4::ZERO;
-        for i in 0..B {
+        for (i, col) in self.col.iter_mut().enumerate() {
             let off = 16 * i as isize;
-            let (v, mask) = masked16(line, self.p + 16 * i, lo - off, hi - off);
-            // (`0xff − 0xff = 0` lanes: the count goes up by one.)
-            self.count[i] -= mask;
+            let v = masked16(line, self.p + 16 * i, lo - off, hi - off);
             let half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
-            let inside = [i16x8::from_u8x16_low(mask), i16x8::from_u8x16_high(mask)];
             for h in 0..2 {
-                self.col[i][h] += half[h];
-                // (`0x00ff & j = j`.)
-                self.jcount[i][h] += inside[h] & jv;
+                col[h] += half[h];
                 sum += half[h];
                 let l = if i == 0 {
                     LANE[h]
@@ -627,48 +617,55 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
                 jl += half[h].dot(l * jv);
             }
         }
-        let j2 = j * j;
         self.jw += sum.dot(jv);
-        self.j2w += sum.dot(i16x8::splat(j2));
+        self.j2w += sum.dot(i16x8::splat(j * j));
         self.jlw += jl;
-        self.j2n += j2 as i64 * (hi - lo + 1) as i64;
+        // The counts: `l` over `lo..=hi`.
+        let (lo, hi, j) = (lo as i64, hi as i64, j as i64);
+        let n = hi - lo + 1;
+        let l1 = ((lo + hi) * n) >> 1;
+        let l2 = SQUARES[(hi + 1) as usize & 63] - SQUARES[lo as usize & 63];
+        let s = &mut self.n;
+        s[0] += n;
+        s[1] += l1;
+        s[2] += l2;
+        s[3] += j * n;
+        s[4] += j * j * n;
+        s[5] += j * l1;
     }
 
     fn sums(self) -> ([f64; 6], [f64; 6]) {
         let (mut c0, mut c1, mut c2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
-        let (mut n0, mut n1, mut n2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
-        let (mut nj, mut njl) = (i32x4::ZERO, i32x4::ZERO);
-        let one = i16x8::splat(1);
-        for i in 0..B {
-            let count = [
-                i16x8::from_u8x16_low(self.count[i]),
-                i16x8::from_u8x16_high(self.count[i]),
-            ];
+        for (i, col) in self.col.iter().enumerate() {
             for h in 0..2 {
-                let l = LANE[h] + i16x8::splat(16 * i as i16);
+                let off = i16x8::splat(16 * i as i16);
+                let l = LANE[h] + off;
+                c0 += col[h].dot(i16x8::splat(1));
+                c1 += col[h].dot(l);
                 // (`l²` up to 961 in 16 bits.)
-                let l2 = l * l;
-                let col = self.col[i][h];
-                c0 += col.dot(one);
-                c1 += col.dot(l);
-                c2 += col.dot(l2);
-                n0 += count[h].dot(one);
-                n1 += count[h].dot(l);
-                n2 += count[h].dot(l2);
-                nj += self.jcount[i][h].dot(one);
-                njl += self.jcount[i][h].dot(l);
+                c2 += col[h].dot(l * l);
             }
         }
         let r = |v: i32x4| v.reduce_add() as i64;
         let g = [r(c0), r(c1), r(c2), r(self.jw), r(self.j2w), r(self.jlw)];
-        let n = [r(n0), r(n1), r(n2), r(nj), self.j2n, r(njl)];
         // From lane and row to the origin.
         let dk = (self.p as i64) - self.k0;
         let dj = self.r0 as i64 - self.j0;
         let f = |s| moved(s, dk, dj).map(|x: i64| x as f64);
-        (f(g), f(n))
+        (f(g), f(self.n))
     }
 }
+
+/// `SQUARES[x] = Σ_{i < x} i²`.
+const SQUARES: [i64; 64] = {
+    let mut t = [0i64; 64];
+    let mut i = 1;
+    while i < 64 {
+        t[i] = t[i - 1] + ((i - 1) * (i - 1)) as i64;
+        i += 1;
+    }
+    t
+};
 
 /// A blob's ellipse as the quadratic form
 /// `ρ²(dx, dy) = qxx dx² + 2 qxy dx dy + qyy dy²` about `(bx, ·)`: the

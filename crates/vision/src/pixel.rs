@@ -582,19 +582,18 @@ const FROM_32: [u8; 64] = {
 };
 
 /// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
-/// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0, and the mask
-/// of the lanes inside (`0xff`): a run of a row as one vector, masked by
-/// two unaligned loads from a table instead of a loop.
+/// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
+/// row as one vector, masked by two unaligned loads from a table instead
+/// of a loop.
 #[inline(always)]
-pub(crate) fn masked16(line: &[u8], p: usize, lo: isize, hi: isize) -> (u8x16, u8x16) {
+pub(crate) fn masked16(line: &[u8], p: usize, lo: isize, hi: isize) -> u8x16 {
     debug_assert!((-16..=31).contains(&lo) && (-16..=31).contains(&hi));
     // Lane `i` of the first mask is `FROM_32[32 − lo + i]`, set for
     // `i ≥ lo`; of the second `FROM_32[32 − hi − 1 + i]`, set for `i > hi`.
     // (The `min`s change nothing but spare the bounds checks.)
     let ge = lanes16(&FROM_32[((32 - lo) as usize).min(48)..][..16]);
     let gt = lanes16(&FROM_32[((31 - hi) as usize).min(48)..][..16]);
-    let mask = ge & !gt;
-    (lanes16(&line[p..p + 16]) & mask, mask)
+    lanes16(&line[p..p + 16]) & ge & !gt
 }
 
 #[cfg(test)]
