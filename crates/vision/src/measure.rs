@@ -24,10 +24,10 @@
 //! ring is counted by grey value in bytes instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, near_i32x2, round_i64};
+use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, round_i64, ROUND};
 use crate::pixel::{masked16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4};
+use wide::{f64x2, i16x8, i32x4, CmpGe};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -256,48 +256,62 @@ impl Window {
     fn rows(&self, mut f: impl FnMut(RowSpans)) {
         let q = &self.q;
         let (r0, r1) = self.rows;
-        let (c0, c1) = self.cols;
-        let (wr0, wr1) = self.wr;
-        let (bc0, bc1) = self.box_cols;
         let (wr0i, wr1i) = self.wrows;
-        let (wc0i, wc1i) = self.wcols;
-        // The rows' spans a block of rows ahead, in a loop of their own:
-        // each needs two square roots, whose latency the long row loop
-        // below would wait for one row after the other; computed together,
-        // the rows' roots overlap.
-        let mut spans = [[0i32; 4]; SPAN_BLOCK];
-        for row in r0..=r1 {
-            let k = (row - r0) % SPAN_BLOCK;
-            if k == 0 {
-                for (sp, ahead) in spans.iter_mut().zip(row..r1 + 1) {
-                    let ((ia, ib), (oa, ob)) =
-                        q.spans(ahead as i64 as f64 - self.by, self.s_in, self.s_out);
-                    *sp = [ia, ib, oa, ob];
+        // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole.
+        let (hr0, hr1) = (ceil_i64(self.wr.0), floor_i64(self.wr.1));
+        // Clipping as floats (see `near_f64x2`).
+        let at = |c: i64| f64x2::splat(c as f64 + ROUND);
+        let (c0, c1) = (at(self.cols.0), at(self.cols.1));
+        let (bc0, bc1) = (at(self.box_cols.0), at(self.box_cols.1));
+        let (wc0, wc1) = (at(self.wcols.0), at(self.wcols.1));
+        // A block of rows at a time: first the spans of all its rows, two
+        // rows in the lanes of each vector (their outer spans, holes and
+        // the window's spans, clipped as floats), then the rows. (The
+        // spans' square roots overlap, and neither loop holds the other's
+        // values.)
+        let mut spans = [[0i32; 6]; SPAN_BLOCK];
+        let mut first = r0;
+        while first <= r1 {
+            let last = r1.min(first + SPAN_BLOCK - 1);
+            for (i, pair) in spans[..=last - first].chunks_mut(2).enumerate() {
+                let top = (first + 2 * i) as i64 as f64 - self.by;
+                let [ia, ib, oa, ob] = q.spans(f64x2::new([top, top + 1.0]), self.s_in, self.s_out);
+                let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
+                let ends = [
+                    oa,
+                    ob,
+                    ia.fast_max(bc0).fast_max(oa),
+                    ib.fast_min(bc1).fast_min(ob),
+                    ia.fast_max(wc0),
+                    ib.fast_min(wc1),
+                ]
+                .map(low_i32x2);
+                for (lane, sp) in pair.iter_mut().enumerate() {
+                    *sp = ends.map(|e| e[lane]);
                 }
             }
-            // (Through i64: one instruction on x86-64, unlike usize → f64.)
-            let row_f = row as i64 as f64;
-            let [ia, ib, oa, ob] = spans[k].map(i64::from);
-            let (oa, ob) = (oa.max(c0), ob.min(c1));
-            if oa > ob {
-                continue;
+            for (row, sp) in (first..=last).zip(&spans) {
+                let [oa, ob, xa, xb, a, b] = sp.map(i64::from);
+                if oa > ob {
+                    continue;
+                }
+                // Background: the outer span minus the window's span
+                // inside the box.
+                let row_i = row as i64;
+                let hole = if row_i >= hr0 && row_i <= hr1 {
+                    (xa, xb)
+                } else {
+                    EMPTY
+                };
+                let window = (row >= wr0i && row <= wr1i && a <= b).then_some((a, b));
+                f(RowSpans {
+                    row,
+                    outer: (oa, ob),
+                    hole,
+                    window,
+                });
             }
-            // Background: the outer span minus the window's span inside
-            // the box.
-            let in_rows = row_f >= wr0 && row_f <= wr1;
-            let hole = if in_rows {
-                (ia.max(bc0).max(oa), ib.min(bc1).min(ob))
-            } else {
-                EMPTY
-            };
-            let (a, b) = (ia.max(wc0i), ib.min(wc1i));
-            let window = (row >= wr0i && row <= wr1i && a <= b).then_some((a, b));
-            f(RowSpans {
-                row,
-                outer: (oa, ob),
-                hole,
-                window,
-            });
+            first = last + 1;
         }
     }
 
@@ -680,40 +694,38 @@ struct Conic {
     bx: f64,
 }
 
-/// Rows whose spans [`measure_weighted`] computes ahead at a time.
-const SPAN_BLOCK: usize = 8;
+/// Rows whose spans [`Window::rows`] computes ahead at a time.
+const SPAN_BLOCK: usize = 24;
 
 /// An empty inclusive range.
 const EMPTY: (i64, i64) = (1, 0);
-/// See [`EMPTY`].
-const EMPTY32: (i32, i32) = (1, 0);
 
 impl Conic {
     /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`
-    /// (`s_in ≤ s_out`), as inclusive ranges, unclipped. The ends are the
-    /// ceiling and floor of the roots, taken as the nearest integers to
-    /// `root ± 0.5` (exact but for a root that is exactly an integer, where
-    /// a column on the ellipse itself may be left out).
+    /// (`s_in ≤ s_out`) of the rows `dy` (lanes), as inclusive ranges
+    /// `[lo_in, hi_in, lo_out, hi_out]` (unclipped, see [`near_f64x2`];
+    /// empty ones with `lo > hi`). The ends are the ceiling and floor of
+    /// the roots, taken as the nearest integers to `root ± 0.5` (exact but
+    /// for a root that is exactly an integer, where a column on the
+    /// ellipse itself may be left out).
     #[inline(always)]
-    fn spans(&self, dy: f64, s_in: f64, s_out: f64) -> ((i32, i32), (i32, i32)) {
-        // (Both spans at once in the two lanes of a vector: each lane the
-        // same operations as alone.)
-        let b = self.qxy * dy;
-        let base = b * b - self.qxx * self.qyy * dy * dy;
-        let disc = f64x2::splat(base) + f64x2::new([self.qxx * s_in, self.qxx * s_out]);
-        let [disc_in, disc_out] = disc.to_array();
-        // (NaN counts as negative.)
-        if disc_out.is_nan() || disc_out < 0.0 {
-            return (EMPTY32, EMPTY32);
-        }
-        let mid = f64x2::splat(self.bx - b * self.inv_qxx);
-        let h = disc.sqrt() * f64x2::splat(self.inv_qxx);
-        let [lo_in, lo_out] = near_i32x2(mid - h + f64x2::splat(0.5));
-        let [hi_in, hi_out] = near_i32x2(mid + h - f64x2::splat(0.5));
-        if disc_in.is_nan() || disc_in < 0.0 {
-            return (EMPTY32, (lo_out, hi_out));
-        }
-        ((lo_in, hi_in), (lo_out, hi_out))
+    fn spans(&self, dy: f64x2, s_in: f64, s_out: f64) -> [f64x2; 4] {
+        let b = f64x2::splat(self.qxy) * dy;
+        let base = b * b - f64x2::splat(self.qxx * self.qyy) * dy * dy;
+        let mid = f64x2::splat(self.bx) - b * f64x2::splat(self.inv_qxx);
+        let inv = f64x2::splat(self.inv_qxx);
+        let ends = |s: f64| {
+            let disc = base + f64x2::splat(self.qxx * s);
+            // (No root, or NaN: `h = −1` gives `lo > hi`.)
+            let h = disc
+                .cmp_ge(f64x2::ZERO)
+                .blend(disc.sqrt() * inv, f64x2::splat(-1.0));
+            let lo = near_f64x2(mid - h + f64x2::splat(0.5));
+            let hi = near_f64x2(mid + h - f64x2::splat(0.5));
+            (lo, hi)
+        };
+        let ((lo_in, hi_in), (lo_out, hi_out)) = (ends(s_in), ends(s_out));
+        [lo_in, hi_in, lo_out, hi_out]
     }
 }
 

@@ -5,15 +5,22 @@
 
 use wide::f64x2;
 
-/// Nearest integers (ties to even) of both lanes for `|x| < 2³¹`, with an
-/// add and a move: adding 1.5 · 2⁵² leaves the integer in the low bits of
-/// the mantissa.
+/// `1.5 · 2⁵²`: adding it to an `x` with `|x| < 2³¹` leaves the nearest
+/// integer (ties to even) in the low bits of the mantissa.
+pub(crate) const ROUND: f64 = 6_755_399_441_055_744.0;
+
+/// The nearest integers of both lanes (`|x| < 2³¹`) plus [`ROUND`], with
+/// an add: as floats in the order of the integers (so that they can be
+/// clipped as floats), the integers read with [`low_i32x2`].
 #[inline(always)]
-pub(crate) fn near_i32x2(x: f64x2) -> [i32; 2] {
-    const ROUND: f64 = 6_755_399_441_055_744.0;
-    (x + f64x2::splat(ROUND))
-        .to_array()
-        .map(|r| r.to_bits() as u32 as i32)
+pub(crate) fn near_f64x2(x: f64x2) -> f64x2 {
+    x + f64x2::splat(ROUND)
+}
+
+/// The integers `n` of `n + ROUND` (see [`near_f64x2`]).
+#[inline(always)]
+pub(crate) fn low_i32x2(r: f64x2) -> [i32; 2] {
+    r.to_array().map(|r| r.to_bits() as u32 as i32)
 }
 
 /// `floor` for values well inside the `i64` range (no libm call on
@@ -45,7 +52,7 @@ mod tests {
     fn rounding_helpers() {
         for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
             assert_eq!(
-                near_i32x2(f64x2::new([x, -x])),
+                low_i32x2(near_f64x2(f64x2::new([x, -x]))),
                 [x, -x].map(|x| x.round_ties_even() as i32),
                 "{x}"
             );
