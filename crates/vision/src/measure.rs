@@ -1196,6 +1196,48 @@ mod tests {
         }
     }
 
+    /// The spans of the conic's rows against the quadratic form at every
+    /// column (two rows per call, rows without roots empty).
+    #[test]
+    fn conic_spans_hold_the_columns_inside() {
+        let mut rng = Rng::new(12);
+        for case in 0..2000 {
+            let (cxx, cyy) = (rng.range(0.5, 30.0), rng.range(0.5, 30.0));
+            let cxy = rng.range(-0.95, 0.95) * (cxx * cyy).sqrt();
+            let det = cxx * cyy - cxy * cxy;
+            let (qxx, qyy, qxy) = (cyy / (4.0 * det), cxx / (4.0 * det), -cxy / (4.0 * det));
+            let q = Conic {
+                qxx,
+                qyy,
+                qxy,
+                inv_qxx: 1.0 / qxx,
+                bx: rng.range(10.0, 1000.0),
+            };
+            let s_in = rng.range(0.5, 2.5);
+            let s_out = s_in + rng.range(0.0, 1.5);
+            let dy0 = rng.range(-25.0, 25.0);
+            let ends = q
+                .spans(f64x2::new([dy0, dy0 + 1.0]), s_in, s_out)
+                .map(low_i32x2);
+            for (lane, dy) in [dy0, dy0 + 1.0].into_iter().enumerate() {
+                for (s, lo, hi) in [
+                    (s_in, ends[0][lane], ends[1][lane]),
+                    (s_out, ends[2][lane], ends[3][lane]),
+                ] {
+                    let c0 = q.bx as i32 - 40;
+                    for col in c0..c0 + 80 {
+                        let dx = col as f64 - q.bx;
+                        let rho = qxx * dx * dx + 2.0 * qxy * dx * dy + qyy * dy * dy;
+                        if (rho - s).abs() < 1e-9 {
+                            continue;
+                        }
+                        assert_eq!(rho <= s, lo <= col && col <= hi, "{case} {lane} {col}");
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn counted_ring_has_the_sampled_percentile() {
         let mut rng = Rng::new(9);
