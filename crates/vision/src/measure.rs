@@ -27,7 +27,7 @@ use crate::label::Blob;
 use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, round_i64, ROUND};
 use crate::pixel::{masked16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, CmpGe};
+use wide::{f64x2, i16x8, i32x4, CmpGe, CmpLe};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -256,9 +256,12 @@ impl Window {
     fn rows(&self, mut f: impl FnMut(RowSpans)) {
         let q = &self.q;
         let (r0, r1) = self.rows;
-        let (wr0i, wr1i) = self.wrows;
-        // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole.
-        let (hr0, hr1) = (ceil_i64(self.wr.0), floor_i64(self.wr.1));
+        // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole,
+        // and of the window.
+        let (hr0, hr1) = (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1));
+        let (wr0, wr1) = (self.wrows.0 as f64, self.wrows.1 as f64);
+        let (wr0, wr1) = (f64x2::splat(wr0), f64x2::splat(wr1));
+        let (one, zero) = (f64x2::splat(ROUND + 1.0), f64x2::splat(ROUND));
         // Clipping as floats (see `near_f64x2`).
         let at = |c: i64| f64x2::splat(c as f64 + ROUND);
         let (c0, c1) = (at(self.cols.0), at(self.cols.1));
@@ -274,16 +277,20 @@ impl Window {
         while first <= r1 {
             let last = r1.min(first + SPAN_BLOCK - 1);
             for (i, pair) in spans[..=last - first].chunks_mut(2).enumerate() {
-                let top = (first + 2 * i) as i64 as f64 - self.by;
-                let [ia, ib, oa, ob] = q.spans(f64x2::new([top, top + 1.0]), self.s_in, self.s_out);
+                let top = (first + 2 * i) as i64 as f64;
+                let rows = f64x2::new([top, top + 1.0]);
+                let [ia, ib, oa, ob] = q.spans(rows - f64x2::splat(self.by), self.s_in, self.s_out);
                 let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
+                // (Outside their rows the hole and the window are `(1, 0)`.)
+                let hole = rows.cmp_ge(hr0) & rows.cmp_le(hr1);
+                let window = rows.cmp_ge(wr0) & rows.cmp_le(wr1);
                 let ends = [
                     oa,
                     ob,
-                    ia.fast_max(bc0).fast_max(oa),
-                    ib.fast_min(bc1).fast_min(ob),
-                    ia.fast_max(wc0),
-                    ib.fast_min(wc1),
+                    hole.blend(ia.fast_max(bc0).fast_max(oa), one),
+                    hole.blend(ib.fast_min(bc1).fast_min(ob), zero),
+                    window.blend(ia.fast_max(wc0), one),
+                    window.blend(ib.fast_min(wc1), zero),
                 ]
                 .map(low_i32x2);
                 for (lane, sp) in pair.iter_mut().enumerate() {
@@ -297,18 +304,11 @@ impl Window {
                 }
                 // Background: the outer span minus the window's span
                 // inside the box.
-                let row_i = row as i64;
-                let hole = if row_i >= hr0 && row_i <= hr1 {
-                    (xa, xb)
-                } else {
-                    EMPTY
-                };
-                let window = (row >= wr0i && row <= wr1i && a <= b).then_some((a, b));
                 f(RowSpans {
                     row,
                     outer: (oa, ob),
-                    hole,
-                    window,
+                    hole: (xa, xb),
+                    window: (a <= b).then_some((a, b)),
                 });
             }
             first = last + 1;
@@ -696,9 +696,6 @@ struct Conic {
 
 /// Rows whose spans [`Window::rows`] computes ahead at a time.
 const SPAN_BLOCK: usize = 24;
-
-/// An empty inclusive range.
-const EMPTY: (i64, i64) = (1, 0);
 
 impl Conic {
     /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`
