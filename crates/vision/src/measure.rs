@@ -768,7 +768,8 @@ pub trait Weight: Copy {
     /// Whether the weight is the grey value itself (so that 8-bit weights
     /// are bytes).
     const LINEAR: bool = false;
-    /// The weight of grey value `v`.
+    /// The weight of grey value `v`, from 0 to `v · SCALE` (the bound
+    /// that keeps the window's integer sums in `i64` relies on it).
     fn weight(&self, v: u32) -> i64;
     /// The weight of a level between grey values (the background), unrounded.
     fn level(&self, v: f64) -> f64;
