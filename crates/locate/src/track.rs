@@ -156,7 +156,7 @@ impl Locator {
                 continue;
             };
             let ideal = u.ideal;
-            let Some(measured) = self.camera.distort(ideal) else {
+            let Some(measured) = self.camera.distort_fast(ideal) else {
                 continue;
             };
             let p = self.camera.image_to_pixel(measured);
