@@ -21,7 +21,7 @@ pub mod track;
 use gate::Grid;
 use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
-use photopose_geometry::precision::uncertain_projection;
+use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
     Camera, GeometryError, Matrix2, Observation, Resection, ResectionOptions, ResectionReport,
     Vector2, Vector3,
@@ -481,11 +481,10 @@ impl Locator {
         }
         // Project every uncoded field target with its uncertainty.
         self.projected.clear();
+        let projector = UncertainProjector::new(c, &coarse.exterior, &coarse.covariance);
         for &(fi, neighbour) in &self.uncoded {
             let t = &self.field.targets()[fi];
-            let Some(u) =
-                uncertain_projection(c, &coarse.exterior, &coarse.covariance, &t.position)
-            else {
+            let Some(u) = projector.project(&t.position) else {
                 continue;
             };
             let ideal = u.ideal;
