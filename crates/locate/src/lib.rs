@@ -23,8 +23,8 @@ use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
 use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
-    Camera, GeometryError, Matrix2, Observation, Resection, ResectionOptions, ResectionReport,
-    Vector2, Vector3,
+    Camera, DistortSeed, GeometryError, Matrix2, Observation, Resection, ResectionOptions,
+    ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{
     DetectStage, Detection, Detections, Detector, DetectorOptions, FrameStatus, VisionError,
@@ -193,6 +193,9 @@ pub struct Locator {
     window: WindowMeasurer,
     /// Tracking mode's windows of one frame.
     windows: Vec<Window>,
+    /// Each field target's inverse distortion in the last tracked frame
+    /// that projected it (the start of the next: `Camera::distort_seeded`).
+    seeds: Vec<Option<DistortSeed>>,
 }
 
 /// A tracked target's window, before it is measured.
@@ -284,6 +287,7 @@ impl Locator {
             spacing,
             window,
             windows: Vec::with_capacity(n),
+            seeds: vec![None; n],
             field,
         })
     }

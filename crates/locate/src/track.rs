@@ -157,7 +157,7 @@ impl Locator {
                 continue;
             };
             let ideal = u.ideal;
-            let Some(measured) = self.camera.distort_fast(ideal) else {
+            let Some(measured) = self.camera.distort_seeded(ideal, &mut self.seeds[fi]) else {
                 continue;
             };
             let p = self.camera.image_to_pixel(measured);
