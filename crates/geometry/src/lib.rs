@@ -31,7 +31,7 @@ pub mod rng;
 pub mod rotation;
 pub mod simulation;
 
-pub use camera::{Camera, Distortion, Interior, Sensor};
+pub use camera::{Camera, DistortSeed, Distortion, Interior, Sensor};
 pub use error::GeometryError;
 pub use exterior::Exterior;
 pub use nalgebra::{

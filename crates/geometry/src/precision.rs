@@ -146,10 +146,7 @@ pub struct UncertainProjection {
 }
 
 /// [`projection_with_covariance`], also giving the point in camera
-/// coordinates. The products `J Σ Jᵀ` are written out in SIMD pairs (the
-/// two rows of `J`): the same operations in the same order as nalgebra's
-/// (each sum from its first term on), so the same bits in fewer
-/// instructions.
+/// coordinates ([`UncertainProjector`] for one point).
 #[inline]
 pub fn uncertain_projection(
     c: f64,
@@ -157,58 +154,104 @@ pub fn uncertain_projection(
     covariance: &Matrix6<f64>,
     p: &Vector3<f64>,
 ) -> Option<UncertainProjection> {
-    let r = &exterior.rotation;
-    let z = r * (p - exterior.center);
-    if z.z >= 0.0 {
-        return None;
+    UncertainProjector::new(c, exterior, covariance).project(p)
+}
+
+/// [`uncertain_projection`] of many points with one pose and covariance:
+/// what depends only on them (the covariance's entries and the rotation's
+/// columns as SIMD pairs) is set up once (tracking: 3.51 M → 2.88 M
+/// instructions per 50 frames).
+///
+/// The products `J Σ Jᵀ` are written out in SIMD pairs (the two rows of
+/// `J`): the same operations in the same order as nalgebra's (each sum from
+/// its first term on), so the same bits in fewer instructions.
+#[derive(Debug, Clone, Copy)]
+pub struct UncertainProjector {
+    c: f64,
+    exterior: Exterior,
+    /// `Σ_km` in both lanes, at `6 m + k`.
+    sigma: [f64x2; 36],
+    /// Per column `k` of `R`: `(−r0, −r1)`, `−r2` twice, `(r1, r2)`,
+    /// `(r2, r0)`.
+    dc: [f64x2; 3],
+    dcz: [f64x2; 3],
+    yz: [f64x2; 3],
+    zx: [f64x2; 3],
+}
+
+impl UncertainProjector {
+    /// A projector for `exterior` with covariance `covariance` of
+    /// `(Xc, Yc, Zc, ωX, ωY, ωZ)` and principal distance `c`.
+    pub fn new(c: f64, exterior: &Exterior, covariance: &Matrix6<f64>) -> Self {
+        let r = &exterior.rotation;
+        UncertainProjector {
+            c,
+            exterior: *exterior,
+            sigma: std::array::from_fn(|i| f64x2::splat(covariance[(i % 6, i / 6)])),
+            dc: std::array::from_fn(|k| f64x2::new([-r[(0, k)], -r[(1, k)]])),
+            dcz: std::array::from_fn(|k| f64x2::splat(-r[(2, k)])),
+            yz: std::array::from_fn(|k| f64x2::new([r[(1, k)], r[(2, k)]])),
+            zx: std::array::from_fn(|k| f64x2::new([r[(2, k)], r[(0, k)]])),
+        }
     }
-    let inv = 1.0 / z.z;
-    let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
-    // Column k of J as one SIMD pair: its two rows are the same operations
-    // on x and on y (each lane computes exactly what a scalar would).
-    let (g, fv) = (f64x2::new([gx, gy]), f64x2::splat(f));
-    let mut j = [f64x2::ZERO; 6];
-    for k in 0..3 {
-        let (a0, a1, a2) = (r[(0, k)], r[(1, k)], r[(2, k)]);
-        // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by ω_k:
-        // R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
-        let dc = f64x2::new([-a0, -a1]);
-        j[k] = fv * (dc - g * f64x2::splat(-a2));
-        let dw = f64x2::new([a1, a2]) * f64x2::new([z.z, z.x])
-            - f64x2::new([a2, a0]) * f64x2::new([z.y, z.z]);
-        let dwz = a0 * z.y - a1 * z.x;
-        j[3 + k] = fv * (dw - g * f64x2::splat(dwz));
+
+    /// The projection of `p` with its uncertainty; `None` if it is not in
+    /// front of the camera.
+    #[inline]
+    pub fn project(&self, p: &Vector3<f64>) -> Option<UncertainProjection> {
+        let (c, r) = (self.c, &self.exterior.rotation);
+        let z = r * (p - self.exterior.center);
+        if z.z >= 0.0 {
+            return None;
+        }
+        let inv = 1.0 / z.z;
+        let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
+        // Column k of J as one SIMD pair: its two rows are the same
+        // operations on x and on y (each lane computes exactly what a
+        // scalar would).
+        let (g, fv) = (f64x2::new([gx, gy]), f64x2::splat(f));
+        let (zzx, zyz) = (f64x2::new([z.z, z.x]), f64x2::new([z.y, z.z]));
+        let mut j = [f64x2::ZERO; 6];
+        for k in 0..3 {
+            let (a0, a1) = (r[(0, k)], r[(1, k)]);
+            // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by
+            // ω_k: R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
+            j[k] = fv * (self.dc[k] - g * self.dcz[k]);
+            let dw = self.yz[k] * zzx - self.zx[k] * zyz;
+            let dwz = a0 * z.y - a1 * z.x;
+            j[3 + k] = fv * (dw - g * f64x2::splat(dwz));
+        }
+        // Columns of J Σ, each pair summed from its first term on as
+        // nalgebra sums, then (J Σ) Jᵀ: the diagonal pairs each column
+        // with itself, the off-diagonal with it swapped.
+        let s = &self.sigma;
+        let t: [f64x2; 6] = std::array::from_fn(|m| {
+            let col = &s[6 * m..6 * m + 6];
+            j[0] * col[0]
+                + j[1] * col[1]
+                + j[2] * col[2]
+                + j[3] * col[3]
+                + j[4] * col[4]
+                + j[5] * col[5]
+        });
+        let swap = |v: f64x2| {
+            let [a, b] = v.to_array();
+            f64x2::new([b, a])
+        };
+        let mut diag = t[0] * j[0];
+        let mut off = t[0] * swap(j[0]);
+        for m in 1..6 {
+            diag += t[m] * j[m];
+            off += t[m] * swap(j[m]);
+        }
+        let ([s00, s11], [s01, s10]) = (diag.to_array(), off.to_array());
+        let covariance = Matrix2::new(s00, s01, s10, s11);
+        Some(UncertainProjection {
+            ideal: Vector2::new(-c * gx, -c * gy),
+            covariance,
+            camera: z,
+        })
     }
-    // Columns of J Σ, each pair summed from its first term on as nalgebra
-    // sums, then (J Σ) Jᵀ: the diagonal pairs each column with itself, the
-    // off-diagonal with it swapped.
-    let s = covariance;
-    let t: [f64x2; 6] = std::array::from_fn(|m| {
-        let col = |k: usize| f64x2::splat(s[(k, m)]);
-        j[0] * col(0)
-            + j[1] * col(1)
-            + j[2] * col(2)
-            + j[3] * col(3)
-            + j[4] * col(4)
-            + j[5] * col(5)
-    });
-    let swap = |v: f64x2| {
-        let [a, b] = v.to_array();
-        f64x2::new([b, a])
-    };
-    let mut diag = t[0] * j[0];
-    let mut off = t[0] * swap(j[0]);
-    for m in 1..6 {
-        diag += t[m] * j[m];
-        off += t[m] * swap(j[m]);
-    }
-    let ([s00, s11], [s01, s10]) = (diag.to_array(), off.to_array());
-    let covariance = Matrix2::new(s00, s01, s10, s11);
-    Some(UncertainProjection {
-        ideal: Vector2::new(-c * gx, -c * gy),
-        covariance,
-        camera: z,
-    })
 }
 
 #[cfg(test)]

@@ -21,9 +21,9 @@ pub mod track;
 use gate::Grid;
 use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
-use photopose_geometry::precision::uncertain_projection;
+use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
-    Camera, GeometryError, Matrix2, Matrix3, Observation, Resection, ResectionOptions,
+    Camera, DistortSeed, GeometryError, Matrix2, Observation, Resection, ResectionOptions,
     ResectionReport, Vector2, Vector3,
 };
 use photopose_vision::{
@@ -193,6 +193,9 @@ pub struct Locator {
     window: WindowMeasurer,
     /// Tracking mode's windows of one frame.
     windows: Vec<Window>,
+    /// Each field target's inverse distortion in the last tracked frame
+    /// that projected it (the start of the next: `Camera::distort_seeded`).
+    seeds: Vec<Option<DistortSeed>>,
 }
 
 /// A tracked target's window, before it is measured.
@@ -284,6 +287,7 @@ impl Locator {
             spacing,
             window,
             windows: Vec::with_capacity(n),
+            seeds: vec![None; n],
             field,
         })
     }
@@ -481,11 +485,10 @@ impl Locator {
         }
         // Project every uncoded field target with its uncertainty.
         self.projected.clear();
+        let projector = UncertainProjector::new(c, &coarse.exterior, &coarse.covariance);
         for &(fi, neighbour) in &self.uncoded {
             let t = &self.field.targets()[fi];
-            let Some(u) =
-                uncertain_projection(c, &coarse.exterior, &coarse.covariance, &t.position)
-            else {
+            let Some(u) = projector.project(&t.position) else {
                 continue;
             };
             let ideal = u.ideal;
@@ -612,6 +615,16 @@ fn move_by_eccentricity(o: &mut Observation, t: &mut Identified, offset: Vector2
 
 /// [`eccentricity`] given the target's centre in camera coordinates,
 /// `camera = R (P − C)` ([`photopose_geometry::Exterior::to_camera`]).
+///
+/// The products `M = diag(−c, −c, 1) · R · [x̂ ŷ (P − C)]` and
+/// `Q' = M⁻ᵀ diag(1, 1, −r²) M⁻¹` written out without their terms in the
+/// zeros and ones of the three known factors: the same operations in the
+/// same order as nalgebra's products and inverses on what remains (a term
+/// `0 · x` only ever added `±0`), so the same bits in half the
+/// instructions (tracking: 2.91 M → 1.91 M per 50 frames). `M`'s last row
+/// is `R`'s, and its corner `camera.z`. Inlined: in the tracked frame's
+/// loop the products of the pose alone are hoisted (another 0.6 M).
+#[inline(always)]
 fn eccentricity_seen(
     c: f64,
     e: &photopose_geometry::Exterior,
@@ -619,15 +632,56 @@ fn eccentricity_seen(
     camera: &Vector3<f64>,
     radius: f64,
 ) -> Option<Vector2<f64>> {
-    let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
     let centre = photopose_geometry::exterior::ideal_of_camera_point(c, camera)?;
-    // Plane (s, t) of a target facing +Z, origin at its centre.
-    let plane = Matrix3::from_columns(&[Vector3::x(), Vector3::y(), position - e.center]);
-    let m_inv = (k * e.rotation * plane).try_inverse()?;
+    let r = &e.rotation;
+    let u = position - e.center;
+    // Rows 0 and 1 of diag(−c, −c, 1) · R.
+    let (k00, k01, k02) = (-c * r[(0, 0)], -c * r[(0, 1)], -c * r[(0, 2)]);
+    let (k10, k11, k12) = (-c * r[(1, 0)], -c * r[(1, 1)], -c * r[(1, 2)]);
+    // M: columns (kR) x̂, (kR) ŷ, (kR) (P − C).
+    let (m11, m12, m13) = (k00, k01, k00 * u.x + k01 * u.y + k02 * u.z);
+    let (m21, m22, m23) = (k10, k11, k10 * u.x + k11 * u.y + k12 * u.z);
+    let (m31, m32, m33) = (r[(2, 0)], r[(2, 1)], camera.z);
+    // nalgebra's 3 × 3 inverse (`try_inverse`), operation for operation.
+    let minor_m12_m23 = m22 * m33 - m32 * m23;
+    let minor_m11_m23 = m21 * m33 - m31 * m23;
+    let minor_m11_m22 = m21 * m32 - m31 * m22;
+    let det = m11 * minor_m12_m23 - m12 * minor_m11_m23 + m13 * minor_m11_m22;
+    if det == 0.0 {
+        return None;
+    }
+    // a[i][j] = (M⁻¹)_ij.
+    let a = [
+        [
+            minor_m12_m23 / det,
+            (m13 * m32 - m33 * m12) / det,
+            (m12 * m23 - m22 * m13) / det,
+        ],
+        [
+            -minor_m11_m23 / det,
+            (m11 * m33 - m31 * m13) / det,
+            (m13 * m21 - m23 * m11) / det,
+        ],
+        [
+            minor_m11_m22 / det,
+            (m12 * m31 - m32 * m11) / det,
+            (m11 * m22 - m21 * m12) / det,
+        ],
+    ];
+    // Q'_ij = Σ_k (M⁻ᵀ D)_ik (M⁻¹)_kj with (M⁻ᵀ D)_ik = a[k][i] D_kk.
     let r2 = radius * radius;
-    let q = m_inv.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -r2)) * m_inv;
-    let a2 = Matrix2::new(q[(0, 0)], q[(0, 1)], q[(1, 0)], q[(1, 1)]);
-    let ellipse_centre = -(a2.try_inverse()? * Vector2::new(q[(0, 2)], q[(1, 2)]));
+    let neg_r2 = -r2;
+    let d2 = [a[2][0] * neg_r2, a[2][1] * neg_r2];
+    let q = |i: usize, j: usize| a[0][i] * a[0][j] + a[1][i] * a[1][j] + d2[i] * a[2][j];
+    let (q00, q01, q10, q11) = (q(0, 0), q(0, 1), q(1, 0), q(1, 1));
+    let (q02, q12) = (q(0, 2), q(1, 2));
+    // nalgebra's 2 × 2 inverse, then −A⁻¹ (q02, q12).
+    let det2 = q00 * q11 - q10 * q01;
+    if det2 == 0.0 {
+        return None;
+    }
+    let (i00, i01, i10, i11) = (q11 / det2, -q01 / det2, -q10 / det2, q00 / det2);
+    let ellipse_centre = Vector2::new(-(i00 * q02 + i01 * q12), -(i10 * q02 + i11 * q12));
     let offset = ellipse_centre - centre;
     (offset.x.is_finite() && offset.y.is_finite()).then_some(offset)
 }
@@ -635,7 +689,72 @@ fn eccentricity_seen(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use photopose_geometry::Matrix3;
     use photopose_vision::{CodeStatus, TargetKind};
+
+    /// The former, plain form of `eccentricity_seen` (nalgebra's products).
+    fn eccentricity_plain(
+        c: f64,
+        e: &photopose_geometry::Exterior,
+        position: &Vector3<f64>,
+        camera: &Vector3<f64>,
+        radius: f64,
+    ) -> Option<Vector2<f64>> {
+        let k = Matrix3::from_diagonal(&Vector3::new(-c, -c, 1.0));
+        let centre = photopose_geometry::exterior::ideal_of_camera_point(c, camera)?;
+        // Plane (s, t) of a target facing +Z, origin at its centre.
+        let plane = Matrix3::from_columns(&[Vector3::x(), Vector3::y(), position - e.center]);
+        let m_inv = (k * e.rotation * plane).try_inverse()?;
+        let r2 = radius * radius;
+        let q = m_inv.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -r2)) * m_inv;
+        let a2 = Matrix2::new(q[(0, 0)], q[(0, 1)], q[(1, 0)], q[(1, 1)]);
+        let ellipse_centre = -(a2.try_inverse()? * Vector2::new(q[(0, 2)], q[(1, 2)]));
+        let offset = ellipse_centre - centre;
+        (offset.x.is_finite() && offset.y.is_finite()).then_some(offset)
+    }
+
+    #[test]
+    fn written_out_eccentricity_is_bit_identical() {
+        use photopose_geometry::Exterior;
+        // Tilted, turned cameras over a plate, and the axis-aligned
+        // rotations of `look_at` with their exact zeros.
+        let mut seen = 0;
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for k in 0..3000 {
+            let eye = Vector3::new(600.0 * next(), 600.0 * next(), 900.0 + 400.0 * next());
+            let (at, up) = if k % 10 == 0 {
+                (Vector3::new(eye.x, eye.y, 0.0), Vector3::x())
+            } else {
+                (
+                    Vector3::new(200.0 * next(), 200.0 * next(), 0.0),
+                    Vector3::new(next(), next(), 0.0),
+                )
+            };
+            let Some(e) = Exterior::look_at(eye, at, up) else {
+                continue;
+            };
+            let p = Vector3::new(500.0 * next(), 500.0 * next(), 2.0 * next());
+            let radius = 2.0 + 4.0 * next();
+            let cam = e.to_camera(&p);
+            let want = eccentricity_plain(12.0, &e, &p, &cam, radius);
+            let got = eccentricity_seen(12.0, &e, &p, &cam, radius);
+            assert_eq!(want.is_some(), got.is_some());
+            if let (Some(w), Some(g)) = (want, got) {
+                seen += 1;
+                assert_eq!(
+                    (w.x.to_bits(), w.y.to_bits()),
+                    (g.x.to_bits(), g.y.to_bits())
+                );
+            }
+        }
+        assert!(seen > 2000, "{seen} targets in front");
+    }
 
     fn detection(saturated: bool) -> Detection {
         Detection {

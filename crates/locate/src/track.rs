@@ -21,7 +21,7 @@
 use crate::{Identified, Locator, PoseStatus, Projected, Window};
 use photopose_field::TargetKind;
 use photopose_frame::ImageView;
-use photopose_geometry::precision::uncertain_projection;
+use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
     Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3,
 };
@@ -151,12 +151,13 @@ impl Locator {
         // the frame's lines come from memory while the targets before them
         // are measured.
         self.windows.clear();
+        let projector = UncertainProjector::new(c, e, &prior.covariance);
         for (fi, t) in self.field.targets().iter().enumerate() {
-            let Some(u) = uncertain_projection(c, e, &prior.covariance, &t.position) else {
+            let Some(u) = projector.project(&t.position) else {
                 continue;
             };
             let ideal = u.ideal;
-            let Some(measured) = self.camera.distort(ideal) else {
+            let Some(measured) = self.camera.distort_seeded(ideal, &mut self.seeds[fi]) else {
                 continue;
             };
             let p = self.camera.image_to_pixel(measured);
