@@ -266,6 +266,112 @@ impl Blob {
     }
 }
 
+/// Half-width of [`SMALL_POW_SUMS`]: run ends of a blob at most this wide,
+/// about its origin.
+pub(crate) const SMALL_SIDE: usize = 64;
+
+/// `[Σx, Σx², Σx³, Σx⁴]` for `x` from 0 below `t` (for negative `t` the
+/// negated sums of `t..0`, so that the difference of the entries at a
+/// run's ends is the run's sum), entry `t + SMALL_SIDE` for `t` from
+/// `−SMALL_SIDE` to `SMALL_SIDE`: exact integers.
+static SMALL_POW_SUMS: [[i64; 4]; 2 * SMALL_SIDE + 1] = {
+    let mut t = [[0i64; 4]; 2 * SMALL_SIDE + 1];
+    let mut acc = [0i64; 4];
+    // Upward from 0 …
+    let mut x = 0i64;
+    while x < SMALL_SIDE as i64 {
+        acc = [
+            acc[0] + x,
+            acc[1] + x * x,
+            acc[2] + x * x * x,
+            acc[3] + x * x * x * x,
+        ];
+        t[(SMALL_SIDE as i64 + x + 1) as usize] = acc;
+        x += 1;
+    }
+    // … and downward.
+    let mut acc = [0i64; 4];
+    let mut x = -1i64;
+    while x >= -(SMALL_SIDE as i64) {
+        acc = [
+            acc[0] - x,
+            acc[1] - x * x,
+            acc[2] - x * x * x,
+            acc[3] - x * x * x * x,
+        ];
+        t[(SMALL_SIDE as i64 + x) as usize] = acc;
+        x -= 1;
+    }
+    t
+};
+
+/// A small blob's binary moments (those of [`Blob::m`] and [`Blob::m4`])
+/// summed in integers a row at a time: the fast path of blobs grown on row
+/// masks (tracking windows, at most [`SMALL_SIDE`] pixels each way).
+/// [`Blob::add_run`] sums the same integers in `f64`; every term and every
+/// partial sum of a blob of at most 64 × 64 pixels lies below 2⁵³ (Σx⁴ at
+/// most 4096 · 64⁴ ≈ 6.9 · 10¹⁰), so each of its additions is exact and the
+/// sums converted once are the same `f64` values bit for bit, whatever the
+/// order. Per row a few integer products instead of fourteen `f64`
+/// accumulations per run.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct SmallMoments {
+    /// Σx, Σy, Σx², Σy², Σxy, then [`Blob::m4`]'s order.
+    s: [i64; 14],
+}
+
+/// `[n, Σx, Σx², Σx³, Σx⁴]` of the pixels of a row's runs, `x` about a
+/// blob's origin column.
+pub(crate) type RowSums = [i64; 5];
+
+impl SmallMoments {
+    /// Adds the run of columns `a..e` (about the origin, within
+    /// `±SMALL_SIDE`) to a row's sums.
+    #[inline(always)]
+    pub(crate) fn add_run(row: &mut RowSums, a: i64, e: i64) {
+        let (pa, pe) = (
+            SMALL_POW_SUMS[(a + SMALL_SIDE as i64) as usize],
+            SMALL_POW_SUMS[(e + SMALL_SIDE as i64) as usize],
+        );
+        row[0] += e - a;
+        for k in 0..4 {
+            row[k + 1] += pe[k] - pa[k];
+        }
+    }
+
+    /// Adds a row's sums, `y` rows below the origin.
+    #[inline(always)]
+    pub(crate) fn add_row(&mut self, y: i64, r: &RowSums) {
+        let [n, s1, s2, s3, s4] = *r;
+        let (y2, y3) = (y * y, y * y * y);
+        let s = &mut self.s;
+        s[0] += s1;
+        s[1] += n * y;
+        s[2] += s2;
+        s[3] += n * y2;
+        s[4] += s1 * y;
+        s[5] += s3;
+        s[6] += s2 * y;
+        s[7] += s1 * y2;
+        s[8] += n * y3;
+        s[9] += s4;
+        s[10] += s3 * y;
+        s[11] += s2 * y2;
+        s[12] += s1 * y3;
+        s[13] += n * y3 * y;
+    }
+
+    /// The moments as [`Blob::m`] and [`Blob::m4`].
+    #[inline]
+    pub(crate) fn to_f64(self) -> ([f64; 5], [f64; 9]) {
+        let f = self.s.map(|v| v as f64);
+        (
+            [f[0], f[1], f[2], f[3], f[4]],
+            [f[5], f[6], f[7], f[8], f[9], f[10], f[11], f[12], f[13]],
+        )
+    }
+}
+
 /// Outcome of labelling a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LabelOutcome {

@@ -16,7 +16,7 @@
 //! ands, and its runs are read off its rows' words. Wider windows are grown
 //! run by run, with a list of the runs found per row.
 
-use crate::label::{Blob, Run};
+use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
 use crate::pixel::{Pixel, Plane};
 use crate::threshold::Threshold;
 
@@ -25,6 +25,8 @@ const NONE: u32 = u32::MAX;
 
 /// Largest width and height of a window grown on row masks.
 const MASK_SIDE: usize = 64;
+// (Its blobs' moments are summed in integers: `SmallMoments`.)
+const _: () = assert!(MASK_SIDE <= SMALL_SIDE);
 
 /// Why growing stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,8 +71,6 @@ pub struct SeedLabeller {
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
     spans: Vec<(u32, u32, u32)>,
     rows: Vec<u64>,
-    /// Mask path: rows whose neighbours are still to be searched.
-    todo: Vec<u32>,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
 }
@@ -100,7 +100,6 @@ impl SeedLabeller {
             // (Every row of a blob holds a pixel no other blob holds, and
             // every row pushed gained one.)
             rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
-            todo: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
             n_runs: 0,
         }
     }
@@ -376,10 +375,12 @@ impl SeedLabeller {
         let last = plane.height - 1;
         self.grown[r] = fill_runs(self.fg[r], bit);
         let (mut lo, mut hi) = (r, r);
-        self.todo.clear();
-        self.todo.push(r as u32);
-        while let Some(k) = self.todo.pop() {
-            let k = k as usize;
+        // The rows whose neighbours are still to be searched, as a mask
+        // (no list to keep: a row that gains pixels again is still pending).
+        let mut todo = 1u64 << r;
+        while todo != 0 {
+            let k = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
             let reach = {
                 let g = self.grown[k];
                 g | g << 1 | g >> 1
@@ -396,17 +397,21 @@ impl SeedLabeller {
                     self.grown[n] = before | add;
                     lo = lo.min(n);
                     hi = hi.max(n);
-                    self.todo.push(n as u32);
+                    todo |= 1 << n;
                 }
             }
         }
-        // The statistics in the labeller's order: row by row, each row's
-        // runs by column.
-        let mut b = Blob::empty();
+        // The statistics: the moments summed in integers a row at a time
+        // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
+        // the grey-value statistics per run.
+        let origin = self.grown[lo].trailing_zeros() as i64;
+        let mut sums = SmallMoments::default();
+        let (mut max, mut saturated, mut area, mut cols) = (0u32, 0u32, 0u32, 0u64);
         let first = self.rows.len() as u32;
         for k in lo..=hi {
             let g = self.grown[k];
             let line = plane.row(self.row0 + k);
+            let mut row: RowSums = [0; 5];
             let mut m = g;
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
@@ -416,19 +421,31 @@ impl SeedLabeller {
                 }
                 self.n_runs += 1;
                 let end = start + len;
-                b.add_run(&Run::of(
-                    line,
-                    (self.row0 + k) as u32,
-                    self.col0 as u32,
-                    start,
-                    end,
-                    saturation,
-                ));
+                let (run_max, run_sat) = P::run_stats(line, start, end, saturation);
+                max = max.max(run_max.min(u16::MAX as u32));
+                saturated += run_sat.min(u16::MAX as u32);
+                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
+            sums.add_row((k - lo) as i64, &row);
+            area += row[0] as u32;
+            cols |= g;
             self.taken[k] |= g;
             self.rows.push(g);
         }
+        let (m, m4) = sums.to_f64();
+        let b = Blob {
+            area,
+            col0: (self.col0 + cols.trailing_zeros() as usize) as u32,
+            row0: (self.row0 + lo) as u32,
+            col1: (self.col0 + 63 - cols.leading_zeros() as usize) as u32,
+            row1: (self.row0 + hi) as u32,
+            max,
+            saturated,
+            m,
+            m4,
+            origin_col: (self.col0 as i64 + origin) as u32,
+        };
         self.spans.push((lo as u32, first, self.rows.len() as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
@@ -561,6 +578,32 @@ mod tests {
             .collect();
         check(&data, w, (0, 0, w, h));
         check(&data, w, (1, 1, w - 2, h - 2));
+    }
+
+    /// The largest blob of the mask path (a whole 64 × 64 window, its
+    /// moments' largest sums, with the origin at either side) and a
+    /// diamond whose rows start left of its origin: the integer moments
+    /// equal the labeller's `f64` ones.
+    #[test]
+    fn the_largest_masked_blobs_have_the_labellers_moments() {
+        let (w, h) = (66usize, 66usize);
+        let mut data = vec![10u8; w * h];
+        for (i, v) in data.iter_mut().enumerate() {
+            let (c, r) = ((i % w) as i64, (i / w) as i64);
+            if (1..65).contains(&c) && (1..65).contains(&r) {
+                *v = if (c + r) % 7 == 0 { 255 } else { 200 };
+            }
+        }
+        check(&data, w, (1, 1, 64, 64));
+        check(&data, w, (0, 0, 64, 64));
+        let mut diamond = vec![10u8; w * h];
+        for (i, v) in diamond.iter_mut().enumerate() {
+            let (c, r) = ((i % w) as i64, (i / w) as i64);
+            if (c - 32).abs() + (r - 31).abs() <= 31 {
+                *v = 220;
+            }
+        }
+        check(&diamond, w, (0, 0, 64, 64));
     }
 
     #[test]
