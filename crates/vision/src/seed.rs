@@ -17,7 +17,7 @@
 //! run by run, with a list of the runs found per row.
 
 use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
-use crate::pixel::{Pixel, Plane};
+use crate::pixel::{Pixel, Plane, ShortRow};
 use crate::threshold::Threshold;
 
 /// No run (end of a row's list).
@@ -63,8 +63,10 @@ pub struct SeedLabeller {
     fg: [u64; MASK_SIDE],
     known: u64,
     level: Option<Threshold>,
-    /// Mask path: per window row, the pixels of the blobs grown so far.
+    /// Mask path: per window row, the pixels of the blobs grown so far
+    /// (valid for the window's `height` rows).
     taken: [u64; MASK_SIDE],
+    height: usize,
     /// Mask path: the blob being grown, per window row.
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
@@ -95,6 +97,7 @@ impl SeedLabeller {
             known: 0,
             level: None,
             taken: [0; MASK_SIDE],
+            height: 0,
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
             // (Every row of a blob holds a pixel no other blob holds, and
@@ -121,6 +124,7 @@ impl SeedLabeller {
             self.known = 0;
             self.level = None;
             self.taken[..plane.height].fill(0);
+            self.height = plane.height;
             self.spans.clear();
             self.rows.clear();
             self.n_runs = 0;
@@ -152,6 +156,29 @@ impl SeedLabeller {
         self.run_at(col, row).map(|k| self.owner[k] as usize)
     }
 
+    /// Whether every full-frame pixel of the box `col_lo..=col_hi ×
+    /// row_lo..=row_hi` lies in a blob grown so far: then no other blob
+    /// has a pixel there. Answered on the row masks (a mask and a compare
+    /// per row); `false` for a window grown run by run.
+    pub fn covers(&self, col_lo: usize, col_hi: usize, row_lo: usize, row_hi: usize) -> bool {
+        if !self.masked || col_lo > col_hi || row_lo > row_hi {
+            return false;
+        }
+        let (Some(a), Some(b)) = (col_lo.checked_sub(self.col0), col_hi.checked_sub(self.col0))
+        else {
+            return false;
+        };
+        let Some(r0) = row_lo.checked_sub(self.row0) else {
+            return false;
+        };
+        let r1 = row_hi - self.row0;
+        if b >= MASK_SIDE || r1 >= self.height {
+            return false;
+        }
+        let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+        self.taken[r0..=r1].iter().all(|&t| t & cols == cols)
+    }
+
     /// The run found so far that holds full-frame pixel `(col, row)`.
     fn run_at(&self, col: usize, row: usize) -> Option<usize> {
         let r = row.checked_sub(self.row0)?;
@@ -175,7 +202,7 @@ impl SeedLabeller {
     /// blob in [`SeedLabeller::blobs`] (an earlier one if it holds the
     /// pixel already), `Ok(None)` if the pixel is background or outside
     /// the window. Pixels at or above `saturation` count as saturated.
-    pub fn grow<P: Pixel>(
+    pub fn grow<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -253,7 +280,7 @@ impl SeedLabeller {
     /// columns `col_lo..=col_hi` (clipped to the window) not yet in a
     /// blob: [`SeedLabeller::grow`] for a stretch of a row, skipping the
     /// runs found before in one step.
-    pub fn grow_span<P: Pixel>(
+    pub fn grow_span<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -274,6 +301,7 @@ impl SeedLabeller {
             let r = row - self.row0;
             let (a, b) = (lo - self.col0, hi - self.col0);
             let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+            self.set_level(threshold);
             let mut open = self.fg_row(plane, threshold, r) & cols & !self.taken[r];
             while open != 0 {
                 let col = self.col0 + open.trailing_zeros() as usize;
@@ -301,57 +329,34 @@ impl SeedLabeller {
         Ok(())
     }
 
-    /// The foreground mask of window row `r` at `threshold` (found once
-    /// per window and threshold).
+    /// Makes the row masks found so far those at `threshold` (forgets
+    /// them when it differs from the last one).
     #[inline(always)]
-    fn fg_row<P: Pixel>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
-        if self.known & (1 << r) != 0 && self.level == Some(threshold) {
-            return self.fg[r];
-        }
-        self.find_fg_row(plane, threshold, r)
-    }
-
-    /// [`SeedLabeller::fg_row`] of a row not yet seen at `threshold`.
-    #[inline(never)]
-    fn find_fg_row<P: Pixel>(
-        &mut self,
-        plane: &Plane<'_, P>,
-        threshold: Threshold,
-        r: usize,
-    ) -> u64 {
+    fn set_level(&mut self, threshold: Threshold) {
         if self.level != Some(threshold) {
             self.level = Some(threshold);
             self.known = 0;
         }
-        self.known |= 1 << r;
-        // 8-bit pixels: a whole block of 32 or 64 from the row's start
-        // where the frame holds them (sixteen at a time; the mask of the
-        // pixels past the window's width cleared), else the row alone (its
-        // last pixels then one at a time).
-        let start = r * plane.stride;
-        let block = if P::MAX == u8::MAX as u32 {
-            // (32 pixels when they hold the window: two blocks of sixteen.)
-            let n = if plane.width <= MASK_SIDE / 2 {
-                MASK_SIDE / 2
-            } else {
-                MASK_SIDE
-            };
-            plane.data.get(start..start + n)
-        } else {
-            None
-        };
-        self.fg[r] = match block {
-            Some(block) => {
-                threshold.foreground_mask(block) & (u64::MAX >> (MASK_SIDE - plane.width))
-            }
-            None => threshold.foreground_mask(plane.row(self.row0 + r)),
-        };
+    }
+
+    /// The foreground mask of window row `r` at the level of
+    /// [`SeedLabeller::set_level`] (found once per window and level).
+    #[inline(always)]
+    fn fg_row<P: ShortRow>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
+        if self.known >> r & 1 == 0 {
+            // The row from its start, with the frame's pixels past the
+            // window's width where it holds them (read in whole vectors).
+            let start = r * plane.stride;
+            let row = &plane.data[start..(start + MASK_SIDE).min(plane.data.len())];
+            self.fg[r] = P::short_mask(row, plane.width, threshold);
+            self.known |= 1 << r;
+        }
         self.fg[r]
     }
 
     /// [`SeedLabeller::grow`] on row masks (a window of at most
     /// [`MASK_SIDE`] pixels each way, position inside it).
-    fn grow_masked<P: Pixel>(
+    fn grow_masked<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -360,6 +365,7 @@ impl SeedLabeller {
         row: usize,
     ) -> Result<Option<usize>, SeedOverflow> {
         let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
+        self.set_level(threshold);
         if self.fg_row(plane, threshold, r) & bit == 0 {
             return Ok(None);
         }
@@ -421,12 +427,13 @@ impl SeedLabeller {
                 }
                 self.n_runs += 1;
                 let end = start + len;
-                let (run_max, run_sat) = P::run_stats(line, start, end, saturation);
-                max = max.max(run_max.min(u16::MAX as u32));
-                saturated += run_sat.min(u16::MAX as u32);
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
+            // (A run's statistics are at most 64 pixels': no clamping.)
+            let (row_max, row_sat) = P::masked_stats(line, g, saturation);
+            max = max.max(row_max);
+            saturated += row_sat;
             sums.add_row((k - lo) as i64, &row);
             area += row[0] as u32;
             cols |= g;
@@ -604,6 +611,49 @@ mod tests {
             }
         }
         check(&diamond, w, (0, 0, 64, 64));
+    }
+
+    /// `covers` is "every pixel of the box is in a grown blob", asked
+    /// pixel by pixel with `blob_at`, for boxes inside, across and outside
+    /// the window.
+    #[test]
+    fn a_box_is_covered_when_each_of_its_pixels_is_in_a_blob() {
+        let img = [
+            "..........", //
+            ".######...", //
+            ".######.#.", //
+            ".#####..#.", //
+            "..........", //
+        ];
+        let (w, h) = (img[0].len(), img.len());
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        let plane = window(&data, w, (1, 0, w - 1, h));
+        let t = Threshold::global(100);
+        let mut s = SeedLabeller::new(100, 10, h);
+        s.start(&plane);
+        s.grow(&plane, t, 250, 3, 2).expect("capacity");
+        let (mut yes, mut no) = (0, 0);
+        for (c0, c1, r0, r1) in (0..w + 1).flat_map(|c0| {
+            (c0..w + 1).flat_map(move |c1| {
+                (0..h + 1).flat_map(move |r0| (r0..h + 1).map(move |r1| (c0, c1, r0, r1)))
+            })
+        }) {
+            let plain = (r0..=r1).all(|r| (c0..=c1).all(|c| s.blob_at(c, r).is_some()));
+            assert_eq!(s.covers(c0, c1, r0, r1), plain, "{c0}..={c1} × {r0}..={r1}");
+            if plain {
+                yes += 1;
+            } else {
+                no += 1;
+            }
+        }
+        assert!(yes > 20 && no > 20, "{yes} {no}");
+        // The other blob not grown yet: its pixels are not covered.
+        assert!(!s.covers(8, 8, 2, 3));
+        s.grow(&plane, t, 250, 8, 2).expect("capacity");
+        assert!(s.covers(8, 8, 2, 3));
     }
 
     #[test]
