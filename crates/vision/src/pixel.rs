@@ -789,18 +789,28 @@ pub trait ShortRow: Pixel {
     fn short_mask(row: &[Self], width: usize, threshold: Threshold) -> u64 {
         threshold.foreground_mask(&row[..width])
     }
-    /// The largest value of the pixels `row[i]` whose bit `i` is set in
-    /// `mask` (0 if none) and how many of them are at or above
-    /// `saturation`: [`Pixel::run_stats`] of all the runs of `mask`.
+    /// The largest value of the pixels of a blob given by its row masks
+    /// (bit `i` of `masks[k]`: column `plane.col0 + i` of row `row0 + k`;
+    /// 0 if none) and how many of them are at or above `saturation`:
+    /// [`Pixel::run_stats`] of all the runs of the masks.
     #[inline]
-    fn masked_stats(row: &[Self], mask: u64, saturation: u32) -> (u32, u32) {
-        let (mut max, mut sat, mut m) = (0, 0, mask);
-        while m != 0 {
-            let start = m.trailing_zeros() as usize;
-            let end = start + (!(m >> start)).trailing_zeros() as usize;
-            let (a, b) = Self::run_stats(row, start, end, saturation);
-            (max, sat) = (max.max(a), sat + b);
-            m &= !(u64::MAX >> (64 - end));
+    fn masked_stats(
+        plane: &Plane<'_, Self>,
+        row0: usize,
+        masks: &[u64],
+        saturation: u32,
+    ) -> (u32, u32) {
+        let (mut max, mut sat) = (0, 0);
+        for (k, &mask) in masks.iter().enumerate() {
+            let row = plane.row(row0 + k);
+            let mut m = mask;
+            while m != 0 {
+                let start = m.trailing_zeros() as usize;
+                let end = start + (!(m >> start)).trailing_zeros() as usize;
+                let (a, b) = Self::run_stats(row, start, end, saturation);
+                (max, sat) = (max.max(a), sat + b);
+                m &= !(u64::MAX >> (64 - end));
+            }
         }
         (max, sat)
     }
@@ -839,41 +849,52 @@ impl ShortRow for u8 {
 
     /// Sixteen pixels at a time (from the mask's next pixel, or the row's
     /// last sixteen): the mask's bits as lanes, the maximum of those lanes
-    /// reduced once at the end; the saturated ones counted from a bit
-    /// mask.
+    /// over all rows reduced once at the end; the saturated ones counted
+    /// from a bit mask.
     #[inline]
-    fn masked_stats(row: &[Self], mask: u64, saturation: u32) -> (u32, u32) {
+    fn masked_stats(
+        plane: &Plane<'_, Self>,
+        row0: usize,
+        masks: &[u64],
+        saturation: u32,
+    ) -> (u32, u32) {
         const BITS: u8x16 = u8x16::new([1, 2, 4, 8, 16, 32, 64, 128, 1, 2, 4, 8, 16, 32, 64, 128]);
         const SPREAD: u64 = 0x0101_0101_0101_0101;
-        let len = row.len();
-        debug_assert!(len >= 64 || mask >> len == 0);
+        let len = plane.width;
+        let (mut max, mut sat) = (u8x16::splat(0), 0u32);
         if len < 16 {
-            let (mut max, mut sat) = (0, 0);
-            for (i, &p) in row.iter().enumerate() {
-                if mask >> i & 1 != 0 {
-                    max = max.max(p as u32);
-                    sat += (p as u32 >= saturation) as u32;
+            let mut top = 0;
+            for (k, &mask) in masks.iter().enumerate() {
+                for (i, &p) in plane.row(row0 + k).iter().enumerate() {
+                    if mask >> i & 1 != 0 {
+                        top = top.max(p as u32);
+                        sat += (p as u32 >= saturation) as u32;
+                    }
                 }
             }
-            return (max, sat);
+            return (top, sat);
         }
         let sat_level = u8x16::splat(saturation.min(255) as u8);
-        let (mut max, mut sat, mut m) = (u8x16::splat(0), 0u32, mask);
-        while m != 0 {
-            let p = (m.trailing_zeros() as usize).min(len - 16);
-            let bits = m >> p & 0xffff;
-            let (lo, hi) = ((bits & 0xff) * SPREAD, (bits >> 8) * SPREAD);
-            let mut b = [0u8; 16];
-            b[..8].copy_from_slice(&lo.to_le_bytes());
-            b[8..].copy_from_slice(&hi.to_le_bytes());
-            let lanes = (u8x16::new(b) & BITS).cmp_eq(BITS);
-            let v = lanes16(&row[p..p + 16]);
-            max = max.max(v & lanes);
-            let s = v.max(sat_level).cmp_eq(v).move_mask() as u64 & bits;
-            if s != 0 {
-                sat += s.count_ones();
+        for (k, &mask) in masks.iter().enumerate() {
+            debug_assert!(len >= 64 || mask >> len == 0);
+            let row = plane.row(row0 + k);
+            let mut m = mask;
+            while m != 0 {
+                let p = (m.trailing_zeros() as usize).min(len - 16);
+                let bits = m >> p & 0xffff;
+                let (lo, hi) = ((bits & 0xff) * SPREAD, (bits >> 8) * SPREAD);
+                let mut b = [0u8; 16];
+                b[..8].copy_from_slice(&lo.to_le_bytes());
+                b[8..].copy_from_slice(&hi.to_le_bytes());
+                let lanes = (u8x16::new(b) & BITS).cmp_eq(BITS);
+                let v = lanes16(&row[p..p + 16]);
+                max = max.max(v & lanes);
+                let s = v.max(sat_level).cmp_eq(v).move_mask() as u64 & bits;
+                if s != 0 {
+                    sat += s.count_ones();
+                }
+                m &= !(0xffff << p);
             }
-            m &= !(0xffff << p);
         }
         if saturation > u8::MAX as u32 {
             sat = 0;
@@ -897,7 +918,7 @@ mod short_row_tests {
     fn u8_short_rows_equal_the_plain_ones() {
         let mut rng = Rng::new(11);
         for round in 0..3000 {
-            let data: Vec<u8> = (0..80).map(|_| (rng.next_u64() % 256) as u8).collect();
+            let data: Vec<u8> = (0..240).map(|_| (rng.next_u64() % 256) as u8).collect();
             let width = 1 + round % 64;
             let room = [width, 16.max(width), 32.max(width), 64.max(width), 80][round % 5];
             let row = &data[..room.min(80)];
@@ -905,24 +926,35 @@ mod short_row_tests {
             let t = Threshold::global(level);
             let plain = (0..width).fold(0u64, |m, i| m | ((data[i] as u32 > level) as u64) << i);
             assert_eq!(u8::short_mask(row, width, t), plain, "{width} {room}");
-            let mask = rng.next_u64() & (u64::MAX >> (64 - width));
+            // A blob of three rows of the frame `data` (stride 80).
+            let masks = [0, 1, 2].map(|_| rng.next_u64() & (u64::MAX >> (64 - width)));
             let sat = [200, 250, 255, 256][round % 4];
             let mut want = (0, 0);
-            for i in (0..width).filter(|i| mask >> i & 1 != 0) {
-                want = (
-                    want.0.max(data[i] as u32),
-                    want.1 + (data[i] as u32 >= sat) as u32,
-                );
+            for (k, mask) in masks.iter().enumerate() {
+                for i in (0..width).filter(|i| mask >> i & 1 != 0) {
+                    let v = data[k * 80 + i] as u32;
+                    want = (want.0.max(v), want.1 + (v >= sat) as u32);
+                }
             }
-            assert_eq!(u8::masked_stats(&data[..width], mask, sat), want, "{width}");
-            assert_eq!(
-                <u16 as ShortRow>::masked_stats(
-                    &data[..width].iter().map(|&v| v as u16).collect::<Vec<_>>(),
-                    mask,
-                    sat
-                ),
-                want
-            );
+            let plane = Plane {
+                data: &data[..],
+                width,
+                height: 3,
+                stride: 80,
+                col0: 7,
+                row0: 5,
+            };
+            assert_eq!(u8::masked_stats(&plane, 5, &masks, sat), want, "{width}");
+            let wide: Vec<u16> = data.iter().map(|&v| v as u16).collect();
+            let plane = Plane {
+                data: &wide[..],
+                width,
+                height: 3,
+                stride: 80,
+                col0: 7,
+                row0: 5,
+            };
+            assert_eq!(u16::masked_stats(&plane, 5, &masks, sat), want);
         }
     }
 }

@@ -19,13 +19,14 @@
 use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
 use crate::pixel::{Pixel, Plane, ShortRow};
 use crate::threshold::Threshold;
+use wide::f64x2;
 
 /// No run (end of a row's list).
 const NONE: u32 = u32::MAX;
 
 /// Largest width and height of a window grown on row masks.
 const MASK_SIDE: usize = 64;
-// (Its blobs' moments are summed in integers: `SmallMoments`.)
+// (Its blobs' moments are summed exactly: `SmallMoments`.)
 const _: () = assert!(MASK_SIDE <= SMALL_SIDE);
 
 /// Why growing stopped.
@@ -407,17 +408,16 @@ impl SeedLabeller {
                 }
             }
         }
-        // The statistics: the moments summed in integers a row at a time
+        // The statistics: the moments summed exactly a row at a time
         // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
         // the grey-value statistics per run.
         let origin = self.grown[lo].trailing_zeros() as i64;
-        let mut sums = SmallMoments::default();
-        let (mut max, mut saturated, mut area, mut cols) = (0u32, 0u32, 0u32, 0u64);
+        let mut sums = SmallMoments::ZERO;
+        let (mut area, mut cols) = (0u32, 0u64);
         let first = self.rows.len() as u32;
         for k in lo..=hi {
             let g = self.grown[k];
-            let line = plane.row(self.row0 + k);
-            let mut row: RowSums = [0; 5];
+            let mut row: RowSums = [f64x2::ZERO; 3];
             let mut m = g;
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
@@ -427,20 +427,19 @@ impl SeedLabeller {
                 }
                 self.n_runs += 1;
                 let end = start + len;
+                area += len as u32;
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
-            // (A run's statistics are at most 64 pixels': no clamping.)
-            let (row_max, row_sat) = P::masked_stats(line, g, saturation);
-            max = max.max(row_max);
-            saturated += row_sat;
-            sums.add_row((k - lo) as i64, &row);
-            area += row[0] as u32;
+            sums.add_row(k - lo, &row);
             cols |= g;
             self.taken[k] |= g;
             self.rows.push(g);
         }
-        let (m, m4) = sums.to_f64();
+        // (A run's statistics are at most 64 pixels': no clamping.)
+        let (max, saturated) =
+            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
+        let (m, m4) = sums.to_blob_moments();
         let b = Blob {
             area,
             col0: (self.col0 + cols.trailing_zeros() as usize) as u32,
