@@ -275,8 +275,11 @@ pub(crate) const SMALL_SIDE: usize = 64;
 /// `t` the negated sums of `t..0`, so that the difference of the entries
 /// at a run's ends is the run's sums), entry `t + SMALL_SIDE` for `t` from
 /// `−SMALL_SIDE` to `SMALL_SIDE`: exact integers (in `f64`, read in pairs).
-static SMALL_POW_SUMS: [[f64; 6]; 2 * SMALL_SIDE + 1] = {
-    let mut t = [[0.0; 6]; 2 * SMALL_SIDE + 1];
+/// (256 entries, the last ones unused: an index masked to 8 bits needs no
+/// bounds check.)
+const _: () = assert!(2 * SMALL_SIDE < 256);
+static SMALL_POW_SUMS: [[f64; 6]; 256] = {
+    let mut t = [[0.0; 6]; 256];
     let mut acc = [0i64; 5];
     // Upward from 0 …
     let mut x = 0i64;
@@ -363,13 +366,13 @@ impl SmallMoments {
     /// `±SMALL_SIDE`) to a row's sums.
     #[inline(always)]
     pub(crate) fn add_run(row: &mut RowSums, a: i64, e: i64) {
+        debug_assert!(a.abs() <= SMALL_SIDE as i64 && e.abs() <= SMALL_SIDE as i64);
         let (pa, pe) = (
-            &SMALL_POW_SUMS[(a + SMALL_SIDE as i64) as usize],
-            &SMALL_POW_SUMS[(e + SMALL_SIDE as i64) as usize],
+            &SMALL_POW_SUMS[(a + SMALL_SIDE as i64) as usize & 255],
+            &SMALL_POW_SUMS[(e + SMALL_SIDE as i64) as usize & 255],
         );
-        for k in 0..3 {
-            row[k] +=
-                f64x2::new([pe[2 * k], pe[2 * k + 1]]) - f64x2::new([pa[2 * k], pa[2 * k + 1]]);
+        for (k, sum) in row.iter_mut().enumerate() {
+            *sum += f64x2::new([pe[2 * k], pe[2 * k + 1]]) - f64x2::new([pa[2 * k], pa[2 * k + 1]]);
         }
     }
 
@@ -378,12 +381,12 @@ impl SmallMoments {
     pub(crate) fn add_row(&mut self, y: usize, r: &RowSums) {
         let y = f64x2::splat(y as f64);
         let (y2, y3) = (y * y, y * y * y);
-        for k in 0..3 {
-            self.q0[k] += r[k];
+        for (q, &v) in self.q0.iter_mut().zip(r) {
+            *q += v;
         }
-        for k in 0..2 {
-            self.q1[k] += r[k] * y;
-            self.q2[k] += r[k] * y2;
+        for ((q1, q2), &v) in self.q1.iter_mut().zip(&mut self.q2).zip(r) {
+            *q1 += v * y;
+            *q2 += v * y2;
         }
         self.q3 += r[0] * y3;
         self.q4 += r[0] * (y3 * y);

@@ -392,20 +392,11 @@ impl SeedLabeller {
                 let g = self.grown[k];
                 g | g << 1 | g >> 1
             };
-            for n in [k.wrapping_sub(1), k + 1] {
-                if n > last {
-                    continue;
-                }
-                let (below, above) = (n < lo, n > hi);
-                let before = if below || above { 0 } else { self.grown[n] };
-                let f = self.fg_row(plane, threshold, n);
-                let add = fill_runs(f, reach & f) & !before;
-                if add != 0 {
-                    self.grown[n] = before | add;
-                    lo = lo.min(n);
-                    hi = hi.max(n);
-                    todo |= 1 << n;
-                }
+            if k > 0 {
+                todo |= self.spread(plane, threshold, reach, k - 1, &mut lo, &mut hi);
+            }
+            if k < last {
+                todo |= self.spread(plane, threshold, reach, k + 1, &mut lo, &mut hi);
             }
         }
         // The statistics: the moments summed exactly a row at a time
@@ -413,7 +404,7 @@ impl SeedLabeller {
         // the grey-value statistics per run.
         let origin = self.grown[lo].trailing_zeros() as i64;
         let mut sums = SmallMoments::ZERO;
-        let (mut area, mut cols) = (0u32, 0u64);
+        let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
         let first = self.rows.len() as u32;
         for k in lo..=hi {
             let g = self.grown[k];
@@ -422,10 +413,7 @@ impl SeedLabeller {
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
                 let len = (!(m >> start)).trailing_zeros() as usize;
-                if self.n_runs >= self.max_runs {
-                    return Err(SeedOverflow::Runs);
-                }
-                self.n_runs += 1;
+                runs += 1;
                 let end = start + len;
                 area += len as u32;
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
@@ -436,6 +424,12 @@ impl SeedLabeller {
             self.taken[k] |= g;
             self.rows.push(g);
         }
+        // (The capacity counted per blob: the same error, the window's
+        // state after it is not used.)
+        if self.n_runs + runs > self.max_runs {
+            return Err(SeedOverflow::Runs);
+        }
+        self.n_runs += runs;
         // (A run's statistics are at most 64 pixels': no clamping.)
         let (max, saturated) =
             P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
@@ -455,6 +449,32 @@ impl SeedLabeller {
         self.spans.push((lo as u32, first, self.rows.len() as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
+    }
+
+    /// Adds to the blob being grown (rows `lo..=hi` of `grown`) the runs
+    /// of window row `n` that touch `reach` (the pixels of a neighbour row
+    /// and their left and right neighbours); the row's bit if it gained
+    /// pixels (its own neighbours are then to be searched).
+    #[inline(always)]
+    fn spread<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        reach: u64,
+        n: usize,
+        lo: &mut usize,
+        hi: &mut usize,
+    ) -> u64 {
+        let before = if n < *lo || n > *hi { 0 } else { self.grown[n] };
+        let f = self.fg_row(plane, threshold, n);
+        let add = fill_runs(f, reach & f) & !before;
+        if add == 0 {
+            return 0;
+        }
+        self.grown[n] = before | add;
+        *lo = (*lo).min(n);
+        *hi = (*hi).max(n);
+        1 << n
     }
 
     /// One past the last column of the run of row `row` holding column
