@@ -215,26 +215,39 @@ impl Blob {
             (1.0, 0.0)
         };
         // Central moments from the raw ones about the origin: Σ (x + a)^p
-        // (y + b)^q with a, b the centre's negated offsets, expanded.
+        // (y + b)^q with a, b the centre's negated offsets, expanded. The
+        // moments in x and their mirror images in y (the same formula with
+        // x and y swapped) two at a time, lane for lane the same
+        // operations (the same bits as one at a time; 1.2 M of tracking's
+        // instructions less).
         let [s10, s01, s20, s02, s11] = self.m;
         let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = self.m4;
         let (a, b) = (-s10 / n, -s01 / n);
         let (a2, b2) = (a * a, b * b);
-        let c20 = s20 + 2.0 * a * s10 + a2 * n;
-        let c02 = s02 + 2.0 * b * s01 + b2 * n;
+        let pair = |x: f64, y: f64| f64x2::new([x, y]);
+        let (ab, ba, nn) = (pair(a, b), pair(b, a), f64x2::splat(n));
+        let ab2 = pair(a2, b2);
+        let (m10, m20, m30, m40) = (
+            pair(s10, s01),
+            pair(s20, s02),
+            pair(s30, s03),
+            pair(s40, s04),
+        );
+        let (m21, m31, m01) = (pair(s21, s12), pair(s31, s13), pair(s01, s10));
+        let [c20, c02] = (m20 + f64x2::splat(2.0) * ab * m10 + ab2 * nn).to_array();
         let c11 = s11 + a * s01 + b * s10 + a * b * n;
-        let c40 = s40 + 4.0 * a * s30 + 6.0 * a2 * s20 + 4.0 * a2 * a * s10 + a2 * a2 * n;
-        let c04 = s04 + 4.0 * b * s03 + 6.0 * b2 * s02 + 4.0 * b2 * b * s01 + b2 * b2 * n;
-        let c31 = s31
-            + b * s30
-            + 3.0 * a * (s21 + b * s20)
-            + 3.0 * a2 * (s11 + b * s10)
-            + a2 * a * (s01 + b * n);
-        let c13 = s13
-            + a * s03
-            + 3.0 * b * (s12 + a * s02)
-            + 3.0 * b2 * (s11 + a * s01)
-            + b2 * b * (s10 + a * n);
+        let [c40, c04] = (m40
+            + f64x2::splat(4.0) * ab * m30
+            + f64x2::splat(6.0) * ab2 * m20
+            + f64x2::splat(4.0) * ab2 * ab * m10
+            + ab2 * ab2 * nn)
+            .to_array();
+        let [c31, c13] = (m31
+            + ba * m30
+            + f64x2::splat(3.0) * ab * (m21 + ba * m20)
+            + f64x2::splat(3.0) * ab2 * (f64x2::splat(s11) + ba * m10)
+            + ab2 * ab * (m01 + ba * nn))
+            .to_array();
         let c22 = s22
             + 2.0 * b * s21
             + b2 * s20
@@ -880,6 +893,100 @@ mod tests {
         assert!((got[1] - 1.8).abs() < 0.05, "bar {}", got[1]);
         assert!(got[2] < 1.75, "two discs {}", got[2]);
         assert!(got[3] > 2.1, "a dot with a tail {}", got[3]);
+    }
+
+    /// [`Blob::kurtosis`] with its central moments one at a time (the
+    /// form the paired one replaced).
+    fn kurtosis_one_at_a_time(blob: &Blob) -> f64 {
+        let n = blob.area as f64;
+        let (cxx, cyy, cxy) = blob.covariance();
+        let (t, t2) = (cxx - cyy, 2.0 * cxy);
+        let r = (t * t + t2 * t2).sqrt();
+        let (ux, uy) = if r > 0.0 {
+            let c2 = t / r;
+            (
+                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
+                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
+            )
+        } else {
+            (1.0, 0.0)
+        };
+        let [s10, s01, s20, s02, s11] = blob.m;
+        let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = blob.m4;
+        let (a, b) = (-s10 / n, -s01 / n);
+        let (a2, b2) = (a * a, b * b);
+        let c20 = s20 + 2.0 * a * s10 + a2 * n;
+        let c02 = s02 + 2.0 * b * s01 + b2 * n;
+        let c11 = s11 + a * s01 + b * s10 + a * b * n;
+        let c40 = s40 + 4.0 * a * s30 + 6.0 * a2 * s20 + 4.0 * a2 * a * s10 + a2 * a2 * n;
+        let c04 = s04 + 4.0 * b * s03 + 6.0 * b2 * s02 + 4.0 * b2 * b * s01 + b2 * b2 * n;
+        let c31 = s31
+            + b * s30
+            + 3.0 * a * (s21 + b * s20)
+            + 3.0 * a2 * (s11 + b * s10)
+            + a2 * a * (s01 + b * n);
+        let c13 = s13
+            + a * s03
+            + 3.0 * b * (s12 + a * s02)
+            + 3.0 * b2 * (s11 + a * s01)
+            + b2 * b * (s10 + a * n);
+        let c22 = s22
+            + 2.0 * b * s21
+            + b2 * s20
+            + 2.0 * a * (s12 + 2.0 * b * s11 + b2 * s10)
+            + a2 * (s02 + 2.0 * b * s01 + b2 * n);
+        let (ux2, uy2) = (ux * ux, uy * uy);
+        let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
+        let su4 = ux2 * ux2 * c40
+            + 4.0 * ux2 * ux * uy * c31
+            + 6.0 * ux2 * uy2 * c22
+            + 4.0 * ux * uy2 * uy * c13
+            + uy2 * uy2 * c04;
+        if su2 > 0.0 {
+            n * su4 / (su2 * su2)
+        } else {
+            0.0
+        }
+    }
+
+    /// The paired central moments give the kurtosis of one at a time bit
+    /// for bit, on the blobs of random frames (every shape, orientation
+    /// and offset from the moments' origin).
+    #[test]
+    fn kurtosis_in_pairs_is_the_one_at_a_time_bit_for_bit() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(17);
+        let (w, h) = (120usize, 90usize);
+        let mut checked = 0;
+        for _ in 0..20 {
+            let mut data = vec![0u8; w * h];
+            for _ in 0..40 {
+                let (c, r) = (
+                    (rng.next_u64() % w as u64) as usize,
+                    (rng.next_u64() % h as u64) as usize,
+                );
+                let (rw, rh) = (1 + rng.next_u64() % 12, 1 + rng.next_u64() % 12);
+                let skew = (rng.next_u64() % 5) as usize;
+                for y in r..(r + rh as usize).min(h) {
+                    for x in (c + (y - r) * skew / 4)..(c + (y - r) * skew / 4 + rw as usize).min(w)
+                    {
+                        data[y * w + x] = 200;
+                    }
+                }
+            }
+            let mut l = Labeller::new(100_000, 10_000);
+            let plane = Plane::whole(&data, w, h);
+            assert_eq!(
+                l.label(&plane, Threshold::global(100), 255),
+                LabelOutcome::Complete
+            );
+            for b in l.blobs() {
+                let (got, want) = (b.kurtosis(), kurtosis_one_at_a_time(b));
+                assert_eq!(got.to_bits(), want.to_bits(), "{b:?}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 200, "{checked}");
     }
 
     /// The plain labelling: each pixel against its own level, runs read

@@ -161,6 +161,7 @@ impl SeedLabeller {
     /// row_lo..=row_hi` lies in a blob grown so far: then no other blob
     /// has a pixel there. Answered on the row masks (a mask and a compare
     /// per row); `false` for a window grown run by run.
+    #[inline]
     pub fn covers(&self, col_lo: usize, col_hi: usize, row_lo: usize, row_hi: usize) -> bool {
         if !self.masked || col_lo > col_hi || row_lo > row_hi {
             return false;
@@ -177,7 +178,8 @@ impl SeedLabeller {
             return false;
         }
         let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
-        self.taken[r0..=r1].iter().all(|&t| t & cols == cols)
+        let all = self.taken[r0..=r1].iter().fold(u64::MAX, |all, &t| all & t);
+        all & cols == cols
     }
 
     /// The run found so far that holds full-frame pixel `(col, row)`.

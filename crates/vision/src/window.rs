@@ -212,7 +212,7 @@ impl WindowMeasurer {
         }
         let gate2 = e.gate_px * e.gate_px;
         let mut found = None;
-        for blob in self.seeds.blobs() {
+        for (i, blob) in self.seeds.blobs().iter().enumerate() {
             if blob.area < self.options.min_area {
                 continue;
             }
@@ -223,9 +223,9 @@ impl WindowMeasurer {
             if found.is_some() {
                 return WindowOutcome::Ambiguous;
             }
-            found = Some(*blob);
+            found = Some(i);
         }
-        let Some(blob) = found else {
+        let Some(blob) = found.map(|i| &self.seeds.blobs()[i]) else {
             return WindowOutcome::Missing;
         };
         // A blob cut by the core's edge (not the frame's) is larger than
@@ -252,7 +252,7 @@ impl WindowMeasurer {
         ) {
             return WindowOutcome::Rejected(RejectReason::TooLarge);
         }
-        if let Err(reason) = blob_tests(&outer_plane, &blob, &self.options) {
+        if let Err(reason) = blob_tests(&outer_plane, blob, &self.options) {
             return WindowOutcome::Rejected(reason);
         }
         // Near the frame's edge the whole-frame detector keeps a target only
@@ -271,12 +271,12 @@ impl WindowMeasurer {
             // first with the plain window to read the ring (its fourth
             // moment, tested here on this window, is the same but for the
             // rare pixel the smaller window leaves out).
-            return match coded_centroid(&outer_plane, &blob, t, &self.options, max_value) {
-                Ok(m) => WindowOutcome::Found(found_target(&m, &blob, None)),
+            return match coded_centroid(&outer_plane, blob, t, &self.options, max_value) {
+                Ok(m) => WindowOutcome::Found(found_target(&m, blob, None)),
                 Err(reason) => WindowOutcome::Rejected(reason),
             };
         }
-        let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
+        let m = match centroid(&outer_plane, blob, t, &self.options, max_value) {
             Ok(m) => m,
             Err(reason) => return WindowOutcome::Rejected(reason),
         };
@@ -306,11 +306,11 @@ impl WindowMeasurer {
             }
         }
         let m = if e.coded {
-            coded_centre(&outer_plane, &blob, t, &self.options, max_value).unwrap_or(m)
+            coded_centre(&outer_plane, blob, t, &self.options, max_value).unwrap_or(m)
         } else {
             m
         };
-        WindowOutcome::Found(found_target(&m, &blob, code))
+        WindowOutcome::Found(found_target(&m, blob, code))
     }
 }
 
