@@ -68,7 +68,8 @@ pub struct SeedLabeller {
     /// (valid for the window's `height` rows).
     taken: [u64; MASK_SIDE],
     height: usize,
-    /// Mask path: the blob being grown, per window row.
+    /// Mask path: the blob being grown, per window row (valid for the
+    /// window's `height` rows).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
@@ -382,11 +383,15 @@ impl SeedLabeller {
         // above or below (8-connectivity: within one column), row after
         // row until no row gains a pixel.
         let last = plane.height - 1;
+        // (The window's rows cleared first: no test which rows the blob
+        // holds yet per step.)
+        self.grown[..plane.height].fill(0);
         self.grown[r] = fill_runs(self.fg[r], bit);
-        let (mut lo, mut hi) = (r, r);
         // The rows whose neighbours are still to be searched, as a mask
-        // (no list to keep: a row that gains pixels again is still pending).
+        // (no list to keep: a row that gains pixels again is still
+        // pending), and the rows the blob holds.
         let mut todo = 1u64 << r;
+        let mut held = todo;
         while todo != 0 {
             let k = todo.trailing_zeros() as usize;
             todo &= todo - 1;
@@ -395,12 +400,17 @@ impl SeedLabeller {
                 g | g << 1 | g >> 1
             };
             if k > 0 {
-                todo |= self.spread(plane, threshold, reach, k - 1, &mut lo, &mut hi);
+                todo |= self.spread(plane, threshold, reach, k - 1);
             }
             if k < last {
-                todo |= self.spread(plane, threshold, reach, k + 1, &mut lo, &mut hi);
+                todo |= self.spread(plane, threshold, reach, k + 1);
             }
+            held |= todo;
         }
+        let (lo, hi) = (
+            held.trailing_zeros() as usize,
+            MASK_SIDE - 1 - held.leading_zeros() as usize,
+        );
         // The statistics: the moments summed exactly a row at a time
         // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
         // the grey-value statistics per run.
@@ -453,7 +463,7 @@ impl SeedLabeller {
         Ok(Some(self.blobs.len() - 1))
     }
 
-    /// Adds to the blob being grown (rows `lo..=hi` of `grown`) the runs
+    /// Adds to the blob being grown (`grown`) the runs
     /// of window row `n` that touch `reach` (the pixels of a neighbour row
     /// and their left and right neighbours); the row's bit if it gained
     /// pixels (its own neighbours are then to be searched).
@@ -464,18 +474,14 @@ impl SeedLabeller {
         threshold: Threshold,
         reach: u64,
         n: usize,
-        lo: &mut usize,
-        hi: &mut usize,
     ) -> u64 {
-        let before = if n < *lo || n > *hi { 0 } else { self.grown[n] };
+        let before = self.grown[n];
         let f = self.fg_row(plane, threshold, n);
         let add = fill_runs(f, reach & f) & !before;
         if add == 0 {
             return 0;
         }
         self.grown[n] = before | add;
-        *lo = (*lo).min(n);
-        *hi = (*hi).max(n);
         1 << n
     }
 
