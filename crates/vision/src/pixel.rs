@@ -778,9 +778,9 @@ mod tests {
 
 /// The short rows of a tracking window (at most 64 pixels, grown on row
 /// masks by [`SeedLabeller`](crate::seed::SeedLabeller)): a row's
-/// foreground mask and the grey-value statistics of the pixels of a mask,
-/// a whole row at once. The plain forms go through [`Pixel`]; 8-bit rows
-/// sixteen pixels at a time.
+/// foreground mask, and the grey-value statistics of a blob given by its
+/// rows' masks. The plain forms go through [`Pixel`]; 8-bit rows sixteen
+/// pixels at a time.
 pub trait ShortRow: Pixel {
     /// Bit `i` set where `row[i]` is foreground, for `i < width ≤ 64`;
     /// `row` may hold pixels past `width` (the frame's), read but masked
@@ -820,7 +820,9 @@ impl ShortRow for u16 {}
 
 /// Why: tracking grows about ten rows per window, each row's mask and
 /// statistics in a few vector operations instead of a general block mask
-/// and one [`Pixel::run_stats`] per run.
+/// and one [`Pixel::run_stats`] per run (with the level checked once per
+/// grow: tracking 162.7 M → 155.8 M instructions; the statistics over a
+/// whole blob with one reduction: a further 2.9 M).
 impl ShortRow for u8 {
     /// One vector for a row of at most 16 pixels, two for at most 32,
     /// where `row` holds them.

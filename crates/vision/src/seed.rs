@@ -7,14 +7,16 @@
 //!
 //! A grown blob is the labeller's blob exactly: its runs are the maximal
 //! runs of the window, its statistics are added in the labeller's
-//! (row-major) order, so that its centre and moments are bit for bit the
-//! ones the whole-window labeller gives it.
+//! (row-major) order or summed exactly, so that its centre and moments are
+//! bit for bit the ones the whole-window labeller gives it.
 //!
 //! A window at most 64 pixels wide and high (tracking's windows) is grown
 //! on bit masks, one 64-bit word per row: a row's foreground pixels are
-//! found sixteen at a time, a blob spreads from row to row by shifts and
-//! ands, and its runs are read off its rows' words. Wider windows are grown
-//! run by run, with a list of the runs found per row.
+//! found sixteen at a time ([`ShortRow`]), a blob spreads from row to row
+//! by shifts and ands, its runs are read off its rows' words and its
+//! moments summed a row at a time in exact sums of integers
+//! (`label::SmallMoments`). Wider windows are grown run by run, with a
+//! list of the runs found per row.
 
 use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
 use crate::pixel::{Pixel, Plane, ShortRow};
@@ -67,6 +69,7 @@ pub struct SeedLabeller {
     /// Mask path: per window row, the pixels of the blobs grown so far
     /// (valid for the window's `height` rows).
     taken: [u64; MASK_SIDE],
+    /// Mask path: the window's height (rows of `taken` in use).
     height: usize,
     /// Mask path: the blob being grown, per window row (valid for the
     /// window's `height` rows).
@@ -102,8 +105,7 @@ impl SeedLabeller {
             height: 0,
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
-            // (Every row of a blob holds a pixel no other blob holds, and
-            // every row pushed gained one.)
+            // (Every row of a blob holds a pixel no other blob holds.)
             rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
             n_runs: 0,
         }
@@ -413,7 +415,7 @@ impl SeedLabeller {
         );
         // The statistics: the moments summed exactly a row at a time
         // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
-        // the grey-value statistics per run.
+        // the grey-value statistics over all the rows at once.
         let origin = self.grown[lo].trailing_zeros() as i64;
         let mut sums = SmallMoments::ZERO;
         let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
