@@ -385,9 +385,9 @@ impl SeedLabeller {
         // above or below (8-connectivity: within one column), row after
         // row until no row gains a pixel.
         let last = plane.height - 1;
-        // (The window's rows cleared first: no test which rows the blob
+        // (`grown` is all 0 between grows: no test which rows the blob
         // holds yet per step.)
-        self.grown[..plane.height].fill(0);
+        debug_assert!(self.grown.iter().all(|&g| g == 0));
         self.grown[r] = fill_runs(self.fg[r], bit);
         // The rows whose neighbours are still to be searched, as a mask
         // (no list to keep: a row that gains pixels again is still
@@ -420,8 +420,11 @@ impl SeedLabeller {
         let mut sums = SmallMoments::ZERO;
         let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
         let first = self.rows.len() as u32;
+        // (A run's statistics are at most 64 pixels': no clamping.)
+        let (max, saturated) =
+            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
         for k in lo..=hi {
-            let g = self.grown[k];
+            let g = std::mem::take(&mut self.grown[k]);
             let mut row: RowSums = [f64x2::ZERO; 3];
             let mut m = g;
             while m != 0 {
@@ -444,9 +447,6 @@ impl SeedLabeller {
             return Err(SeedOverflow::Runs);
         }
         self.n_runs += runs;
-        // (A run's statistics are at most 64 pixels': no clamping.)
-        let (max, saturated) =
-            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
         let (m, m4) = sums.to_blob_moments();
         let b = Blob {
             area,
