@@ -447,6 +447,69 @@ mod tests {
         }
     }
 
+    /// The gate's scan is skipped only where the target's blob covers the
+    /// square around the gate: a neighbour whose centre lies inside the
+    /// gate is still found (ambiguous), a prediction off the dot's middle
+    /// (its square reaching past the dot) still measures the dot.
+    #[test]
+    fn the_gate_is_scanned_unless_the_target_covers_it() {
+        let mut s = Scene::new(120, 90, 15.0);
+        for (col, row) in [(40.2, 40.3), (50.6, 40.9)] {
+            let dot = Drawn {
+                col,
+                row,
+                radius: 3.5,
+                view: View::frontal(1.0),
+                code: None,
+                phase: 0.0,
+            };
+            s.draw(&dot, 190.0);
+        }
+        s.blur(0.6);
+        let img = s.to_mono8();
+        let options = DetectorOptions::default();
+        let mut det = Detector::new(img.width(), img.height(), options).unwrap();
+        let view = img.view();
+        // (The whole frame rejects these dots: too close to read their
+        // rings. Its threshold is what the windows need.)
+        let t = det.detect(view).unwrap().threshold;
+        let first = (40.2, 40.3);
+        let mut w = WindowMeasurer::new(options);
+        let covered = |w: &WindowMeasurer, e: &Expected| {
+            let reach = e.gate_px + 1.0;
+            w.seeds.covers(
+                ceil_i64(e.col - reach) as usize,
+                floor_i64(e.col + reach) as usize,
+                ceil_i64(e.row - reach) as usize,
+                floor_i64(e.row + reach) as usize,
+            )
+        };
+        let at = |col: f64, row: f64, gate_px: f64| Expected {
+            col,
+            row,
+            gate_px,
+            radius_px: 3.5,
+            coded: false,
+            read_code: false,
+        };
+        // On the dot, a narrow gate: covered, the dot found.
+        let e = at(first.0 + 0.3, first.1 - 0.2, 1.0);
+        let WindowOutcome::Found(dot) = w.measure(&view, &t, &e) else {
+            panic!("{:?}", w.measure(&view, &t, &e));
+        };
+        assert!((dot.col - first.0).abs() < 0.1 && (dot.row - first.1).abs() < 0.1);
+        assert!(covered(&w, &e));
+        // Off the dot's middle: the square reaches past the dot, the gate
+        // is scanned and holds the dot alone.
+        let e = at(first.0 + 2.2, first.1 + 0.4, 2.5);
+        assert_eq!(w.measure(&view, &t, &e), WindowOutcome::Found(dot));
+        assert!(!covered(&w, &e));
+        // A gate that holds the neighbour's centre too: ambiguous.
+        let e = at(first.0, first.1, 12.0);
+        assert_eq!(w.measure(&view, &t, &e), WindowOutcome::Ambiguous);
+        assert!(!covered(&w, &e));
+    }
+
     #[test]
     fn nothing_inside_the_gate_is_missing_and_two_are_ambiguous() {
         let img = scene();
