@@ -824,8 +824,8 @@ impl ShortRow for u16 {}
 /// grow: tracking 162.7 M → 155.8 M instructions; the statistics over a
 /// whole blob with one reduction: a further 2.9 M).
 impl ShortRow for u8 {
-    /// One vector for a row of at most 16 pixels, two for at most 32,
-    /// where `row` holds them.
+    /// Two vectors for a row of at most 32 pixels (one of at most 16
+    /// where `row` holds no 32), where `row` holds them.
     #[inline]
     fn short_mask(row: &[Self], width: usize, threshold: Threshold) -> u64 {
         debug_assert!(width <= 64 && width <= row.len());
@@ -833,12 +833,12 @@ impl ShortRow for u8 {
             return 0;
         };
         let keep = u64::MAX >> (64 - width);
+        if let Some(b) = row.get(..32).filter(|_| width <= 32) {
+            let m = above16(lanes16(&b[..16]), t) | above16(lanes16(&b[16..]), t) << 16;
+            return m as u64 & keep;
+        }
         if width <= 16 && row.len() >= 16 {
             return above16(lanes16(&row[..16]), t) as u64 & keep;
-        }
-        if width <= 32 && row.len() >= 32 {
-            let m = above16(lanes16(&row[..16]), t) | above16(lanes16(&row[16..32]), t) << 16;
-            return m as u64 & keep;
         }
         if let Some(block) = row.get(..64) {
             let Ok(block) = <&[u8; 64]>::try_from(block) else {

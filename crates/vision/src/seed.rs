@@ -427,6 +427,17 @@ impl SeedLabeller {
             let g = std::mem::take(&mut self.grown[k]);
             let mut row: RowSums = [f64x2::ZERO; 3];
             let mut m = g;
+            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
+                // One run (the rule): its ends straight from the mask.
+                let (start, end) = (
+                    g.trailing_zeros() as usize,
+                    MASK_SIDE - g.leading_zeros() as usize,
+                );
+                runs += 1;
+                area += (end - start) as u32;
+                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
+                m = 0;
+            }
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
                 let len = (!(m >> start)).trailing_zeros() as usize;
