@@ -447,7 +447,7 @@ impl SeedLabeller {
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
-            sums.add_row(k - lo, &row);
+            sums.add_row((k - lo) as u32, &row);
             cols |= g;
             self.taken[k] |= g;
             self.rows.push(g);
