@@ -877,9 +877,11 @@ impl ShortRow for u8 {
             return (top, sat);
         }
         let sat_level = u8x16::splat(saturation.min(255) as u8);
-        for (k, &mask) in masks.iter().enumerate() {
+        let mut start = (row0 - plane.row0) * plane.stride;
+        for &mask in masks {
             debug_assert!(len >= 64 || mask >> len == 0);
-            let row = plane.row(row0 + k);
+            let row = &plane.data[start..start + len];
+            start += plane.stride;
             let mut m = mask;
             while m != 0 {
                 let p = (m.trailing_zeros() as usize).min(len - 16);
