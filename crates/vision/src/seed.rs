@@ -353,7 +353,7 @@ impl SeedLabeller {
             // The row from its start, with the frame's pixels past the
             // window's width where it holds them (read in whole vectors).
             let start = r * plane.stride;
-            let row = &plane.data[start..(start + MASK_SIDE).min(plane.data.len())];
+            let row = &plane.data[start..];
             self.fg[r] = P::short_mask(row, plane.width, threshold);
             self.known |= 1 << r;
         }
