@@ -10,6 +10,7 @@
 
 use crate::pixel::{Pixel, Plane};
 use crate::threshold::{LocalLevels, Threshold, TileRow};
+use wide::f64x2;
 
 /// The levels the labeller compares a row's pixels with, a block of the
 /// row at a time.
@@ -214,26 +215,39 @@ impl Blob {
             (1.0, 0.0)
         };
         // Central moments from the raw ones about the origin: Σ (x + a)^p
-        // (y + b)^q with a, b the centre's negated offsets, expanded.
+        // (y + b)^q with a, b the centre's negated offsets, expanded. The
+        // moments in x and their mirror images in y (the same formula with
+        // x and y swapped) two at a time, lane for lane the same
+        // operations (the same bits as one at a time; in tracking 2.99 M
+        // → 2.51 M instructions).
         let [s10, s01, s20, s02, s11] = self.m;
         let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = self.m4;
         let (a, b) = (-s10 / n, -s01 / n);
         let (a2, b2) = (a * a, b * b);
-        let c20 = s20 + 2.0 * a * s10 + a2 * n;
-        let c02 = s02 + 2.0 * b * s01 + b2 * n;
+        let pair = |x: f64, y: f64| f64x2::new([x, y]);
+        let (ab, ba, nn) = (pair(a, b), pair(b, a), f64x2::splat(n));
+        let ab2 = pair(a2, b2);
+        let (m10, m20, m30, m40) = (
+            pair(s10, s01),
+            pair(s20, s02),
+            pair(s30, s03),
+            pair(s40, s04),
+        );
+        let (m21, m31, m01) = (pair(s21, s12), pair(s31, s13), pair(s01, s10));
+        let [c20, c02] = (m20 + f64x2::splat(2.0) * ab * m10 + ab2 * nn).to_array();
         let c11 = s11 + a * s01 + b * s10 + a * b * n;
-        let c40 = s40 + 4.0 * a * s30 + 6.0 * a2 * s20 + 4.0 * a2 * a * s10 + a2 * a2 * n;
-        let c04 = s04 + 4.0 * b * s03 + 6.0 * b2 * s02 + 4.0 * b2 * b * s01 + b2 * b2 * n;
-        let c31 = s31
-            + b * s30
-            + 3.0 * a * (s21 + b * s20)
-            + 3.0 * a2 * (s11 + b * s10)
-            + a2 * a * (s01 + b * n);
-        let c13 = s13
-            + a * s03
-            + 3.0 * b * (s12 + a * s02)
-            + 3.0 * b2 * (s11 + a * s01)
-            + b2 * b * (s10 + a * n);
+        let [c40, c04] = (m40
+            + f64x2::splat(4.0) * ab * m30
+            + f64x2::splat(6.0) * ab2 * m20
+            + f64x2::splat(4.0) * ab2 * ab * m10
+            + ab2 * ab2 * nn)
+            .to_array();
+        let [c31, c13] = (m31
+            + ba * m30
+            + f64x2::splat(3.0) * ab * (m21 + ba * m20)
+            + f64x2::splat(3.0) * ab2 * (f64x2::splat(s11) + ba * m10)
+            + ab2 * ab * (m01 + ba * nn))
+            .to_array();
         let c22 = s22
             + 2.0 * b * s21
             + b2 * s20
@@ -262,6 +276,151 @@ impl Blob {
             self.m[2] / n - mx * mx + 1.0 / 12.0,
             self.m[3] / n - my * my + 1.0 / 12.0,
             self.m[4] / n - mx * my,
+        )
+    }
+}
+
+/// Half-width of [`SMALL_POW_SUMS`]: run ends of a blob at most this wide,
+/// about its origin.
+pub(crate) const SMALL_SIDE: usize = 64;
+
+/// `[t, Σx, Σx², Σx³, Σx⁴, 0]` for `x` from 0 below `t` (for negative
+/// `t` the negated sums of `t..0`, so that the difference of the entries
+/// at a run's ends is the run's sums), entry `t + SMALL_SIDE` for `t` from
+/// `−SMALL_SIDE` to `SMALL_SIDE`: exact integers (in `f64`, read in pairs).
+/// (256 entries, the last ones unused: an index masked to 8 bits needs no
+/// bounds check.)
+const _: () = assert!(2 * SMALL_SIDE < 256);
+static SMALL_POW_SUMS: [[f64; 6]; 256] = {
+    let mut t = [[0.0; 6]; 256];
+    let mut acc = [0i64; 5];
+    // Upward from 0 …
+    let mut x = 0i64;
+    while x < SMALL_SIDE as i64 {
+        acc = [
+            acc[0] + 1,
+            acc[1] + x,
+            acc[2] + x * x,
+            acc[3] + x * x * x,
+            acc[4] + x * x * x * x,
+        ];
+        let i = (SMALL_SIDE as i64 + x + 1) as usize;
+        t[i] = [
+            acc[0] as f64,
+            acc[1] as f64,
+            acc[2] as f64,
+            acc[3] as f64,
+            acc[4] as f64,
+            0.0,
+        ];
+        x += 1;
+    }
+    // … and downward.
+    let mut acc = [0i64; 5];
+    let mut x = -1i64;
+    while x >= -(SMALL_SIDE as i64) {
+        acc = [
+            acc[0] - 1,
+            acc[1] - x,
+            acc[2] - x * x,
+            acc[3] - x * x * x,
+            acc[4] - x * x * x * x,
+        ];
+        let i = (SMALL_SIDE as i64 + x) as usize;
+        t[i] = [
+            acc[0] as f64,
+            acc[1] as f64,
+            acc[2] as f64,
+            acc[3] as f64,
+            acc[4] as f64,
+            0.0,
+        ];
+        x -= 1;
+    }
+    t
+};
+
+/// A small blob's binary moments (those of [`Blob::m`] and [`Blob::m4`])
+/// summed a row at a time, two at once: the fast path of blobs grown on
+/// row masks (tracking windows, at most [`SMALL_SIDE`] pixels each way).
+/// The moments are sums of integers: every term and every partial sum of
+/// a blob of at most 64 × 64 pixels lies below 2⁵³ (Σx⁴ at most
+/// 4096 · 64⁴ ≈ 6.9 · 10¹⁰), so each `f64` addition and product here and
+/// in [`Blob::add_run`] is exact, and both give the same values bit for
+/// bit, whatever the order (a zero is +0 in both: the sums start at +0).
+/// Per row eleven vector products and sums instead of fourteen `f64`
+/// accumulations per run.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SmallMoments {
+    /// `Σ (n, s1)`, `Σ (s2, s3)`, `Σ (s4, ·)` over the rows, then the same
+    /// times `y`, `y²`, `y³`, `y⁴` as far as needed (the other lanes are
+    /// not used).
+    q0: [f64x2; 3],
+    q1: [f64x2; 2],
+    q2: [f64x2; 2],
+    q3: f64x2,
+    q4: f64x2,
+}
+
+/// `(n, Σx)`, `(Σx², Σx³)`, `(Σx⁴, 0)` of the pixels of a row's runs, `x`
+/// about a blob's origin column.
+pub(crate) type RowSums = [f64x2; 3];
+
+impl SmallMoments {
+    pub(crate) const ZERO: Self = SmallMoments {
+        q0: [f64x2::ZERO; 3],
+        q1: [f64x2::ZERO; 2],
+        q2: [f64x2::ZERO; 2],
+        q3: f64x2::ZERO,
+        q4: f64x2::ZERO,
+    };
+
+    /// Adds the run of columns `a..e` (about the origin, within
+    /// `±SMALL_SIDE`) to a row's sums.
+    #[inline(always)]
+    pub(crate) fn add_run(row: &mut RowSums, a: i64, e: i64) {
+        debug_assert!(a.abs() <= SMALL_SIDE as i64 && e.abs() <= SMALL_SIDE as i64);
+        let (pa, pe) = (
+            &SMALL_POW_SUMS[(a + SMALL_SIDE as i64) as usize & 255],
+            &SMALL_POW_SUMS[(e + SMALL_SIDE as i64) as usize & 255],
+        );
+        for (k, sum) in row.iter_mut().enumerate() {
+            *sum += f64x2::new([pe[2 * k], pe[2 * k + 1]]) - f64x2::new([pa[2 * k], pa[2 * k + 1]]);
+        }
+    }
+
+    /// Adds a row's sums, `y` rows below the origin.
+    #[inline(always)]
+    pub(crate) fn add_row(&mut self, y: u32, r: &RowSums) {
+        // (From `u32`: one conversion instruction, where `usize` takes six.)
+        let y = f64x2::splat(y as f64);
+        let (y2, y3) = (y * y, y * y * y);
+        for (q, &v) in self.q0.iter_mut().zip(r) {
+            *q += v;
+        }
+        for ((q1, q2), &v) in self.q1.iter_mut().zip(&mut self.q2).zip(r) {
+            *q1 += v * y;
+            *q2 += v * y2;
+        }
+        self.q3 += r[0] * y3;
+        self.q4 += r[0] * (y3 * y);
+    }
+
+    /// The moments as [`Blob::m`] and [`Blob::m4`].
+    #[inline]
+    pub(crate) fn to_blob_moments(self) -> ([f64; 5], [f64; 9]) {
+        let [_, s10] = self.q0[0].to_array();
+        let [s20, s30] = self.q0[1].to_array();
+        let [s40, _] = self.q0[2].to_array();
+        let [s01, s11] = self.q1[0].to_array();
+        let [s21, s31] = self.q1[1].to_array();
+        let [s02, s12] = self.q2[0].to_array();
+        let [s22, _] = self.q2[1].to_array();
+        let [s03, s13] = self.q3.to_array();
+        let [s04, _] = self.q4.to_array();
+        (
+            [s10, s01, s20, s02, s11],
+            [s30, s21, s12, s03, s40, s31, s22, s13, s04],
         )
     }
 }
@@ -735,6 +894,100 @@ mod tests {
         assert!((got[1] - 1.8).abs() < 0.05, "bar {}", got[1]);
         assert!(got[2] < 1.75, "two discs {}", got[2]);
         assert!(got[3] > 2.1, "a dot with a tail {}", got[3]);
+    }
+
+    /// [`Blob::kurtosis`] with its central moments one at a time (the
+    /// form the paired one replaced).
+    fn kurtosis_one_at_a_time(blob: &Blob) -> f64 {
+        let n = blob.area as f64;
+        let (cxx, cyy, cxy) = blob.covariance();
+        let (t, t2) = (cxx - cyy, 2.0 * cxy);
+        let r = (t * t + t2 * t2).sqrt();
+        let (ux, uy) = if r > 0.0 {
+            let c2 = t / r;
+            (
+                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
+                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
+            )
+        } else {
+            (1.0, 0.0)
+        };
+        let [s10, s01, s20, s02, s11] = blob.m;
+        let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = blob.m4;
+        let (a, b) = (-s10 / n, -s01 / n);
+        let (a2, b2) = (a * a, b * b);
+        let c20 = s20 + 2.0 * a * s10 + a2 * n;
+        let c02 = s02 + 2.0 * b * s01 + b2 * n;
+        let c11 = s11 + a * s01 + b * s10 + a * b * n;
+        let c40 = s40 + 4.0 * a * s30 + 6.0 * a2 * s20 + 4.0 * a2 * a * s10 + a2 * a2 * n;
+        let c04 = s04 + 4.0 * b * s03 + 6.0 * b2 * s02 + 4.0 * b2 * b * s01 + b2 * b2 * n;
+        let c31 = s31
+            + b * s30
+            + 3.0 * a * (s21 + b * s20)
+            + 3.0 * a2 * (s11 + b * s10)
+            + a2 * a * (s01 + b * n);
+        let c13 = s13
+            + a * s03
+            + 3.0 * b * (s12 + a * s02)
+            + 3.0 * b2 * (s11 + a * s01)
+            + b2 * b * (s10 + a * n);
+        let c22 = s22
+            + 2.0 * b * s21
+            + b2 * s20
+            + 2.0 * a * (s12 + 2.0 * b * s11 + b2 * s10)
+            + a2 * (s02 + 2.0 * b * s01 + b2 * n);
+        let (ux2, uy2) = (ux * ux, uy * uy);
+        let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
+        let su4 = ux2 * ux2 * c40
+            + 4.0 * ux2 * ux * uy * c31
+            + 6.0 * ux2 * uy2 * c22
+            + 4.0 * ux * uy2 * uy * c13
+            + uy2 * uy2 * c04;
+        if su2 > 0.0 {
+            n * su4 / (su2 * su2)
+        } else {
+            0.0
+        }
+    }
+
+    /// The paired central moments give the kurtosis of one at a time bit
+    /// for bit, on the blobs of random frames (every shape, orientation
+    /// and offset from the moments' origin).
+    #[test]
+    fn kurtosis_in_pairs_is_the_one_at_a_time_bit_for_bit() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(17);
+        let (w, h) = (120usize, 90usize);
+        let mut checked = 0;
+        for _ in 0..20 {
+            let mut data = vec![0u8; w * h];
+            for _ in 0..40 {
+                let (c, r) = (
+                    (rng.next_u64() % w as u64) as usize,
+                    (rng.next_u64() % h as u64) as usize,
+                );
+                let (rw, rh) = (1 + rng.next_u64() % 12, 1 + rng.next_u64() % 12);
+                let skew = (rng.next_u64() % 5) as usize;
+                for y in r..(r + rh as usize).min(h) {
+                    for x in (c + (y - r) * skew / 4)..(c + (y - r) * skew / 4 + rw as usize).min(w)
+                    {
+                        data[y * w + x] = 200;
+                    }
+                }
+            }
+            let mut l = Labeller::new(100_000, 10_000);
+            let plane = Plane::whole(&data, w, h);
+            assert_eq!(
+                l.label(&plane, Threshold::global(100), 255),
+                LabelOutcome::Complete
+            );
+            for b in l.blobs() {
+                let (got, want) = (b.kurtosis(), kurtosis_one_at_a_time(b));
+                assert_eq!(got.to_bits(), want.to_bits(), "{b:?}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 200, "{checked}");
     }
 
     /// The plain labelling: each pixel against its own level, runs read

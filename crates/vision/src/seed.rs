@@ -7,24 +7,29 @@
 //!
 //! A grown blob is the labeller's blob exactly: its runs are the maximal
 //! runs of the window, its statistics are added in the labeller's
-//! (row-major) order, so that its centre and moments are bit for bit the
-//! ones the whole-window labeller gives it.
+//! (row-major) order or summed exactly, so that its centre and moments are
+//! bit for bit the ones the whole-window labeller gives it.
 //!
 //! A window at most 64 pixels wide and high (tracking's windows) is grown
 //! on bit masks, one 64-bit word per row: a row's foreground pixels are
-//! found sixteen at a time, a blob spreads from row to row by shifts and
-//! ands, and its runs are read off its rows' words. Wider windows are grown
-//! run by run, with a list of the runs found per row.
+//! found sixteen at a time ([`ShortRow`]), a blob spreads from row to row
+//! by shifts and ands, its runs are read off its rows' words and its
+//! moments summed a row at a time in exact sums of integers
+//! (`label::SmallMoments`). Wider windows are grown run by run, with a
+//! list of the runs found per row.
 
-use crate::label::{Blob, Run};
-use crate::pixel::{Pixel, Plane};
+use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
+use crate::pixel::{Pixel, Plane, ShortRow};
 use crate::threshold::Threshold;
+use wide::f64x2;
 
 /// No run (end of a row's list).
 const NONE: u32 = u32::MAX;
 
 /// Largest width and height of a window grown on row masks.
 const MASK_SIDE: usize = 64;
+// (Its blobs' moments are summed exactly: `SmallMoments`.)
+const _: () = assert!(MASK_SIDE <= SMALL_SIDE);
 
 /// Why growing stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,16 +66,18 @@ pub struct SeedLabeller {
     fg: [u64; MASK_SIDE],
     known: u64,
     level: Option<Threshold>,
-    /// Mask path: per window row, the pixels of the blobs grown so far.
+    /// Mask path: per window row, the pixels of the blobs grown so far
+    /// (valid for the window's `height` rows).
     taken: [u64; MASK_SIDE],
-    /// Mask path: the blob being grown, per window row.
+    /// Mask path: the window's height (rows of `taken` in use).
+    height: usize,
+    /// Mask path: the blob being grown, per window row (valid for the
+    /// window's `height` rows).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
     spans: Vec<(u32, u32, u32)>,
     rows: Vec<u64>,
-    /// Mask path: rows whose neighbours are still to be searched.
-    todo: Vec<u32>,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
 }
@@ -95,12 +102,11 @@ impl SeedLabeller {
             known: 0,
             level: None,
             taken: [0; MASK_SIDE],
+            height: 0,
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
-            // (Every row of a blob holds a pixel no other blob holds, and
-            // every row pushed gained one.)
+            // (Every row of a blob holds a pixel no other blob holds.)
             rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
-            todo: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
             n_runs: 0,
         }
     }
@@ -122,6 +128,7 @@ impl SeedLabeller {
             self.known = 0;
             self.level = None;
             self.taken[..plane.height].fill(0);
+            self.height = plane.height;
             self.spans.clear();
             self.rows.clear();
             self.n_runs = 0;
@@ -153,6 +160,31 @@ impl SeedLabeller {
         self.run_at(col, row).map(|k| self.owner[k] as usize)
     }
 
+    /// Whether every full-frame pixel of the box `col_lo..=col_hi ×
+    /// row_lo..=row_hi` lies in a blob grown so far: then no other blob
+    /// has a pixel there. Answered on the row masks (a mask and a compare
+    /// per row); `false` for a window grown run by run.
+    #[inline]
+    pub fn covers(&self, col_lo: usize, col_hi: usize, row_lo: usize, row_hi: usize) -> bool {
+        if !self.masked || col_lo > col_hi || row_lo > row_hi {
+            return false;
+        }
+        let (Some(a), Some(b)) = (col_lo.checked_sub(self.col0), col_hi.checked_sub(self.col0))
+        else {
+            return false;
+        };
+        let Some(r0) = row_lo.checked_sub(self.row0) else {
+            return false;
+        };
+        let r1 = row_hi - self.row0;
+        if b >= MASK_SIDE || r1 >= self.height {
+            return false;
+        }
+        let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+        let all = self.taken[r0..=r1].iter().fold(u64::MAX, |all, &t| all & t);
+        all & cols == cols
+    }
+
     /// The run found so far that holds full-frame pixel `(col, row)`.
     fn run_at(&self, col: usize, row: usize) -> Option<usize> {
         let r = row.checked_sub(self.row0)?;
@@ -176,7 +208,7 @@ impl SeedLabeller {
     /// blob in [`SeedLabeller::blobs`] (an earlier one if it holds the
     /// pixel already), `Ok(None)` if the pixel is background or outside
     /// the window. Pixels at or above `saturation` count as saturated.
-    pub fn grow<P: Pixel>(
+    pub fn grow<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -254,7 +286,7 @@ impl SeedLabeller {
     /// columns `col_lo..=col_hi` (clipped to the window) not yet in a
     /// blob: [`SeedLabeller::grow`] for a stretch of a row, skipping the
     /// runs found before in one step.
-    pub fn grow_span<P: Pixel>(
+    pub fn grow_span<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -275,6 +307,7 @@ impl SeedLabeller {
             let r = row - self.row0;
             let (a, b) = (lo - self.col0, hi - self.col0);
             let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+            self.set_level(threshold);
             let mut open = self.fg_row(plane, threshold, r) & cols & !self.taken[r];
             while open != 0 {
                 let col = self.col0 + open.trailing_zeros() as usize;
@@ -302,57 +335,34 @@ impl SeedLabeller {
         Ok(())
     }
 
-    /// The foreground mask of window row `r` at `threshold` (found once
-    /// per window and threshold).
+    /// Makes the row masks found so far those at `threshold` (forgets
+    /// them when it differs from the last one).
     #[inline(always)]
-    fn fg_row<P: Pixel>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
-        if self.known & (1 << r) != 0 && self.level == Some(threshold) {
-            return self.fg[r];
-        }
-        self.find_fg_row(plane, threshold, r)
-    }
-
-    /// [`SeedLabeller::fg_row`] of a row not yet seen at `threshold`.
-    #[inline(never)]
-    fn find_fg_row<P: Pixel>(
-        &mut self,
-        plane: &Plane<'_, P>,
-        threshold: Threshold,
-        r: usize,
-    ) -> u64 {
+    fn set_level(&mut self, threshold: Threshold) {
         if self.level != Some(threshold) {
             self.level = Some(threshold);
             self.known = 0;
         }
-        self.known |= 1 << r;
-        // 8-bit pixels: a whole block of 32 or 64 from the row's start
-        // where the frame holds them (sixteen at a time; the mask of the
-        // pixels past the window's width cleared), else the row alone (its
-        // last pixels then one at a time).
-        let start = r * plane.stride;
-        let block = if P::MAX == u8::MAX as u32 {
-            // (32 pixels when they hold the window: two blocks of sixteen.)
-            let n = if plane.width <= MASK_SIDE / 2 {
-                MASK_SIDE / 2
-            } else {
-                MASK_SIDE
-            };
-            plane.data.get(start..start + n)
-        } else {
-            None
-        };
-        self.fg[r] = match block {
-            Some(block) => {
-                threshold.foreground_mask(block) & (u64::MAX >> (MASK_SIDE - plane.width))
-            }
-            None => threshold.foreground_mask(plane.row(self.row0 + r)),
-        };
+    }
+
+    /// The foreground mask of window row `r` at the level of
+    /// [`SeedLabeller::set_level`] (found once per window and level).
+    #[inline(always)]
+    fn fg_row<P: ShortRow>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
+        if self.known >> r & 1 == 0 {
+            // The row from its start, with the frame's pixels past the
+            // window's width where it holds them (read in whole vectors).
+            let start = r * plane.stride;
+            let row = &plane.data[start..];
+            self.fg[r] = P::short_mask(row, plane.width, threshold);
+            self.known |= 1 << r;
+        }
         self.fg[r]
     }
 
     /// [`SeedLabeller::grow`] on row masks (a window of at most
     /// [`MASK_SIDE`] pixels each way, position inside it).
-    fn grow_masked<P: Pixel>(
+    fn grow_masked<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
         threshold: Threshold,
@@ -361,6 +371,7 @@ impl SeedLabeller {
         row: usize,
     ) -> Result<Option<usize>, SeedOverflow> {
         let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
+        self.set_level(threshold);
         if self.fg_row(plane, threshold, r) & bit == 0 {
             return Ok(None);
         }
@@ -374,64 +385,117 @@ impl SeedLabeller {
         // above or below (8-connectivity: within one column), row after
         // row until no row gains a pixel.
         let last = plane.height - 1;
-        self.grown[r] = fill_runs(self.fg[r], bit);
-        let (mut lo, mut hi) = (r, r);
-        self.todo.clear();
-        self.todo.push(r as u32);
-        while let Some(k) = self.todo.pop() {
-            let k = k as usize;
+        // (`grown` is all 0 between grows: no test which rows the blob
+        // holds yet per step.)
+        debug_assert!(self.grown.iter().all(|&g| g == 0));
+        self.grown[r] = run_holding(self.fg[r], bit);
+        // The rows whose neighbours are still to be searched, as a mask
+        // (no list to keep: a row that gains pixels again is still
+        // pending), and the rows the blob holds.
+        let mut todo = 1u64 << r;
+        let mut held = todo;
+        while todo != 0 {
+            let k = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
             let reach = {
                 let g = self.grown[k];
                 g | g << 1 | g >> 1
             };
-            for n in [k.wrapping_sub(1), k + 1] {
-                if n > last {
-                    continue;
-                }
-                let (below, above) = (n < lo, n > hi);
-                let before = if below || above { 0 } else { self.grown[n] };
-                let f = self.fg_row(plane, threshold, n);
-                let add = fill_runs(f, reach & f) & !before;
-                if add != 0 {
-                    self.grown[n] = before | add;
-                    lo = lo.min(n);
-                    hi = hi.max(n);
-                    self.todo.push(n as u32);
-                }
+            if k > 0 {
+                todo |= self.spread(plane, threshold, reach, k - 1);
             }
+            if k < last {
+                todo |= self.spread(plane, threshold, reach, k + 1);
+            }
+            held |= todo;
         }
-        // The statistics in the labeller's order: row by row, each row's
-        // runs by column.
-        let mut b = Blob::empty();
+        let (lo, hi) = (
+            held.trailing_zeros() as usize,
+            MASK_SIDE - 1 - held.leading_zeros() as usize,
+        );
+        // The statistics: the moments summed exactly a row at a time
+        // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
+        // the grey-value statistics over all the rows at once.
+        let origin = self.grown[lo].trailing_zeros() as i64;
+        let mut sums = SmallMoments::ZERO;
+        let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
         let first = self.rows.len() as u32;
+        // (A run's statistics are at most 64 pixels': no clamping.)
+        let (max, saturated) =
+            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
         for k in lo..=hi {
-            let g = self.grown[k];
-            let line = plane.row(self.row0 + k);
+            let g = std::mem::take(&mut self.grown[k]);
+            let mut row: RowSums = [f64x2::ZERO; 3];
             let mut m = g;
+            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
+                // One run (the rule): its ends straight from the mask.
+                let (start, end) = (
+                    g.trailing_zeros() as usize,
+                    MASK_SIDE - g.leading_zeros() as usize,
+                );
+                runs += 1;
+                area += (end - start) as u32;
+                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
+                m = 0;
+            }
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
                 let len = (!(m >> start)).trailing_zeros() as usize;
-                if self.n_runs >= self.max_runs {
-                    return Err(SeedOverflow::Runs);
-                }
-                self.n_runs += 1;
+                runs += 1;
                 let end = start + len;
-                b.add_run(&Run::of(
-                    line,
-                    (self.row0 + k) as u32,
-                    self.col0 as u32,
-                    start,
-                    end,
-                    saturation,
-                ));
+                area += len as u32;
+                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
+            sums.add_row((k - lo) as u32, &row);
+            cols |= g;
             self.taken[k] |= g;
             self.rows.push(g);
         }
+        // (The capacity counted per blob: the same error, the window's
+        // state after it is not used.)
+        if self.n_runs + runs > self.max_runs {
+            return Err(SeedOverflow::Runs);
+        }
+        self.n_runs += runs;
+        let (m, m4) = sums.to_blob_moments();
+        let b = Blob {
+            area,
+            col0: (self.col0 + cols.trailing_zeros() as usize) as u32,
+            row0: (self.row0 + lo) as u32,
+            col1: (self.col0 + 63 - cols.leading_zeros() as usize) as u32,
+            row1: (self.row0 + hi) as u32,
+            max,
+            saturated,
+            m,
+            m4,
+            origin_col: (self.col0 as i64 + origin) as u32,
+        };
         self.spans.push((lo as u32, first, self.rows.len() as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
+    }
+
+    /// Adds to the blob being grown (`grown`) the runs
+    /// of window row `n` that touch `reach` (the pixels of a neighbour row
+    /// and their left and right neighbours); the row's bit if it gained
+    /// pixels (its own neighbours are then to be searched).
+    #[inline(always)]
+    fn spread<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        reach: u64,
+        n: usize,
+    ) -> u64 {
+        let before = self.grown[n];
+        let f = self.fg_row(plane, threshold, n);
+        let add = fill_runs(f, reach & f) & !before;
+        if add == 0 {
+            return 0;
+        }
+        self.grown[n] = before | add;
+        1 << n
     }
 
     /// One past the last column of the run of row `row` holding column
@@ -485,6 +549,25 @@ impl SeedLabeller {
         self.stack.push(k);
         Ok(end)
     }
+}
+
+/// The run of `f` (a row's foreground bits) that holds `bit` (a single
+/// bit of `f`): [`fill_runs`] of one seed, without spreading it a bit at a
+/// time (the seed mostly lies inside a run of several pixels). Upward the
+/// carry of `f + bit` runs through the run's bits; downward the run starts
+/// above the highest background bit below `bit`.
+#[inline(always)]
+fn run_holding(f: u64, bit: u64) -> u64 {
+    debug_assert!(bit.is_power_of_two() && f & bit != 0);
+    let up = f & !f.wrapping_add(bit);
+    let below = bit - 1;
+    let gaps = !f & below;
+    let down = if gaps == 0 {
+        below
+    } else {
+        below & (u64::MAX << (64 - gaps.leading_zeros()))
+    };
+    up | down
 }
 
 /// The runs of `f` (a row's foreground bits) that hold a bit of `seeds`:
@@ -561,6 +644,94 @@ mod tests {
             .collect();
         check(&data, w, (0, 0, w, h));
         check(&data, w, (1, 1, w - 2, h - 2));
+    }
+
+    /// The largest blob of the mask path (a whole 64 × 64 window, its
+    /// moments' largest sums, with the origin at either side) and a
+    /// diamond whose rows start left of its origin: the integer moments
+    /// equal the labeller's `f64` ones.
+    #[test]
+    fn the_largest_masked_blobs_have_the_labellers_moments() {
+        let (w, h) = (66usize, 66usize);
+        let mut data = vec![10u8; w * h];
+        for (i, v) in data.iter_mut().enumerate() {
+            let (c, r) = ((i % w) as i64, (i / w) as i64);
+            if (1..65).contains(&c) && (1..65).contains(&r) {
+                *v = if (c + r) % 7 == 0 { 255 } else { 200 };
+            }
+        }
+        check(&data, w, (1, 1, 64, 64));
+        check(&data, w, (0, 0, 64, 64));
+        let mut diamond = vec![10u8; w * h];
+        for (i, v) in diamond.iter_mut().enumerate() {
+            let (c, r) = ((i % w) as i64, (i / w) as i64);
+            if (c - 32).abs() + (r - 31).abs() <= 31 {
+                *v = 220;
+            }
+        }
+        check(&diamond, w, (0, 0, 64, 64));
+    }
+
+    /// `covers` is "every pixel of the box is in a grown blob", asked
+    /// pixel by pixel with `blob_at`, for boxes inside, across and outside
+    /// the window.
+    #[test]
+    fn a_box_is_covered_when_each_of_its_pixels_is_in_a_blob() {
+        let img = [
+            "..........", //
+            ".######...", //
+            ".######.#.", //
+            ".#####..#.", //
+            "..........", //
+        ];
+        let (w, h) = (img[0].len(), img.len());
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        let plane = window(&data, w, (1, 0, w - 1, h));
+        let t = Threshold::global(100);
+        let mut s = SeedLabeller::new(100, 10, h);
+        s.start(&plane);
+        s.grow(&plane, t, 250, 3, 2).expect("capacity");
+        let (mut yes, mut no) = (0, 0);
+        for (c0, c1, r0, r1) in (0..w + 1).flat_map(|c0| {
+            (c0..w + 1).flat_map(move |c1| {
+                (0..h + 1).flat_map(move |r0| (r0..h + 1).map(move |r1| (c0, c1, r0, r1)))
+            })
+        }) {
+            let plain = (r0..=r1).all(|r| (c0..=c1).all(|c| s.blob_at(c, r).is_some()));
+            assert_eq!(s.covers(c0, c1, r0, r1), plain, "{c0}..={c1} × {r0}..={r1}");
+            if plain {
+                yes += 1;
+            } else {
+                no += 1;
+            }
+        }
+        assert!(yes > 20 && no > 20, "{yes} {no}");
+        // The other blob not grown yet: its pixels are not covered.
+        assert!(!s.covers(8, 8, 2, 3));
+        s.grow(&plane, t, 250, 8, 2).expect("capacity");
+        assert!(s.covers(8, 8, 2, 3));
+    }
+
+    /// The run holding a bit is the seed spread a bit at a time: every
+    /// bit of random rows, dense and sparse, runs through both ends.
+    #[test]
+    fn the_run_holding_a_bit_is_the_seed_spread() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(3);
+        for round in 0..2000 {
+            let f = match round % 4 {
+                0 => rng.next_u64(),
+                1 => rng.next_u64() | rng.next_u64(),
+                2 => rng.next_u64() & rng.next_u64(),
+                _ => [u64::MAX, 1, 1 << 63, u64::MAX >> 1, u64::MAX << 1][round / 4 % 5],
+            };
+            for i in (0..64).filter(|i| f >> i & 1 != 0) {
+                assert_eq!(run_holding(f, 1 << i), fill_runs(f, 1 << i), "{f:#x} {i}");
+            }
+        }
     }
 
     #[test]

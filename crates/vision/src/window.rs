@@ -23,7 +23,7 @@ use crate::detector::{blob_tests, centroid, coded_centre, coded_centroid, read_r
 use crate::label::Blob;
 use crate::measure;
 use crate::num::{ceil_i64, floor_i64, round_i64};
-use crate::pixel::{Pixel, Plane};
+use crate::pixel::{Pixel, Plane, ShortRow};
 use crate::seed::SeedLabeller;
 use crate::{CodeStatus, DetectorOptions, RejectReason, ThresholdResult, Uncertainty};
 use photopose_frame::{ImageView, ViewPixels};
@@ -147,7 +147,7 @@ impl WindowMeasurer {
         }
     }
 
-    fn run<P: Pixel>(
+    fn run<P: ShortRow>(
         &mut self,
         image: &ImageView<'_>,
         data: &[P],
@@ -186,8 +186,17 @@ impl WindowMeasurer {
         {
             return WindowOutcome::Ambiguous;
         }
+        // The gate mostly lies inside the target's blob: when the square
+        // around its disc is covered by the blobs grown, no other blob has
+        // a pixel there and the scan has nothing to find (it cost about
+        // 500 instructions per window).
+        let (c_lo, c_hi) = (ceil_i64(e.col - reach), floor_i64(e.col + reach));
+        let (r_lo, r_hi) = (ceil_i64(e.row - reach), floor_i64(e.row + reach));
+        let covered = c_lo >= 0
+            && r_lo >= 0
+            && seeds.covers(c_lo as usize, c_hi as usize, r_lo as usize, r_hi as usize);
         let mut row = ceil_i64(e.row - reach).max(0) as f64;
-        while row <= e.row + reach {
+        while !covered && row <= e.row + reach {
             let dy = row - e.row;
             let half = (reach * reach - dy * dy).max(0.0).sqrt();
             let lo = ceil_i64(e.col - half).max(0) as usize;
@@ -203,7 +212,7 @@ impl WindowMeasurer {
         }
         let gate2 = e.gate_px * e.gate_px;
         let mut found = None;
-        for blob in self.seeds.blobs() {
+        for (i, blob) in self.seeds.blobs().iter().enumerate() {
             if blob.area < self.options.min_area {
                 continue;
             }
@@ -214,9 +223,9 @@ impl WindowMeasurer {
             if found.is_some() {
                 return WindowOutcome::Ambiguous;
             }
-            found = Some(*blob);
+            found = Some(i);
         }
-        let Some(blob) = found else {
+        let Some(blob) = found.map(|i| &self.seeds.blobs()[i]) else {
             return WindowOutcome::Missing;
         };
         // A blob cut by the core's edge (not the frame's) is larger than
@@ -243,7 +252,7 @@ impl WindowMeasurer {
         ) {
             return WindowOutcome::Rejected(RejectReason::TooLarge);
         }
-        if let Err(reason) = blob_tests(&outer_plane, &blob, &self.options) {
+        if let Err(reason) = blob_tests(&outer_plane, blob, &self.options) {
             return WindowOutcome::Rejected(reason);
         }
         // Near the frame's edge the whole-frame detector keeps a target only
@@ -262,12 +271,12 @@ impl WindowMeasurer {
             // first with the plain window to read the ring (its fourth
             // moment, tested here on this window, is the same but for the
             // rare pixel the smaller window leaves out).
-            return match coded_centroid(&outer_plane, &blob, t, &self.options, max_value) {
-                Ok(m) => WindowOutcome::Found(found_target(&m, &blob, None)),
+            return match coded_centroid(&outer_plane, blob, t, &self.options, max_value) {
+                Ok(m) => WindowOutcome::Found(found_target(&m, blob, None)),
                 Err(reason) => WindowOutcome::Rejected(reason),
             };
         }
-        let m = match centroid(&outer_plane, &blob, t, &self.options, max_value) {
+        let m = match centroid(&outer_plane, blob, t, &self.options, max_value) {
             Ok(m) => m,
             Err(reason) => return WindowOutcome::Rejected(reason),
         };
@@ -297,11 +306,11 @@ impl WindowMeasurer {
             }
         }
         let m = if e.coded {
-            coded_centre(&outer_plane, &blob, t, &self.options, max_value).unwrap_or(m)
+            coded_centre(&outer_plane, blob, t, &self.options, max_value).unwrap_or(m)
         } else {
             m
         };
-        WindowOutcome::Found(found_target(&m, &blob, code))
+        WindowOutcome::Found(found_target(&m, blob, code))
     }
 }
 
@@ -436,6 +445,69 @@ mod tests {
                 other => panic!("{other:?} at {} {}", d.col, d.row),
             }
         }
+    }
+
+    /// The gate's scan is skipped only where the target's blob covers the
+    /// square around the gate: a neighbour whose centre lies inside the
+    /// gate is still found (ambiguous), a prediction off the dot's middle
+    /// (its square reaching past the dot) still measures the dot.
+    #[test]
+    fn the_gate_is_scanned_unless_the_target_covers_it() {
+        let mut s = Scene::new(120, 90, 15.0);
+        for (col, row) in [(40.2, 40.3), (50.6, 40.9)] {
+            let dot = Drawn {
+                col,
+                row,
+                radius: 3.5,
+                view: View::frontal(1.0),
+                code: None,
+                phase: 0.0,
+            };
+            s.draw(&dot, 190.0);
+        }
+        s.blur(0.6);
+        let img = s.to_mono8();
+        let options = DetectorOptions::default();
+        let mut det = Detector::new(img.width(), img.height(), options).unwrap();
+        let view = img.view();
+        // (The whole frame rejects these dots: too close to read their
+        // rings. Its threshold is what the windows need.)
+        let t = det.detect(view).unwrap().threshold;
+        let first = (40.2, 40.3);
+        let mut w = WindowMeasurer::new(options);
+        let covered = |w: &WindowMeasurer, e: &Expected| {
+            let reach = e.gate_px + 1.0;
+            w.seeds.covers(
+                ceil_i64(e.col - reach) as usize,
+                floor_i64(e.col + reach) as usize,
+                ceil_i64(e.row - reach) as usize,
+                floor_i64(e.row + reach) as usize,
+            )
+        };
+        let at = |col: f64, row: f64, gate_px: f64| Expected {
+            col,
+            row,
+            gate_px,
+            radius_px: 3.5,
+            coded: false,
+            read_code: false,
+        };
+        // On the dot, a narrow gate: covered, the dot found.
+        let e = at(first.0 + 0.3, first.1 - 0.2, 1.0);
+        let WindowOutcome::Found(dot) = w.measure(&view, &t, &e) else {
+            panic!("{:?}", w.measure(&view, &t, &e));
+        };
+        assert!((dot.col - first.0).abs() < 0.1 && (dot.row - first.1).abs() < 0.1);
+        assert!(covered(&w, &e));
+        // Off the dot's middle: the square reaches past the dot, the gate
+        // is scanned and holds the dot alone.
+        let e = at(first.0 + 2.2, first.1 + 0.4, 2.5);
+        assert_eq!(w.measure(&view, &t, &e), WindowOutcome::Found(dot));
+        assert!(!covered(&w, &e));
+        // A gate that holds the neighbour's centre too: ambiguous.
+        let e = at(first.0, first.1, 12.0);
+        assert_eq!(w.measure(&view, &t, &e), WindowOutcome::Ambiguous);
+        assert!(!covered(&w, &e));
     }
 
     #[test]
