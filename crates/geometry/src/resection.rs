@@ -419,13 +419,19 @@ impl Resection {
                     need: 4,
                 });
             }
-            let q = nm.n.cholesky().ok_or(GeometryError::Singular)?.inverse();
+            let ch = nm.n.cholesky().ok_or(GeometryError::Singular)?;
+            let q = ch.inverse();
+            // L⁻¹ of N = L Lᵀ (L lower triangular with a positive diagonal).
+            let l_inv = ch
+                .l()
+                .solve_lower_triangular(&Matrix6::identity())
+                .ok_or(GeometryError::Singular)?;
             let sigma0 = (nm.cost / redundancy as f64).sqrt();
             let sigma_test = sigma0.max(self.options.sigma_floor_px * self.pixel_size);
             // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)).
             let worst = self
                 .lin
-                .worst_standardised(&q, sigma_test)
+                .worst_standardised(&l_inv, sigma_test)
                 .filter(|(_, w)| *w > self.options.snooping_critical)
                 .map(|(i, w)| (self.lin.idx[i], w));
             match worst {
