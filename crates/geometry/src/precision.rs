@@ -199,11 +199,35 @@ impl UncertainProjector {
     /// front of the camera.
     #[inline]
     pub fn project(&self, p: &Vector3<f64>) -> Option<UncertainProjection> {
-        let (c, r) = (self.c, &self.exterior.rotation);
-        let z = r * (p - self.exterior.center);
+        let (camera, ideal) = self.project_point(p)?;
+        Some(UncertainProjection {
+            ideal,
+            covariance: self.covariance_at(&camera),
+            camera,
+        })
+    }
+
+    /// The first half of [`UncertainProjector::project`]: `p` in camera
+    /// coordinates and its ideal image point, without the covariance
+    /// ([`UncertainProjector::covariance_at`] gives it, the same bits).
+    /// Tracking asks for the covariance only of the points that land on
+    /// the sensor.
+    #[inline]
+    pub fn project_point(&self, p: &Vector3<f64>) -> Option<(Vector3<f64>, Vector2<f64>)> {
+        let c = self.c;
+        let z = self.exterior.rotation * (p - self.exterior.center);
         if z.z >= 0.0 {
             return None;
         }
+        let inv = 1.0 / z.z;
+        Some((z, Vector2::new(-c * (z.x * inv), -c * (z.y * inv))))
+    }
+
+    /// The covariance of the ideal image point of the camera point `z`
+    /// (`z.z < 0`, from [`UncertainProjector::project_point`]), mm².
+    #[inline]
+    pub fn covariance_at(&self, z: &Vector3<f64>) -> Matrix2<f64> {
+        let (c, r) = (self.c, &self.exterior.rotation);
         let inv = 1.0 / z.z;
         let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
         // Column k of J as one SIMD pair: its two rows are the same
@@ -245,12 +269,7 @@ impl UncertainProjector {
             off += t[m] * swap(j[m]);
         }
         let ([s00, s11], [s01, s10]) = (diag.to_array(), off.to_array());
-        let covariance = Matrix2::new(s00, s01, s10, s11);
-        Some(UncertainProjection {
-            ideal: Vector2::new(-c * gx, -c * gy),
-            covariance,
-            camera: z,
-        })
+        Matrix2::new(s00, s01, s10, s11)
     }
 }
 

@@ -153,10 +153,10 @@ impl Locator {
         self.windows.clear();
         let projector = UncertainProjector::new(c, e, &prior.covariance);
         for (fi, t) in self.field.targets().iter().enumerate() {
-            let Some(u) = projector.project(&t.position) else {
+            // The covariance only of a target that lands on the sensor.
+            let Some((camera, ideal)) = projector.project_point(&t.position) else {
                 continue;
             };
-            let ideal = u.ideal;
             let Some(measured) = self.camera.distort_seeded(ideal, &mut self.seeds[fi]) else {
                 continue;
             };
@@ -164,9 +164,9 @@ impl Locator {
             if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
                 continue;
             }
-            let sigma_px = crate::largest_sigma(&u.covariance) / px;
+            let sigma_px = crate::largest_sigma(&projector.covariance_at(&camera)) / px;
             // `R (P − C)` of the projection, not computed again.
-            let depth = u.camera.z.abs();
+            let depth = camera.z.abs();
             let scale = c / (depth * px);
             let spacing = self.spacing[fi] * scale;
             let gate =
@@ -186,7 +186,7 @@ impl Locator {
                 expected,
                 spacing,
                 ideal,
-                camera: u.camera,
+                camera,
             });
         }
         for w in self.windows.iter().take(PREFETCH_AHEAD) {
