@@ -731,13 +731,16 @@ fn read_with<P: Pixel, const FAST: bool>(
                 return out;
             }
             let bit = mean > thr;
-            if s.iter().any(|&v| {
-                if bit {
-                    v < thr + sample_margin
-                } else {
-                    v > thr - sample_margin
-                }
-            }) {
+            // Each sample on its sector's side by the margin (the bound
+            // formed once, the same sum as per sample).
+            let off_side = if bit {
+                let low = thr + sample_margin;
+                s.iter().any(|&v| v < low)
+            } else {
+                let high = thr - sample_margin;
+                s.iter().any(|&v| v > high)
+            };
+            if off_side {
                 out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
                 return out;
             }
