@@ -29,6 +29,8 @@ const NONE: u32 = u32::MAX;
 /// Largest width and height of a window grown on row masks.
 const MASK_SIDE: usize = 64;
 // (Its blobs' moments are summed exactly: `SmallMoments`.)
+/// Rows of all the blobs of a window grown on row masks, at most.
+const ROWS: usize = MASK_SIDE * MASK_SIDE;
 const _: () = assert!(MASK_SIDE <= SMALL_SIDE);
 
 /// Why growing stopped.
@@ -77,7 +79,9 @@ pub struct SeedLabeller {
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
     spans: Vec<(u32, u32, u32)>,
-    rows: Vec<u64>,
+    rows: Box<[u64; ROWS]>,
+    /// Mask path: rows of `rows` in use.
+    n_rows: usize,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
 }
@@ -106,7 +110,8 @@ impl SeedLabeller {
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
             // (Every row of a blob holds a pixel no other blob holds.)
-            rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
+            rows: Box::new([0; ROWS]),
+            n_rows: 0,
             n_runs: 0,
         }
     }
@@ -130,7 +135,7 @@ impl SeedLabeller {
             self.taken[..plane.height].fill(0);
             self.height = plane.height;
             self.spans.clear();
-            self.rows.clear();
+            self.n_rows = 0;
             self.n_runs = 0;
         } else {
             self.head.clear();
@@ -419,14 +424,14 @@ impl SeedLabeller {
         let origin = self.grown[lo].trailing_zeros() as i64;
         let mut sums = SmallMoments::ZERO;
         let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
-        let first = self.rows.len() as u32;
+        let first = self.n_rows;
+        debug_assert!(first + hi - lo < ROWS);
         // (A run's statistics are at most 64 pixels': no clamping.)
         let (max, saturated) =
             P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
-        for k in lo..=hi {
+        // (From the last row up: `SmallMoments::add_row_up`.)
+        for k in (lo..=hi).rev() {
             let g = std::mem::take(&mut self.grown[k]);
-            let mut row: RowSums = [f64x2::ZERO; 3];
-            let mut m = g;
             if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
                 // One run (the rule): its ends straight from the mask.
                 let (start, end) = (
@@ -435,9 +440,19 @@ impl SeedLabeller {
                 );
                 runs += 1;
                 area += (end - start) as u32;
-                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
-                m = 0;
+                sums.add_row_up(&SmallMoments::run(
+                    start as i64 - origin,
+                    end as i64 - origin,
+                ));
+                cols |= g;
+                self.taken[k] |= g;
+                // (Below `ROWS` rows in all: every row of a blob holds a
+                // pixel of the window no other blob holds.)
+                self.rows[(first + k - lo) % ROWS] = g;
+                continue;
             }
+            let mut row: RowSums = [f64x2::ZERO; 3];
+            let mut m = g;
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
                 let len = (!(m >> start)).trailing_zeros() as usize;
@@ -447,11 +462,12 @@ impl SeedLabeller {
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
-            sums.add_row((k - lo) as u32, &row);
+            sums.add_row_up(&row);
             cols |= g;
             self.taken[k] |= g;
-            self.rows.push(g);
+            self.rows[(first + k - lo) % ROWS] = g;
         }
+        self.n_rows = first + hi - lo + 1;
         // (The capacity counted per blob: the same error, the window's
         // state after it is not used.)
         if self.n_runs + runs > self.max_runs {
@@ -471,7 +487,8 @@ impl SeedLabeller {
             m4,
             origin_col: (self.col0 as i64 + origin) as u32,
         };
-        self.spans.push((lo as u32, first, self.rows.len() as u32));
+        self.spans
+            .push((lo as u32, first as u32, self.n_rows as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
     }
