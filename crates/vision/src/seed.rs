@@ -387,37 +387,47 @@ impl SeedLabeller {
             return Err(SeedOverflow::Blobs);
         }
         // The runs of each row that touch the blob's pixels of the row
-        // above or below (8-connectivity: within one column), row after
-        // row until no row gains a pixel.
-        let last = plane.height - 1;
+        // above or below (8-connectivity: within one column). A blob of one
+        // run per row (the rule) is found in one pass down from the seed's
+        // row and one up, each row from the one before it; the pixels of a
+        // row next to the following row's runs that the pass did not take
+        // (a branch turning back) are noted, and only then are the rows
+        // searched again until none gains a pixel (`flood`). (No list of
+        // pending rows per step: SeedLabeller::grow 26.03 M -> 23.67 M in
+        // tracking.)
         // (`grown` is all 0 between grows: no test which rows the blob
         // holds yet per step.)
         debug_assert!(self.grown.iter().all(|&g| g == 0));
-        self.grown[r] = run_holding(self.fg[r], bit);
-        // The rows whose neighbours are still to be searched, as a mask
-        // (no list to keep: a row that gains pixels again is still
-        // pending), and the rows the blob holds.
-        let mut todo = 1u64 << r;
-        let mut held = todo;
-        while todo != 0 {
-            let k = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
-            let reach = {
-                let g = self.grown[k];
-                g | g << 1 | g >> 1
-            };
-            if k > 0 {
-                todo |= self.spread(plane, threshold, reach, k - 1);
+        let seed = run_holding(self.fg[r], bit);
+        self.grown[r] = seed;
+        let mut missed = 0u64;
+        let (mut lo, mut hi) = (r, r);
+        for step in [1, usize::MAX] {
+            let (mut k, mut g) = (r, seed);
+            loop {
+                // (Past either end of the window: at least `height`.)
+                let n = k.wrapping_add(step);
+                if n >= plane.height {
+                    break;
+                }
+                let f = self.fg_row(plane, threshold, n);
+                let add = fill_runs(f, reach(g) & f);
+                if add == 0 {
+                    break;
+                }
+                missed |= reach(add) & self.fg[k] & !g;
+                self.grown[n] = add;
+                (k, g) = (n, add);
             }
-            if k < last {
-                todo |= self.spread(plane, threshold, reach, k + 1);
+            if step == 1 {
+                hi = k;
+            } else {
+                lo = k;
             }
-            held |= todo;
         }
-        let (lo, hi) = (
-            held.trailing_zeros() as usize,
-            MASK_SIDE - 1 - held.leading_zeros() as usize,
-        );
+        if missed != 0 {
+            (lo, hi) = self.flood(plane, threshold, lo, hi);
+        }
         // The statistics: the moments summed exactly a row at a time
         // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
         // the grey-value statistics over all the rows at once.
@@ -493,6 +503,38 @@ impl SeedLabeller {
         Ok(Some(self.blobs.len() - 1))
     }
 
+    /// The blob being grown (`grown`, rows `lo..=hi`, connected) made
+    /// whole: the rows whose neighbours are still to be searched kept as a
+    /// mask (a row that gains pixels again is still pending), every row
+    /// searched once at first. The rows the blob then holds.
+    fn flood<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        lo: usize,
+        hi: usize,
+    ) -> (usize, usize) {
+        let last = plane.height - 1;
+        let mut todo = (u64::MAX >> (MASK_SIDE - 1 - (hi - lo))) << lo;
+        let mut held = todo;
+        while todo != 0 {
+            let k = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let reach = reach(self.grown[k]);
+            if k > 0 {
+                todo |= self.spread(plane, threshold, reach, k - 1);
+            }
+            if k < last {
+                todo |= self.spread(plane, threshold, reach, k + 1);
+            }
+            held |= todo;
+        }
+        (
+            held.trailing_zeros() as usize,
+            MASK_SIDE - 1 - held.leading_zeros() as usize,
+        )
+    }
+
     /// Adds to the blob being grown (`grown`) the runs
     /// of window row `n` that touch `reach` (the pixels of a neighbour row
     /// and their left and right neighbours); the row's bit if it gained
@@ -566,6 +608,13 @@ impl SeedLabeller {
         self.stack.push(k);
         Ok(end)
     }
+}
+
+/// The pixels of a row touching those of `g` (of the row above or below,
+/// 8-connectivity): `g` and its left and right neighbours.
+#[inline(always)]
+fn reach(g: u64) -> u64 {
+    g | g << 1 | g >> 1
 }
 
 /// The run of `f` (a row's foreground bits) that holds `bit` (a single
@@ -749,6 +798,34 @@ mod tests {
                 assert_eq!(run_holding(f, 1 << i), fill_runs(f, 1 << i), "{f:#x} {i}");
             }
         }
+    }
+
+    /// The passes down and up from the seed's row miss a branch that
+    /// turns back (the far arm of a U grown from the other's top): it is
+    /// found by searching the rows again, the blob whole.
+    #[test]
+    fn a_branch_turning_back_is_found() {
+        let img = [
+            "#.#.", //
+            "#.#.", //
+            "###.", //
+        ];
+        let (w, h) = (img[0].len(), img.len());
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        let plane = Plane::whole(&data, w, h);
+        let t = Threshold::global(100);
+        for (col, row) in [(0, 0), (2, 0), (1, 2)] {
+            let mut s = SeedLabeller::new(100, 10, h);
+            s.start(&plane);
+            assert_eq!(s.grow(&plane, t, 250, col, row), Ok(Some(0)));
+            assert_eq!(s.blobs()[0].area, 7, "{col} {row}");
+            assert_eq!(s.blob_at(2, 0), Some(0));
+            assert!(s.covers(0, 0, 0, 2) && s.covers(2, 2, 0, 2));
+        }
+        check(&data, w, (0, 0, w, h));
     }
 
     #[test]
