@@ -29,6 +29,8 @@ const NONE: u32 = u32::MAX;
 /// Largest width and height of a window grown on row masks.
 const MASK_SIDE: usize = 64;
 // (Its blobs' moments are summed exactly: `SmallMoments`.)
+/// Rows of all the blobs of a window grown on row masks, at most.
+const ROWS: usize = MASK_SIDE * MASK_SIDE;
 const _: () = assert!(MASK_SIDE <= SMALL_SIDE);
 
 /// Why growing stopped.
@@ -77,7 +79,9 @@ pub struct SeedLabeller {
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
     spans: Vec<(u32, u32, u32)>,
-    rows: Vec<u64>,
+    rows: Box<[u64; ROWS]>,
+    /// Mask path: rows of `rows` in use.
+    n_rows: usize,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
 }
@@ -106,7 +110,8 @@ impl SeedLabeller {
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
             // (Every row of a blob holds a pixel no other blob holds.)
-            rows: Vec::with_capacity(MASK_SIDE * MASK_SIDE),
+            rows: Box::new([0; ROWS]),
+            n_rows: 0,
             n_runs: 0,
         }
     }
@@ -130,7 +135,7 @@ impl SeedLabeller {
             self.taken[..plane.height].fill(0);
             self.height = plane.height;
             self.spans.clear();
-            self.rows.clear();
+            self.n_rows = 0;
             self.n_runs = 0;
         } else {
             self.head.clear();
@@ -382,51 +387,61 @@ impl SeedLabeller {
             return Err(SeedOverflow::Blobs);
         }
         // The runs of each row that touch the blob's pixels of the row
-        // above or below (8-connectivity: within one column), row after
-        // row until no row gains a pixel.
-        let last = plane.height - 1;
+        // above or below (8-connectivity: within one column). A blob of one
+        // run per row (the rule) is found in one pass down from the seed's
+        // row and one up, each row from the one before it; the pixels of a
+        // row next to the following row's runs that the pass did not take
+        // (a branch turning back) are noted, and only then are the rows
+        // searched again until none gains a pixel (`flood`). (No list of
+        // pending rows per step: SeedLabeller::grow 26.03 M -> 23.67 M in
+        // tracking.)
         // (`grown` is all 0 between grows: no test which rows the blob
         // holds yet per step.)
         debug_assert!(self.grown.iter().all(|&g| g == 0));
-        self.grown[r] = run_holding(self.fg[r], bit);
-        // The rows whose neighbours are still to be searched, as a mask
-        // (no list to keep: a row that gains pixels again is still
-        // pending), and the rows the blob holds.
-        let mut todo = 1u64 << r;
-        let mut held = todo;
-        while todo != 0 {
-            let k = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
-            let reach = {
-                let g = self.grown[k];
-                g | g << 1 | g >> 1
-            };
-            if k > 0 {
-                todo |= self.spread(plane, threshold, reach, k - 1);
+        let seed = run_holding(self.fg[r], bit);
+        self.grown[r] = seed;
+        let mut missed = 0u64;
+        let (mut lo, mut hi) = (r, r);
+        for step in [1, usize::MAX] {
+            let (mut k, mut g) = (r, seed);
+            loop {
+                // (Past either end of the window: at least `height`.)
+                let n = k.wrapping_add(step);
+                if n >= plane.height {
+                    break;
+                }
+                let f = self.fg_row(plane, threshold, n);
+                let add = fill_runs(f, reach(g) & f);
+                if add == 0 {
+                    break;
+                }
+                missed |= reach(add) & self.fg[k] & !g;
+                self.grown[n] = add;
+                (k, g) = (n, add);
             }
-            if k < last {
-                todo |= self.spread(plane, threshold, reach, k + 1);
+            if step == 1 {
+                hi = k;
+            } else {
+                lo = k;
             }
-            held |= todo;
         }
-        let (lo, hi) = (
-            held.trailing_zeros() as usize,
-            MASK_SIDE - 1 - held.leading_zeros() as usize,
-        );
+        if missed != 0 {
+            (lo, hi) = self.flood(plane, threshold, lo, hi);
+        }
         // The statistics: the moments summed exactly a row at a time
         // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
         // the grey-value statistics over all the rows at once.
         let origin = self.grown[lo].trailing_zeros() as i64;
         let mut sums = SmallMoments::ZERO;
         let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
-        let first = self.rows.len() as u32;
+        let first = self.n_rows;
+        debug_assert!(first + hi - lo < ROWS);
         // (A run's statistics are at most 64 pixels': no clamping.)
         let (max, saturated) =
             P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
-        for k in lo..=hi {
+        // (From the last row up: `SmallMoments::add_row_up`.)
+        for k in (lo..=hi).rev() {
             let g = std::mem::take(&mut self.grown[k]);
-            let mut row: RowSums = [f64x2::ZERO; 3];
-            let mut m = g;
             if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
                 // One run (the rule): its ends straight from the mask.
                 let (start, end) = (
@@ -435,9 +450,19 @@ impl SeedLabeller {
                 );
                 runs += 1;
                 area += (end - start) as u32;
-                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
-                m = 0;
+                sums.add_row_up(&SmallMoments::run(
+                    start as i64 - origin,
+                    end as i64 - origin,
+                ));
+                cols |= g;
+                self.taken[k] |= g;
+                // (Below `ROWS` rows in all: every row of a blob holds a
+                // pixel of the window no other blob holds.)
+                self.rows[(first + k - lo) % ROWS] = g;
+                continue;
             }
+            let mut row: RowSums = [f64x2::ZERO; 3];
+            let mut m = g;
             while m != 0 {
                 let start = m.trailing_zeros() as usize;
                 let len = (!(m >> start)).trailing_zeros() as usize;
@@ -447,11 +472,12 @@ impl SeedLabeller {
                 SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
                 m &= !(u64::MAX >> (MASK_SIDE - end));
             }
-            sums.add_row((k - lo) as u32, &row);
+            sums.add_row_up(&row);
             cols |= g;
             self.taken[k] |= g;
-            self.rows.push(g);
+            self.rows[(first + k - lo) % ROWS] = g;
         }
+        self.n_rows = first + hi - lo + 1;
         // (The capacity counted per blob: the same error, the window's
         // state after it is not used.)
         if self.n_runs + runs > self.max_runs {
@@ -471,9 +497,42 @@ impl SeedLabeller {
             m4,
             origin_col: (self.col0 as i64 + origin) as u32,
         };
-        self.spans.push((lo as u32, first, self.rows.len() as u32));
+        self.spans
+            .push((lo as u32, first as u32, self.n_rows as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
+    }
+
+    /// The blob being grown (`grown`, rows `lo..=hi`, connected) made
+    /// whole: the rows whose neighbours are still to be searched kept as a
+    /// mask (a row that gains pixels again is still pending), every row
+    /// searched once at first. The rows the blob then holds.
+    fn flood<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        lo: usize,
+        hi: usize,
+    ) -> (usize, usize) {
+        let last = plane.height - 1;
+        let mut todo = (u64::MAX >> (MASK_SIDE - 1 - (hi - lo))) << lo;
+        let mut held = todo;
+        while todo != 0 {
+            let k = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let reach = reach(self.grown[k]);
+            if k > 0 {
+                todo |= self.spread(plane, threshold, reach, k - 1);
+            }
+            if k < last {
+                todo |= self.spread(plane, threshold, reach, k + 1);
+            }
+            held |= todo;
+        }
+        (
+            held.trailing_zeros() as usize,
+            MASK_SIDE - 1 - held.leading_zeros() as usize,
+        )
     }
 
     /// Adds to the blob being grown (`grown`) the runs
@@ -549,6 +608,13 @@ impl SeedLabeller {
         self.stack.push(k);
         Ok(end)
     }
+}
+
+/// The pixels of a row touching those of `g` (of the row above or below,
+/// 8-connectivity): `g` and its left and right neighbours.
+#[inline(always)]
+fn reach(g: u64) -> u64 {
+    g | g << 1 | g >> 1
 }
 
 /// The run of `f` (a row's foreground bits) that holds `bit` (a single
@@ -732,6 +798,34 @@ mod tests {
                 assert_eq!(run_holding(f, 1 << i), fill_runs(f, 1 << i), "{f:#x} {i}");
             }
         }
+    }
+
+    /// The passes down and up from the seed's row miss a branch that
+    /// turns back (the far arm of a U grown from the other's top): it is
+    /// found by searching the rows again, the blob whole.
+    #[test]
+    fn a_branch_turning_back_is_found() {
+        let img = [
+            "#.#.", //
+            "#.#.", //
+            "###.", //
+        ];
+        let (w, h) = (img[0].len(), img.len());
+        let data: Vec<u8> = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        let plane = Plane::whole(&data, w, h);
+        let t = Threshold::global(100);
+        for (col, row) in [(0, 0), (2, 0), (1, 2)] {
+            let mut s = SeedLabeller::new(100, 10, h);
+            s.start(&plane);
+            assert_eq!(s.grow(&plane, t, 250, col, row), Ok(Some(0)));
+            assert_eq!(s.blobs()[0].area, 7, "{col} {row}");
+            assert_eq!(s.blob_at(2, 0), Some(0));
+            assert!(s.covers(0, 0, 0, 2) && s.covers(2, 2, 0, 2));
+        }
+        check(&data, w, (0, 0, w, h));
     }
 
     #[test]
