@@ -418,16 +418,15 @@ impl Window {
             let last = first + spans.len() - 1;
             let (lo, hi) = (wr0.max(first), wr1.min(last));
             if lo <= hi {
+                // (The rows' lane 0 by the stride, not by row.)
+                let mut at = (lo - plane.row0) * stride + pw;
+                let base = (first_col + pw as i64) as isize;
                 for (row, sp) in (lo..=hi).zip(&spans[lo - first..]) {
-                    let (a, b) = (sp[4] as i64, sp[5] as i64);
+                    let (a, b) = (sp[4], sp[5]);
                     if a <= b {
-                        m.row(
-                            plane.row(row),
-                            (a - first_col) as usize,
-                            (b - first_col) as usize,
-                            row,
-                        );
+                        m.lanes(&plane.data, at, a as isize - base, b as isize - base, row);
                     }
+                    at += stride;
                 }
             }
         });
@@ -648,8 +647,23 @@ impl<const B: usize> Lanes<B> {
 impl<const B: usize> Moments<u8> for Lanes<B> {
     #[inline(always)]
     fn row(&mut self, line: &[u8], a: usize, b: usize, row: usize) {
-        debug_assert!(a >= self.p && b < self.p + 16 * B && row - self.r0 < Self::ROWS);
-        debug_assert!(row >= self.next);
+        debug_assert!(a >= self.p && b < self.p + 16 * B);
+        let (lo, hi) = ((a - self.p) as isize, (b - self.p) as isize);
+        self.lanes(line, self.p, lo, hi, row);
+    }
+
+    fn sums(self) -> ([f64; 6], [f64; 6]) {
+        self.sums()
+    }
+}
+
+impl<const B: usize> Lanes<B> {
+    /// [`Moments::row`] of the lanes `lo..=hi` (`0 ≤ lo ≤ hi < 16 B`) of
+    /// the row whose lane 0 is `data[at]`.
+    #[inline(always)]
+    fn lanes(&mut self, data: &[u8], at: usize, lo: isize, hi: isize, row: usize) {
+        debug_assert!(0 <= lo && lo <= hi && hi < 16 * B as isize);
+        debug_assert!(row >= self.next && row - self.r0 < Self::ROWS);
         // Rows left out (no pixel) still step the running sums.
         while self.next < row {
             self.a2 += self.a1;
@@ -658,12 +672,11 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
             self.next += 1;
         }
         self.next += 1;
-        let (lo, hi) = ((a - self.p) as isize, (b - self.p) as isize);
         let ones = i16x8::splat(1);
         let (mut pw, mut qw) = (i32x4::ZERO, i32x4::ZERO);
         for (i, col) in self.col.iter_mut().enumerate() {
             let off = 16 * i as isize;
-            let v = masked16(line, self.p + 16 * i, lo - off, hi - off);
+            let v = masked16(data, at + 16 * i, lo - off, hi - off);
             let half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
             for h in 0..2 {
                 col[h] += half[h];
@@ -695,6 +708,7 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
         s[5] += j * l1;
     }
 
+    /// See [`Moments::sums`].
     fn sums(self) -> ([f64; 6], [f64; 6]) {
         let (mut c0, mut c1, mut c2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
         for (i, col) in self.col.iter().enumerate() {
