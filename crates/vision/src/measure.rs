@@ -424,7 +424,7 @@ impl Window {
                 for (row, sp) in (lo..=hi).zip(&spans[lo - first..]) {
                     let (a, b) = (sp[4], sp[5]);
                     if a <= b {
-                        m.lanes(&plane.data, at, a as isize - base, b as isize - base, row);
+                        m.lanes(plane.data, at, a as isize - base, b as isize - base, row);
                     }
                     at += stride;
                 }
