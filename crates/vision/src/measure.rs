@@ -438,8 +438,31 @@ impl Window {
 #[inline(always)]
 fn lanes(lo: i64, hi: i64) -> u32 {
     debug_assert!(0 <= lo && lo <= hi && hi <= 31);
-    (u32::MAX >> (31 - hi as u32)) & (u32::MAX << lo as u32)
+    // (From two tables: fewer instructions than two shifts by `cl`.)
+    FROM_BIT[lo as usize & 31] & UP_TO_BIT[hi as usize & 31]
 }
+
+/// `FROM_BIT[i]`: the bits `i..32` of a `u32`.
+const FROM_BIT: [u32; 32] = {
+    let mut t = [0; 32];
+    let mut i = 0;
+    while i < 32 {
+        t[i] = u32::MAX << i;
+        i += 1;
+    }
+    t
+};
+
+/// `UP_TO_BIT[i]`: the bits `0..=i` of a `u32`.
+const UP_TO_BIT: [u32; 32] = {
+    let mut t = [0; 32];
+    let mut i = 0;
+    while i < 32 {
+        t[i] = u32::MAX >> (31 - i);
+        i += 1;
+    }
+    t
+};
 
 /// Where [`Window::sums`] puts the window's pixels: the exact integer sums
 /// `Σw·(1, k, k², j, j², k j)` and `Σ1·(...)` of the weights `w` and the
