@@ -979,22 +979,34 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     let (qxx, qyy, qxy) = (cyy / (4.0 * det), cxx / (4.0 * det), -cxy / (4.0 * det));
     let (s_in, s_out) = (scale * scale, bg_outer * bg_outer);
     // Window: the box grown by GROW (and one more pixel for the background).
-    let g = ceil_i64(grow) + 2;
+    // (The window's integer bounds from `⌈grow⌉` and `⌊grow⌋` instead of
+    // eight conversions of floats: `⌈n − grow⌉ = n − ⌊grow⌋` and so on.)
+    let (cg, fg) = (ceil_i64(grow), floor_i64(grow));
+    let g = cg + 2;
     let (first_col, first_row) = (plane.col0 as i64, plane.row0 as i64);
     let (last_col, last_row) = (plane.last_col() as i64, plane.last_row());
     let c0 = (blob.col0 as i64 - g).max(first_col);
     let r0 = (blob.row0 as i64 - g).max(first_row) as usize;
     let c1 = (blob.col1 as i64 + g).min(last_col);
     let r1 = ((blob.row1 as i64 + g) as usize).min(last_row);
-    let (wc0, wr0) = (blob.col0 as f64 - grow, blob.row0 as f64 - grow);
-    let (wc1, wr1) = (blob.col1 as f64 + grow, blob.row1 as f64 + grow);
-    // Columns of the box proper (`wc0 ≤ col ≤ wc1`), for the background.
-    let (bc0, bc1) = (c0.max(ceil_i64(wc0)), c1.min(floor_i64(wc1)));
-    // Rows and columns of the weighted window.
-    let wr0i = wr0.max(first_row as f64) as usize;
-    let wr1i = (wr1 as usize).min(last_row);
-    let wc0i = wc0.max(first_col as f64) as i64;
-    let wc1i = (wc1 as i64).min(last_col);
+    let (wr0, wr1) = (blob.row0 as f64 - grow, blob.row1 as f64 + grow);
+    // Columns of the box proper (`col0 − grow ≤ col ≤ col1 + grow`), for
+    // the background.
+    let [bc0, bc1, wc0i, wc1i] = grown(
+        (blob.col0 as i64, blob.col1 as i64),
+        grow,
+        (cg, fg),
+        (first_col, last_col),
+    );
+    let (bc0, bc1) = (c0.max(bc0), c1.min(bc1));
+    // Rows of the weighted window.
+    let [_, _, wr0i, wr1i] = grown(
+        (blob.row0 as i64, blob.row1 as i64),
+        grow,
+        (cg, fg),
+        (first_row, last_row as i64),
+    );
+    let (wr0i, wr1i) = (wr0i as usize, wr1i.max(0) as usize);
     let window = Window {
         q: Conic {
             qxx,
@@ -1077,6 +1089,27 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
         background,
         kurtosis,
     })
+}
+
+/// For a blob's extent `lo..=hi` (columns or rows) grown by `grow`, with
+/// `⌈grow⌉, ⌊grow⌋` in `cg, fg`, in a plane's `first..=last`: `[⌈lo −
+/// grow⌉, ⌊hi + grow⌋]` and the window's `[max(lo − grow, first), min(hi
+/// + grow, last)]` rounded towards 0, in integers (`⌈n − x⌉ = n − ⌊x⌋`;
+/// `lo ≥ first ≥ 0`).
+#[inline(always)]
+fn grown(
+    (lo, hi): (i64, i64),
+    grow: f64,
+    (cg, fg): (i64, i64),
+    (first, last): (i64, i64),
+) -> [i64; 4] {
+    let top = if grow >= 0.0 {
+        hi + fg
+    } else {
+        // (Rounded towards 0, not down.)
+        (hi as f64 + grow) as i64
+    };
+    [lo - fg, hi + fg, (lo - cg).max(first), top.min(last)]
 }
 
 /// [`Window::sums`] with the window's sums about the pixel `origin`
@@ -1371,6 +1404,32 @@ mod tests {
                     samples.add(part);
                 }
                 assert_eq!(counts.quantile(level), samples.quantile(level), "{case}");
+            }
+        }
+    }
+
+    /// The window's integer bounds against the floats they stand for.
+    #[test]
+    fn grown_bounds_are_the_float_ones() {
+        for grow in [-3.0f64, -1.5, -0.25, 0.0, 0.5, 1.5, 2.0, 2.75, 4.0] {
+            let (cg, fg) = (grow.ceil() as i64, grow.floor() as i64);
+            for first in [0i64, 3] {
+                for lo in first..first + 8 {
+                    for hi in lo..lo + 6 {
+                        let last = first + 9;
+                        let (wlo, whi) = (lo as f64 - grow, hi as f64 + grow);
+                        let want = [
+                            wlo.ceil() as i64,
+                            whi.floor() as i64,
+                            wlo.max(first as f64) as i64,
+                            (whi as i64).min(last),
+                        ];
+                        let got = grown((lo, hi), grow, (cg, fg), (first, last));
+                        assert_eq!(got, want, "{grow} {first} {lo} {hi}");
+                        // Rows: rounded towards 0 as `usize`.
+                        assert_eq!(got[3].max(0) as usize, (whi as usize).min(last as usize));
+                    }
+                }
             }
         }
     }
