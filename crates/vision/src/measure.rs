@@ -300,9 +300,11 @@ impl Window {
         let mut first = r0;
         while first <= r1 {
             let last = r1.min(first + SPAN_BLOCK - 1);
-            for (i, pair) in spans[..=last - first].chunks_mut(2).enumerate() {
-                let top = (first + 2 * i) as i64 as f64;
-                let rows = f64x2::new([top, top + 1.0]);
+            // (The rows as floats stepped by 2: exact integers.)
+            let top = first as f64;
+            let mut rows = f64x2::new([top - 2.0, top - 1.0]);
+            for pair in spans[..=last - first].chunks_mut(2) {
+                rows += f64x2::splat(2.0);
                 let [ia, ib, oa, ob] = q.spans(rows - f64x2::splat(self.by), self.s_in, self.s_out);
                 let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
                 // (Outside their rows the hole and the window are `(1, 0)`.)
@@ -1405,6 +1407,59 @@ mod tests {
                 }
                 assert_eq!(counts.quantile(level), samples.quantile(level), "{case}");
             }
+        }
+    }
+
+    /// The rows [`Window::blocks`] gives (stepped as floats, blocks of
+    /// [`SPAN_BLOCK`]) against each row's spans on its own.
+    #[test]
+    fn blocks_give_every_row_its_spans() {
+        let mut rng = Rng::new(4);
+        for case in 0..200 {
+            let (cxx, cyy) = (rng.range(0.5, 200.0), rng.range(0.5, 200.0));
+            let cxy = rng.range(-0.9, 0.9) * (cxx * cyy).sqrt();
+            let det = cxx * cyy - cxy * cxy;
+            let qxx = cyy / (4.0 * det);
+            let q = Conic {
+                qxx,
+                qyy: cxx / (4.0 * det),
+                qxy: -cxy / (4.0 * det),
+                inv_qxx: 1.0 / qxx,
+                bx: rng.range(100.0, 140.0),
+            };
+            let by = rng.range(100.0, 140.0);
+            let r0 = 60 + (rng.next_u64() % 20) as usize;
+            let r1 = r0 + (rng.next_u64() % 70) as usize;
+            let window = Window {
+                q,
+                by,
+                s_in: 1.5,
+                s_out: 2.5,
+                rows: (r0, r1),
+                cols: (60, 180),
+                first_col: 0,
+                wr: (r0 as f64 + 2.5, r1 as f64 - 2.5),
+                box_cols: (70, 170),
+                wrows: (r0 + 1, r1 - 1),
+                wcols: (80, 160),
+            };
+            let mut next = r0;
+            window.blocks(|first, spans| {
+                assert_eq!(first, next, "{case}");
+                for (row, sp) in (first..).zip(spans) {
+                    let dy = row as f64 - by;
+                    let [ia, ib, oa, ob] = q.spans(f64x2::splat(dy), 1.5, 2.5).map(low_i32x2);
+                    assert_eq!(sp[0], oa[0].max(60), "{case} {row}");
+                    assert_eq!(sp[1], ob[0].min(180), "{case} {row}");
+                    if (r0 + 1..=r1 - 1).contains(&row) {
+                        assert_eq!([sp[4], sp[5]], [ia[0].max(80), ib[0].min(160)]);
+                    } else {
+                        assert_eq!([sp[4], sp[5]], [1, 0], "{case} {row}");
+                    }
+                }
+                next = first + spans.len();
+            });
+            assert_eq!(next, r1 + 1, "{case}");
         }
     }
 
