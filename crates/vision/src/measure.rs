@@ -112,8 +112,10 @@ const BG_OUTER: f64 = 1.75;
 const BG_SAMPLES: usize = 512;
 
 /// Rings of at most this many expected pixels are counted in a histogram
-/// of bytes (see `measure_weighted`).
+/// of bytes (see `measure_weighted`; less than [`BG_SAMPLES`], so that
+/// every dark pixel counts).
 const COUNTED_RING: f64 = 180.0;
+const _: () = assert!(COUNTED_RING < BG_SAMPLES as f64);
 
 /// Where [`Window::sums`] puts the pixels of the background ring.
 trait Ring {
@@ -1038,13 +1040,13 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     // most 255 pixels, else measured again with the buffer). (The fourth
     // moment is the blob's own: `Blob::kurtosis`.)
     let est = std::f64::consts::PI * (s_out - s_in) * 4.0 * det.sqrt();
-    let stride = ceil_i64(est / BG_SAMPLES as f64).max(1) as usize;
     let level = threshold.level();
     // The window's sums are exact integers about the pixel nearest the
     // blob's centre.
     let (cc, rr) = (round_i64(bx), round_i64(by));
     let mut counted = None;
-    if stride == 1 && est <= COUNTED_RING && (P::MAX <= 255 || level < 255) {
+    // (`est ≤ COUNTED_RING < BG_SAMPLES` keeps every dark pixel: stride 1.)
+    if est <= COUNTED_RING && (P::MAX <= 255 || level < 255) {
         let mut count = [0; 256];
         let mut ring = Counts {
             count: &mut count,
@@ -1065,7 +1067,7 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             n: 0,
             seen: 0,
             next: 0,
-            stride,
+            stride: ceil_i64(est / BG_SAMPLES as f64).max(1) as usize,
             threshold,
         };
         let sums = window_sums(&window, plane, w, &mut ring, (cc, rr));
