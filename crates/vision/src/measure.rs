@@ -425,11 +425,12 @@ impl Window {
                 // (The rows' lane 0 by the stride, not by row.)
                 let mut at = (lo - plane.row0) * stride + pw;
                 let base = (first_col + pw as i64) as isize;
-                for (row, sp) in (lo..=hi).zip(&spans[lo - first..]) {
-                    let (a, b) = (sp[4], sp[5]);
-                    if a <= b {
-                        m.lanes(plane.data, at, a as isize - base, b as isize - base, row);
-                    }
+                // (Every row of the window, an empty span as `(1, 0)`: no
+                // branch.)
+                for sp in &spans[lo - first..=hi - first] {
+                    let (a, b) = (sp[4] as isize - base, sp[5] as isize - base);
+                    let (a, b) = if a <= b { (a, b) } else { (1, 0) };
+                    m.lanes(plane.data, at, a, b);
                     at += stride;
                 }
             }
@@ -676,7 +677,15 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
     fn row(&mut self, line: &[u8], a: usize, b: usize, row: usize) {
         debug_assert!(a >= self.p && b < self.p + 16 * B);
         let (lo, hi) = ((a - self.p) as isize, (b - self.p) as isize);
-        self.lanes(line, self.p, lo, hi, row);
+        // Rows left out (no pixel) still step the running sums.
+        debug_assert!(row >= self.next);
+        while self.next < row {
+            self.a2 += self.a1;
+            self.a3 += self.a2;
+            self.b2 += self.b1;
+            self.next += 1;
+        }
+        self.lanes(line, self.p, lo, hi);
     }
 
     fn sums(self) -> ([f64; 6], [f64; 6]) {
@@ -685,19 +694,13 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
 }
 
 impl<const B: usize> Lanes<B> {
-    /// [`Moments::row`] of the lanes `lo..=hi` (`0 ≤ lo ≤ hi < 16 B`) of
-    /// the row whose lane 0 is `data[at]`.
+    /// [`Moments::row`] of the lanes `lo..=hi` (`0 ≤ lo ≤ hi < 16 B`, or
+    /// `(1, 0)`: none) of the next row, whose lane 0 is `data[at]`.
     #[inline(always)]
-    fn lanes(&mut self, data: &[u8], at: usize, lo: isize, hi: isize, row: usize) {
-        debug_assert!(0 <= lo && lo <= hi && hi < 16 * B as isize);
-        debug_assert!(row >= self.next && row - self.r0 < Self::ROWS);
-        // Rows left out (no pixel) still step the running sums.
-        while self.next < row {
-            self.a2 += self.a1;
-            self.a3 += self.a2;
-            self.b2 += self.b1;
-            self.next += 1;
-        }
+    fn lanes(&mut self, data: &[u8], at: usize, lo: isize, hi: isize) {
+        debug_assert!(0 <= lo && lo <= hi && hi < 16 * B as isize || (lo, hi) == (1, 0));
+        debug_assert!(self.next - self.r0 < Self::ROWS);
+        let j = (self.next - self.r0) as i64;
         self.next += 1;
         let ones = i16x8::splat(1);
         let (mut pw, mut qw) = (i32x4::ZERO, i32x4::ZERO);
@@ -722,7 +725,7 @@ impl<const B: usize> Lanes<B> {
         self.b1 += qw;
         self.b2 += self.b1;
         // The counts: `l` over `lo..=hi`.
-        let (lo, hi, j) = (lo as i64, hi as i64, (row - self.r0) as i64);
+        let (lo, hi) = (lo as i64, hi as i64);
         let n = hi - lo + 1;
         let l1 = ((lo + hi) * n) >> 1;
         let l2 = SQUARES[(hi + 1) as usize & 63] - SQUARES[lo as usize & 63];
