@@ -18,7 +18,9 @@
 //! `f64` once, with the background subtracted once it is known; so every
 //! way of summing gives the same bits. An 8-bit frame (the linear weight)
 //! takes each row's window as one masked vector whose lanes are summed
-//! across the rows, and picks its ring pixels by a bit mask; other rows
+//! across the rows (the moments in the row as running sums), and picks
+//! its ring pixels by a bit mask, a block of rows' ring and then its
+//! window in loops of their own; other rows
 //! go through [`Pixel::moment_sums`] one row at a time (in `i128` where a
 //! bound on the window does not rule out an overflow of `i64`). A small
 //! ring is counted by grey value in bytes instead of kept in a buffer.
@@ -378,7 +380,9 @@ impl Window {
     /// and counts as [`Window::sums`] (tracking: 5.3 k instead of 5.5 k
     /// instructions per measurement, the window in lanes through
     /// [`Window::sums`] included). Each block of rows in two loops, its
-    /// ring then its window (`measure_weighted` 53.83 M → 52.45 M).
+    /// ring then its window (`measure_weighted` 53.83 M → 52.45 M), the
+    /// window's every row through [`Lanes`] (an empty span as `(1, 0)`:
+    /// no branch, no stepping over rows left out; 51.00 M → 49.17 M).
     #[inline(always)]
     fn sums_8bit(
         &self,
