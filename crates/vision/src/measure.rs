@@ -258,6 +258,7 @@ impl Window {
     /// roots of the quadratic form.
     #[inline(always)]
     fn rows(&self, mut f: impl FnMut(RowSpans)) {
+        let (wr0, wr1) = self.wrows;
         self.blocks(|first, spans| {
             for (row, sp) in (first..).zip(spans) {
                 let [oa, ob, xa, xb, a, b] = sp.map(i64::from);
@@ -270,7 +271,7 @@ impl Window {
                     row,
                     outer: (oa, ob),
                     hole: (xa, xb),
-                    window: (a <= b).then_some((a, b)),
+                    window: (a <= b && (wr0..=wr1).contains(&row)).then_some((a, b)),
                 });
             }
         });
@@ -278,8 +279,10 @@ impl Window {
 
     /// The spans of the box's rows a block at a time, into `f` with the
     /// block's first row: each row's `[oa, ob, xa, xb, a, b]` (see
-    /// [`RowSpans`]; an empty outer span has `oa > ob`, the hole and the
-    /// window outside their rows are `(1, 0)`).
+    /// [`RowSpans`]; an empty outer span has `oa > ob`, the hole outside
+    /// its rows is `(1, 0)`; the window's span `[a, b]` holds for the rows
+    /// of the window only, which the callers pick: no blend per row pair,
+    /// `measure_weighted` 49.17 M → 47.50 M).
     #[inline(always)]
     fn blocks(&self, mut f: impl FnMut(usize, &[[i32; 6]])) {
         let q = &self.q;
@@ -287,8 +290,6 @@ impl Window {
         // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole,
         // and of the window.
         let (hr0, hr1) = (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1));
-        let (wr0, wr1) = (self.wrows.0 as f64, self.wrows.1 as f64);
-        let (wr0, wr1) = (f64x2::splat(wr0), f64x2::splat(wr1));
         let (one, zero) = (f64x2::splat(ROUND + 1.0), f64x2::splat(ROUND));
         // Clipping as floats (see `near_f64x2`).
         let at = |c: i64| f64x2::splat(c as f64 + ROUND);
@@ -311,16 +312,15 @@ impl Window {
                 rows += f64x2::splat(2.0);
                 let [ia, ib, oa, ob] = q.spans(rows - f64x2::splat(self.by), self.s_in, self.s_out);
                 let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
-                // (Outside their rows the hole and the window are `(1, 0)`.)
+                // (Outside its rows the hole is `(1, 0)`.)
                 let hole = rows.cmp_ge(hr0) & rows.cmp_le(hr1);
-                let window = rows.cmp_ge(wr0) & rows.cmp_le(wr1);
                 let ends = [
                     oa,
                     ob,
                     hole.blend(ia.fast_max(bc0).fast_max(oa), one),
                     hole.blend(ib.fast_min(bc1).fast_min(ob), zero),
-                    window.blend(ia.fast_max(wc0), one),
-                    window.blend(ib.fast_min(wc1), zero),
+                    ia.fast_max(wc0),
+                    ib.fast_min(wc1),
                 ]
                 .map(low_i32x2);
                 for (lane, sp) in pair.iter_mut().enumerate() {
@@ -1460,11 +1460,7 @@ mod tests {
                     let [ia, ib, oa, ob] = q.spans(f64x2::splat(dy), 1.5, 2.5).map(low_i32x2);
                     assert_eq!(sp[0], oa[0].max(60), "{case} {row}");
                     assert_eq!(sp[1], ob[0].min(180), "{case} {row}");
-                    if (r0 + 1..=r1 - 1).contains(&row) {
-                        assert_eq!([sp[4], sp[5]], [ia[0].max(80), ib[0].min(160)]);
-                    } else {
-                        assert_eq!([sp[4], sp[5]], [1, 0], "{case} {row}");
-                    }
+                    assert_eq!([sp[4], sp[5]], [ia[0].max(80), ib[0].min(160)]);
                 }
                 next = first + spans.len();
             });
