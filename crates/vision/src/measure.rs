@@ -317,8 +317,11 @@ impl Window {
                 let ends = [
                     oa,
                     ob,
-                    hole.blend(ia.fast_max(bc0).fast_max(oa), one),
-                    hole.blend(ib.fast_min(bc1).fast_min(ob), zero),
+                    // (Inside the outer span as it is: the inner roots
+                    // are inside the outer ones, `s_in ≤ s_out`, and every
+                    // step from `s` to the ends is monotonic in floats.)
+                    hole.blend(ia.fast_max(bc0), one),
+                    hole.blend(ib.fast_min(bc1), zero),
                     ia.fast_max(wc0),
                     ib.fast_min(wc1),
                 ]
@@ -1458,8 +1461,18 @@ mod tests {
                 for (row, sp) in (first..).zip(spans) {
                     let dy = row as f64 - by;
                     let [ia, ib, oa, ob] = q.spans(f64x2::splat(dy), 1.5, 2.5).map(low_i32x2);
-                    assert_eq!(sp[0], oa[0].max(60), "{case} {row}");
-                    assert_eq!(sp[1], ob[0].min(180), "{case} {row}");
+                    let (oa, ob) = (oa[0].max(60), ob[0].min(180));
+                    assert_eq!([sp[0], sp[1]], [oa, ob], "{case} {row}");
+                    // The hole inside the outer span (clipped to it or not).
+                    let (xa, xb) = (ia[0].max(70).max(oa), ib[0].min(170).min(ob));
+                    if (r0 as f64 + 2.5..=r1 as f64 - 2.5).contains(&(row as f64)) {
+                        assert_eq!(sp[2] <= sp[3], xa <= xb, "{case} {row}");
+                        if xa <= xb {
+                            assert_eq!([sp[2], sp[3]], [xa, xb], "{case} {row}");
+                        }
+                    } else {
+                        assert_eq!([sp[2], sp[3]], [1, 0], "{case} {row}");
+                    }
                     assert_eq!([sp[4], sp[5]], [ia[0].max(80), ib[0].min(160)]);
                 }
                 next = first + spans.len();
