@@ -191,6 +191,24 @@ impl Blob {
         )
     }
 
+    /// The unit vector `(ux, uy)` along the major axis of
+    /// [`Blob::covariance`] (the half angle of `(cxx − cyy, 2 cxy)`; `(1, 0)`
+    /// for a round blob).
+    fn major_axis(&self) -> (f64, f64) {
+        let (cxx, cyy, cxy) = self.covariance();
+        let (t, t2) = (cxx - cyy, 2.0 * cxy);
+        let r = (t * t + t2 * t2).sqrt();
+        if r > 0.0 {
+            let c2 = t / r;
+            (
+                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
+                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
+            )
+        } else {
+            (1.0, 0.0)
+        }
+    }
+
     /// Normalised fourth moment of the blob's pixels along its major axis
     /// (the axis of [`Blob::covariance`]), `n Σu⁴ / (Σu²)²` with `u` the
     /// offset from the centre along it: 2 for a filled ellipse, 1.8 for a
@@ -201,19 +219,7 @@ impl Blob {
         if n == 0.0 {
             return 0.0;
         }
-        let (cxx, cyy, cxy) = self.covariance();
-        // The major axis: the half angle of (cxx − cyy, 2 cxy).
-        let (t, t2) = (cxx - cyy, 2.0 * cxy);
-        let r = (t * t + t2 * t2).sqrt();
-        let (ux, uy) = if r > 0.0 {
-            let c2 = t / r;
-            (
-                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
-                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
-            )
-        } else {
-            (1.0, 0.0)
-        };
+        let (ux, uy) = self.major_axis();
         // Central moments from the raw ones about the origin: Σ (x + a)^p
         // (y + b)^q with a, b the centre's negated offsets, expanded. The
         // moments in x and their mirror images in y (the same formula with
@@ -927,18 +933,7 @@ mod tests {
     /// form the paired one replaced).
     fn kurtosis_one_at_a_time(blob: &Blob) -> f64 {
         let n = blob.area as f64;
-        let (cxx, cyy, cxy) = blob.covariance();
-        let (t, t2) = (cxx - cyy, 2.0 * cxy);
-        let r = (t * t + t2 * t2).sqrt();
-        let (ux, uy) = if r > 0.0 {
-            let c2 = t / r;
-            (
-                ((1.0 + c2) / 2.0).max(0.0).sqrt(),
-                ((1.0 - c2) / 2.0).max(0.0).sqrt().copysign(t2),
-            )
-        } else {
-            (1.0, 0.0)
-        };
+        let (ux, uy) = blob.major_axis();
         let [s10, s01, s20, s02, s11] = blob.m;
         let [s30, s21, s12, s03, s40, s31, s22, s13, s04] = blob.m4;
         let (a, b) = (-s10 / n, -s01 / n);

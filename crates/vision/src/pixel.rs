@@ -853,20 +853,31 @@ pub trait ShortRow: Pixel {
         masks: &[u64],
         saturation: u32,
     ) -> (u32, u32) {
-        let (mut max, mut sat) = (0, 0);
-        for (k, &mask) in masks.iter().enumerate() {
-            let row = plane.row(row0 + k);
-            let mut m = mask;
-            while m != 0 {
-                let start = m.trailing_zeros() as usize;
-                let end = start + (!(m >> start)).trailing_zeros() as usize;
-                let (a, b) = Self::run_stats(row, start, end, saturation);
-                (max, sat) = (max.max(a), sat + b);
-                m &= !(u64::MAX >> (64 - end));
-            }
-        }
-        (max, sat)
+        masked_run_stats(plane, row0, masks, saturation)
     }
+}
+
+/// [`ShortRow::masked_stats`] run by run ([`Pixel::run_stats`] of each).
+#[inline]
+fn masked_run_stats<P: Pixel>(
+    plane: &Plane<'_, P>,
+    row0: usize,
+    masks: &[u64],
+    saturation: u32,
+) -> (u32, u32) {
+    let (mut max, mut sat) = (0, 0);
+    for (k, &mask) in masks.iter().enumerate() {
+        let row = plane.row(row0 + k);
+        let mut m = mask;
+        while m != 0 {
+            let start = m.trailing_zeros() as usize;
+            let end = start + (!(m >> start)).trailing_zeros() as usize;
+            let (a, b) = P::run_stats(row, start, end, saturation);
+            (max, sat) = (max.max(a), sat + b);
+            m &= !(u64::MAX >> (64 - end));
+        }
+    }
+    (max, sat)
 }
 
 impl ShortRow for u16 {}
@@ -918,16 +929,7 @@ impl ShortRow for u8 {
         let len = plane.width;
         let (mut max, mut sat) = (u8x16::splat(0), 0u32);
         if len < 16 {
-            let mut top = 0;
-            for (k, &mask) in masks.iter().enumerate() {
-                for (i, &p) in plane.row(row0 + k).iter().enumerate() {
-                    if mask >> i & 1 != 0 {
-                        top = top.max(p as u32);
-                        sat += (p as u32 >= saturation) as u32;
-                    }
-                }
-            }
-            return (top, sat);
+            return masked_run_stats(plane, row0, masks, saturation);
         }
         let sat_level = u8x16::splat(saturation.min(255) as u8);
         let mut start = (row0 - plane.row0) * plane.stride;
