@@ -23,19 +23,19 @@ pub(crate) fn low_i32x2(r: f64x2) -> [i32; 2] {
     r.to_array().map(|r| r.to_bits() as u32 as i32)
 }
 
-/// `floor` for values well inside the `i64` range (no libm call on
-/// baseline x86-64).
+/// `floor` (no libm call on baseline x86-64), saturating at the ends of
+/// the `i64` range like `as` (infinities included; NaN gives 0).
 #[inline(always)]
 pub(crate) fn floor_i64(x: f64) -> i64 {
     let t = x as i64;
-    t - ((t as f64) > x) as i64
+    t.saturating_sub(((t as f64) > x) as i64)
 }
 
 /// `ceil`, see [`floor_i64`].
 #[inline(always)]
 pub(crate) fn ceil_i64(x: f64) -> i64 {
     let t = x as i64;
-    t + ((t as f64) < x) as i64
+    t.saturating_add(((t as f64) < x) as i64)
 }
 
 /// Nearest integer, see [`floor_i64`].
@@ -58,6 +58,13 @@ mod tests {
             );
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
+        }
+        // Past the ends of `i64`: saturated as `as` saturates, never
+        // wrapped (a debug build would panic).
+        for x in [f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, f64::NAN] {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
+            assert_eq!(round_i64(x), (x + 0.5).floor() as i64, "{x}");
         }
     }
 }
