@@ -259,18 +259,7 @@ impl Blob {
             + b2 * s20
             + 2.0 * a * (s12 + 2.0 * b * s11 + b2 * s10)
             + a2 * (s02 + 2.0 * b * s01 + b2 * n);
-        let (ux2, uy2) = (ux * ux, uy * uy);
-        let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
-        let su4 = ux2 * ux2 * c40
-            + 4.0 * ux2 * ux * uy * c31
-            + 6.0 * ux2 * uy2 * c22
-            + 4.0 * ux * uy2 * uy * c13
-            + uy2 * uy2 * c04;
-        if su2 > 0.0 {
-            n * su4 / (su2 * su2)
-        } else {
-            0.0
-        }
+        kurtosis_along(n, (ux, uy), [c20, c11, c02], [c40, c31, c22, c13, c04])
     }
 
     /// Binary central second moments `(cxx, cyy, cxy)`, px², including the
@@ -800,6 +789,27 @@ impl Labeller {
     }
 }
 
+/// `n Σu⁴ / (Σu²)²` with `u` the offset along the unit vector `(ux, uy)`,
+/// from a blob's central moments `[c20, c11, c02]` and
+/// `[c40, c31, c22, c13, c04]` (`cpq = Σ dxᵖ dyᵠ`); 0 for a blob without
+/// extent ([`Blob::kurtosis`]).
+#[inline]
+fn kurtosis_along(n: f64, (ux, uy): (f64, f64), c2: [f64; 3], c4: [f64; 5]) -> f64 {
+    let ([c20, c11, c02], [c40, c31, c22, c13, c04]) = (c2, c4);
+    let (ux2, uy2) = (ux * ux, uy * uy);
+    let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
+    let su4 = ux2 * ux2 * c40
+        + 4.0 * ux2 * ux * uy * c31
+        + 6.0 * ux2 * uy2 * c22
+        + 4.0 * ux * uy2 * uy * c13
+        + uy2 * uy2 * c04;
+    if su2 > 0.0 {
+        n * su4 / (su2 * su2)
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -958,18 +968,7 @@ mod tests {
             + b2 * s20
             + 2.0 * a * (s12 + 2.0 * b * s11 + b2 * s10)
             + a2 * (s02 + 2.0 * b * s01 + b2 * n);
-        let (ux2, uy2) = (ux * ux, uy * uy);
-        let su2 = ux2 * c20 + 2.0 * ux * uy * c11 + uy2 * c02;
-        let su4 = ux2 * ux2 * c40
-            + 4.0 * ux2 * ux * uy * c31
-            + 6.0 * ux2 * uy2 * c22
-            + 4.0 * ux * uy2 * uy * c13
-            + uy2 * uy2 * c04;
-        if su2 > 0.0 {
-            n * su4 / (su2 * su2)
-        } else {
-            0.0
-        }
+        kurtosis_along(n, (ux, uy), [c20, c11, c02], [c40, c31, c22, c13, c04])
     }
 
     /// The paired central moments give the kurtosis of one at a time bit
