@@ -8,6 +8,7 @@
 #![allow(unsafe_code)] // a global allocator must implement an unsafe trait (it only forwards to `System`); reading the thread name goes through libc
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
@@ -43,11 +44,19 @@ fn on_excluded_thread() -> bool {
     r == 0 && name == *excluded
 }
 
+thread_local! {
+    /// Allocations made on this thread (const-initialised, no destructor:
+    /// reading it never allocates, so the allocator may touch it).
+    static ON_THIS_THREAD: Cell<usize> = const { Cell::new(0) };
+}
+
 fn count() {
     ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
     if !on_excluded_thread() {
         OUTSIDE.fetch_add(1, Ordering::Relaxed);
     }
+    // (Absent while a thread is being torn down: not counted there.)
+    let _ = ON_THIS_THREAD.try_with(|n| n.set(n.get() + 1));
 }
 
 /// A global allocator that counts allocations. Install it in a test binary:
@@ -95,4 +104,11 @@ pub fn allocations_outside() -> usize {
 /// Allocations (including reallocations) counted so far in this process.
 pub fn allocations() -> usize {
     ALLOCATIONS.load(Ordering::Relaxed)
+}
+
+/// Allocations (including reallocations) counted so far on the calling
+/// thread: for code that runs on the test's own thread, unaffected by
+/// what the test harness's other threads allocate meanwhile.
+pub fn allocations_on_this_thread() -> usize {
+    ON_THIS_THREAD.try_with(Cell::get).unwrap_or(0)
 }
