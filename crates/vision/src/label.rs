@@ -275,65 +275,10 @@ impl Blob {
     }
 }
 
-/// Half-width of [`SMALL_POW_SUMS`]: run ends of a blob at most this wide,
-/// about its origin.
+/// Half-width of the run ends [`SmallMoments`] reads from [`POW_SUMS`]: a
+/// blob at most this wide, about its origin.
 pub(crate) const SMALL_SIDE: usize = 64;
-
-/// `[t, Σx, Σx², Σx³, Σx⁴, 0]` for `x` from 0 below `t` (for negative
-/// `t` the negated sums of `t..0`, so that the difference of the entries
-/// at a run's ends is the run's sums), entry `t + SMALL_SIDE` for `t` from
-/// `−SMALL_SIDE` to `SMALL_SIDE`: exact integers (in `f64`, read in pairs).
-/// (256 entries, the last ones unused: an index masked to 8 bits needs no
-/// bounds check.)
-const _: () = assert!(2 * SMALL_SIDE < 256);
-static SMALL_POW_SUMS: [[f64; 6]; 256] = {
-    let mut t = [[0.0; 6]; 256];
-    let mut acc = [0i64; 5];
-    // Upward from 0 …
-    let mut x = 0i64;
-    while x < SMALL_SIDE as i64 {
-        acc = [
-            acc[0] + 1,
-            acc[1] + x,
-            acc[2] + x * x,
-            acc[3] + x * x * x,
-            acc[4] + x * x * x * x,
-        ];
-        let i = (SMALL_SIDE as i64 + x + 1) as usize;
-        t[i] = [
-            acc[0] as f64,
-            acc[1] as f64,
-            acc[2] as f64,
-            acc[3] as f64,
-            acc[4] as f64,
-            0.0,
-        ];
-        x += 1;
-    }
-    // … and downward.
-    let mut acc = [0i64; 5];
-    let mut x = -1i64;
-    while x >= -(SMALL_SIDE as i64) {
-        acc = [
-            acc[0] - 1,
-            acc[1] - x,
-            acc[2] - x * x,
-            acc[3] - x * x * x,
-            acc[4] - x * x * x * x,
-        ];
-        let i = (SMALL_SIDE as i64 + x) as usize;
-        t[i] = [
-            acc[0] as f64,
-            acc[1] as f64,
-            acc[2] as f64,
-            acc[3] as f64,
-            acc[4] as f64,
-            0.0,
-        ];
-        x -= 1;
-    }
-    t
-};
+const _: () = assert!(SMALL_SIDE < POW_HALF);
 
 /// A small blob's binary moments (those of [`Blob::m`] and [`Blob::m4`])
 /// summed a row at a time, two at once: the fast path of blobs grown on
@@ -383,9 +328,10 @@ impl SmallMoments {
     #[inline(always)]
     pub(crate) fn run(a: i64, e: i64) -> RowSums {
         debug_assert!(a.abs() <= SMALL_SIDE as i64 && e.abs() <= SMALL_SIDE as i64);
+        // (The index masked to the table's 256 entries: no bounds check.)
         let (pa, pe) = (
-            &SMALL_POW_SUMS[(a + SMALL_SIDE as i64) as usize & 255],
-            &SMALL_POW_SUMS[(e + SMALL_SIDE as i64) as usize & 255],
+            &POW_SUMS[(a + POW_HALF as i64) as usize & 255],
+            &POW_SUMS[(e + POW_HALF as i64) as usize & 255],
         );
         [0, 1, 2].map(|k| {
             f64x2::new([pe[2 * k], pe[2 * k + 1]]) - f64x2::new([pa[2 * k], pa[2 * k + 1]])
@@ -514,17 +460,28 @@ const fn sum_pow4_below(k: f64) -> f64 {
 
 /// [`POW_SUMS`] holds `k` from `−POW_HALF` to `POW_HALF − 1`.
 const POW_HALF: usize = 128;
+const _: () = assert!(2 * POW_HALF == 256);
 
-/// `[Σx², Σx³, Σx⁴]` below `k` for the run ends near a blob's origin
-/// (entry `k + POW_HALF`): the same functions evaluated at compile time
-/// (IEEE arithmetic, the same operations: the same values bit for bit),
-/// so that a run costs two look-ups instead of six polynomials.
-static POW_SUMS: [[f64; 3]; 2 * POW_HALF] = {
-    let mut t = [[0.0; 3]; 2 * POW_HALF];
+/// `[k, Σx, Σx², Σx³, Σx⁴, 0]` for `x` from 0 below `k` (for negative `k`
+/// the negated sums of `k..0`, which the polynomials give: the difference
+/// of the entries at a run's ends is the run's sums) near a blob's origin,
+/// entry `k + POW_HALF`: exact integers, evaluated at compile time (IEEE
+/// arithmetic, the same operations: the same values bit for bit), so that
+/// a run costs two look-ups instead of the polynomials. Read in pairs by
+/// [`SmallMoments`] (the last entry pads the third pair).
+static POW_SUMS: [[f64; 6]; 2 * POW_HALF] = {
+    let mut t = [[0.0; 6]; 2 * POW_HALF];
     let mut i = 0;
     while i < 2 * POW_HALF {
         let k = i as f64 - POW_HALF as f64;
-        t[i] = [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)];
+        t[i] = [
+            k,
+            k * (k - 1.0) / 2.0,
+            sum_sq_below(k),
+            sum_pow3_below(k),
+            sum_pow4_below(k),
+            0.0,
+        ];
         i += 1;
     }
     t
@@ -534,7 +491,7 @@ static POW_SUMS: [[f64; 3]; 2 * POW_HALF] = {
 #[inline(always)]
 fn pow_sums(k: i64) -> [f64; 3] {
     match POW_SUMS.get(k.wrapping_add(POW_HALF as i64) as usize) {
-        Some(&s) => s,
+        Some(s) => [s[2], s[3], s[4]],
         None => {
             let k = k as f64;
             [sum_sq_below(k), sum_pow3_below(k), sum_pow4_below(k)]

@@ -657,6 +657,16 @@ mod tests {
     use crate::testutil::window;
     use proptest::prelude::*;
 
+    /// An 8-bit frame drawn in text: `#` foreground (200), anything else
+    /// background (10); with its width and height.
+    fn drawn(img: &[&str]) -> (Vec<u8>, usize, usize) {
+        let data = img
+            .iter()
+            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
+            .collect();
+        (data, img[0].len(), img.len())
+    }
+
     /// Every blob the labeller finds in a window, grown from each of its
     /// pixels, is the labeller's blob, bit for bit.
     fn check(data: &[u8], width: usize, area: (usize, usize, usize, usize)) {
@@ -703,11 +713,7 @@ mod tests {
             ".#.#...#####", //
             "#...#.......", //
         ];
-        let (w, h) = (img[0].len(), img.len());
-        let data: Vec<u8> = img
-            .iter()
-            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
-            .collect();
+        let (data, w, h) = drawn(&img);
         check(&data, w, (0, 0, w, h));
         check(&data, w, (1, 1, w - 2, h - 2));
     }
@@ -750,11 +756,7 @@ mod tests {
             ".#####..#.", //
             "..........", //
         ];
-        let (w, h) = (img[0].len(), img.len());
-        let data: Vec<u8> = img
-            .iter()
-            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
-            .collect();
+        let (data, w, h) = drawn(&img);
         let plane = window(&data, w, (1, 0, w - 1, h));
         let t = Threshold::global(100);
         let mut s = SeedLabeller::new(100, 10, h);
@@ -810,11 +812,7 @@ mod tests {
             "#.#.", //
             "###.", //
         ];
-        let (w, h) = (img[0].len(), img.len());
-        let data: Vec<u8> = img
-            .iter()
-            .flat_map(|r| r.bytes().map(|b| if b == b'#' { 200 } else { 10 }))
-            .collect();
+        let (data, w, h) = drawn(&img);
         let plane = Plane::whole(&data, w, h);
         let t = Threshold::global(100);
         for (col, row) in [(0, 0), (2, 0), (1, 2)] {
