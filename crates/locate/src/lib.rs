@@ -196,6 +196,9 @@ pub struct Locator {
     /// Each field target's inverse distortion in the last tracked frame
     /// that projected it (the start of the next: `Camera::distort_seeded`).
     seeds: Vec<Option<DistortSeed>>,
+    /// Tracking mode's order of the coded targets whose rings are read
+    /// (`track::spread_order`).
+    verify_order: Vec<usize>,
 }
 
 /// A tracked target's window, before it is measured.
@@ -288,6 +291,7 @@ impl Locator {
             window,
             windows: Vec::with_capacity(n),
             seeds: vec![None; n],
+            verify_order: track::spread_order(targets, TargetKind::Coded),
             field,
         })
     }

@@ -13,17 +13,19 @@
 //! of a few coded targets are read and must give their own ids (none may
 //! give another), and the refined pose must project every target within its
 //! gate of the prediction. A frame that fails them is not a result: the
-//! caller locates it on the whole frame.
+//! caller locates it on the whole frame. The coded targets read are spread
+//! over the plate ([`spread_order`]): a prediction off by a grid step in
+//! one part of the view only (a tilt or a turn) moves some of them.
 //!
 //! [`Motion`] predicts the pose of a later frame from the two latest poses
 //! (constant velocity per frame).
 
 use crate::{Identified, Locator, PoseStatus, Projected, Window};
-use photopose_field::TargetKind;
+use photopose_field::{Target, TargetKind};
 use photopose_frame::ImageView;
 use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
-    Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3,
+    Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3, Vector3,
 };
 use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
 
@@ -38,7 +40,8 @@ pub struct TrackOptions {
     /// Targets that must be found for a tracked pose (fewer: locate the
     /// whole frame).
     pub min_targets: usize,
-    /// Coded targets whose rings are read to confirm the prediction.
+    /// Coded targets whose rings are read to confirm the prediction (the
+    /// first of the plate's spread order that land on the sensor).
     pub verify_codes: usize,
     /// Share of the predicted motion since the prior added to each gate,
     /// px per px (the prediction's error grows with the speed).
@@ -126,6 +129,46 @@ impl Motion {
     }
 }
 
+/// The field indices of `targets` of `kind` in an order that spreads them
+/// over the plate: first the one farthest from their centroid, then each
+/// time the one farthest from all chosen so far (farthest-point order; ties
+/// to the lower index). Any first few of the order lie far apart, so that a
+/// check of those few covers the whole plate.
+pub fn spread_order(targets: &[Target], kind: TargetKind) -> Vec<usize> {
+    let mut left: Vec<usize> = (0..targets.len())
+        .filter(|&k| targets[k].kind == kind)
+        .collect();
+    if left.is_empty() {
+        return left;
+    }
+    let centroid = left
+        .iter()
+        .fold(Vector3::zeros(), |s, &k| s + targets[k].position)
+        / left.len() as f64;
+    // Squared distance of each remaining target to the chosen set (to the
+    // centroid before the first choice).
+    let mut reach: Vec<f64> = left
+        .iter()
+        .map(|&k| (targets[k].position - centroid).norm_squared())
+        .collect();
+    let mut order = Vec::with_capacity(left.len());
+    while !left.is_empty() {
+        let mut best = 0;
+        for i in 1..left.len() {
+            if reach[i] > reach[best] {
+                best = i;
+            }
+        }
+        let chosen = left.swap_remove(best);
+        reach.swap_remove(best);
+        for (r, &k) in reach.iter_mut().zip(&left) {
+            *r = r.min((targets[k].position - targets[chosen].position).norm_squared());
+        }
+        order.push(chosen);
+    }
+    order
+}
+
 impl Locator {
     /// Locates `image` from `prior` (tracking mode). `Ok` with a pose, or
     /// why the frame must be located whole. Allocates nothing once warm.
@@ -145,7 +188,7 @@ impl Locator {
         let px = self.camera.sensor.pixel_size;
         let e = &prior.exterior;
         let gate_extra = options.motion_gate * prior.motion_px;
-        let (mut confirmed, mut checked) = (0usize, 0usize);
+        let mut confirmed = 0usize;
         // First every target's window; then the measurements, each asking
         // for the pixels of the window `PREFETCH_AHEAD` targets on, so that
         // the frame's lines come from memory while the targets before them
@@ -189,13 +232,25 @@ impl Locator {
                 camera,
             });
         }
+        // The coded targets to read: the first `verify_codes` of the spread
+        // order that land on the sensor (the windows are in field order).
+        let mut marked = 0;
+        for &fi in &self.verify_order {
+            if marked == options.verify_codes {
+                break;
+            }
+            if let Ok(k) = self.windows.binary_search_by_key(&fi, |w| w.field_index) {
+                self.windows[k].expected.read_code = true;
+                marked += 1;
+            }
+        }
         for w in self.windows.iter().take(PREFETCH_AHEAD) {
             self.window.prefetch(&image, &w.expected);
         }
         for (wi, w) in self.windows.iter().enumerate() {
             let Window {
                 field_index: fi,
-                mut expected,
+                expected,
                 spacing,
                 ideal,
                 camera,
@@ -204,14 +259,12 @@ impl Locator {
                 self.window.prefetch(&image, &ahead.expected);
             }
             let t = &self.field.targets()[fi];
-            expected.read_code = expected.coded && checked < options.verify_codes;
             let gate = expected.gate_px;
             let WindowOutcome::Found(m) = self.window.measure(&image, &prior.threshold, &expected)
             else {
                 continue;
             };
             if let Some(code) = m.code {
-                checked += 1;
                 match code.id() {
                     Some(id) if id == t.id => confirmed += 1,
                     Some(_) => return Err(TrackLost::CodeMismatch),
@@ -286,5 +339,63 @@ impl Locator {
         self.pose = Some(report);
         self.status = PoseStatus::Ok;
         Ok(self.pose.as_ref().expect("just set"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photopose_field::design::default_plate;
+
+    /// The smallest distance between any two of `picked`, mm.
+    fn closest_pair(targets: &[Target], picked: &[usize]) -> f64 {
+        let mut d = f64::INFINITY;
+        for (i, &a) in picked.iter().enumerate() {
+            for &b in &picked[i + 1..] {
+                d = d.min((targets[a].position - targets[b].position).norm());
+            }
+        }
+        d
+    }
+
+    #[test]
+    fn the_spread_order_holds_every_target_of_the_kind_once() {
+        let field = default_plate();
+        let t = field.targets();
+        let mut order = spread_order(t, TargetKind::Coded);
+        assert_eq!(order.len(), 30);
+        assert!(order.iter().all(|&k| t[k].kind == TargetKind::Coded));
+        order.sort_unstable();
+        order.dedup();
+        assert_eq!(order.len(), 30);
+        assert!(spread_order(&[], TargetKind::Coded).is_empty());
+    }
+
+    #[test]
+    fn the_first_targets_of_the_spread_order_lie_far_apart() {
+        // The default plate lists its coded targets row by row: its first
+        // four share the top row. The first four of the spread order must
+        // lie much farther apart, in both directions of the plate.
+        let field = default_plate();
+        let t = field.targets();
+        let order = spread_order(t, TargetKind::Coded);
+        let in_field_order: Vec<usize> = (0..t.len())
+            .filter(|&k| t[k].kind == TargetKind::Coded)
+            .take(4)
+            .collect();
+        let spread = &order[..4];
+        assert!(
+            closest_pair(t, spread) > 2.0 * closest_pair(t, &in_field_order),
+            "{} vs {}",
+            closest_pair(t, spread),
+            closest_pair(t, &in_field_order)
+        );
+        let span = |axis: usize, set: &[usize]| {
+            let v: Vec<f64> = set.iter().map(|&k| t[k].position[axis]).collect();
+            v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+        };
+        for axis in 0..2 {
+            assert!(span(axis, spread) > 0.6 * span(axis, &order), "axis {axis}");
+        }
     }
 }
