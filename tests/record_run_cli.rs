@@ -64,8 +64,13 @@ fn rsi_config(dir: &Path, port: u16) -> std::path::PathBuf {
                 root().join("config/bench/hand-eye.toml").display()
             ),
         )
-        .replace("port = 49152", &format!("port = {port}"));
+        .replace("port = 49152", &format!("port = {port}"))
+        // A queue for all 50 frames: this test checks the file, not the
+        // writer's back-pressure, and a loaded machine (a build beside the
+        // tests) slows the writer enough to drop frames from a queue of 8.
+        .replace("queue = 8 ", "queue = 50 ");
     assert!(config.contains("enabled = true") && config.contains(&format!("port = {port}")));
+    assert!(config.contains("queue = 50 "));
     let path = dir.join("photopose.toml");
     std::fs::write(&path, config).unwrap();
     path
