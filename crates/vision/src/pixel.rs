@@ -49,6 +49,12 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         lit
     }
+    /// The largest value of the pixels `a..b` of each of `rows` (0 if
+    /// none): a tile's peak over its sampled rows.
+    #[inline]
+    fn max_of_rows(rows: &[&[Self]], a: usize, b: usize) -> u32 {
+        plain_max_of_rows(rows, a, b)
+    }
     /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
     /// running from `k0`: a row's grey-value moments.
     #[inline]
@@ -61,6 +67,12 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn bytes(_px: &[Self]) -> Option<&[u8]> {
         None
     }
+}
+
+/// [`Pixel::max_of_rows`] a row at a time ([`Pixel::max_of`] of each).
+#[inline(always)]
+fn plain_max_of_rows<P: Pixel>(rows: &[&[P]], a: usize, b: usize) -> u32 {
+    rows.iter().fold(0, |m, r| m.max(P::max_of(&r[a..b])))
 }
 
 /// [`Pixel::run_stats`] one pixel at a time.
@@ -125,6 +137,14 @@ fn level16(threshold: Threshold) -> Option<u8x16> {
 #[inline(always)]
 fn above16(v: u8x16, t: u8x16) -> u32 {
     !(v.saturating_sub(t).cmp_eq(u8x16::splat(0)).move_mask() as u32) & 0xffff
+}
+
+/// The largest lane of `v`.
+#[inline(always)]
+fn reduce_max16(v: u8x16) -> u32 {
+    i16x8::from_u8x16_low(v)
+        .max(i16x8::from_u8x16_high(v))
+        .reduce_max() as u32
 }
 
 /// [`Pixel::lit_mask`] of 8-bit pixels given as four vectors.
@@ -196,6 +216,24 @@ impl Pixel for u8 {
         )
     }
 
+    /// A tile of 64 pixels sixteen at a time: the lanes' maxima over all
+    /// the rows, reduced once.
+    #[inline]
+    fn max_of_rows(rows: &[&[Self]], a: usize, b: usize) -> u32 {
+        if b.wrapping_sub(a) != 64 {
+            return plain_max_of_rows(rows, a, b);
+        }
+        let mut m = u8x16::splat(0);
+        for r in rows {
+            let Ok(t) = <&[u8; 64]>::try_from(&r[a..b]) else {
+                unreachable!("64 pixels")
+            };
+            let v = |k: usize| lanes16(&t[16 * k..16 * k + 16]);
+            m = m.max(v(0).max(v(1)).max(v(2).max(v(3))));
+        }
+        reduce_max16(m)
+    }
+
     /// Sixteen pixels at a time (from the run's next pixel, or the row's
     /// last sixteen), the lanes outside the run masked off: their maximum
     /// as one vector, reduced once at the end; the saturated lanes counted
@@ -230,10 +268,7 @@ impl Pixel for u8 {
         if saturation > u8::MAX as u32 {
             sat = 0;
         }
-        let max = i16x8::from_u8x16_low(max)
-            .max(i16x8::from_u8x16_high(max))
-            .reduce_max();
-        (max as u32, sat)
+        (reduce_max16(max), sat)
     }
 
     /// Sixteen pixels at a time: the largest value of each quarter, and of

@@ -101,6 +101,33 @@ pub struct LocalLevels {
     any_local: bool,
 }
 
+/// Sampled rows per row of tiles.
+const TILE_SAMPLES: usize = TILE / PEAK_STEP;
+
+/// The sampled rows of one row of tiles not yet taken into the tile peaks
+/// (every sampled row of a row of tiles is read by the histogram's pass
+/// before its peaks are taken, from the cache): a tile's peak over all of
+/// them in one go, 16 pixels at a time for 8-bit frames, instead of one
+/// maximum per tile and row (find_threshold 5.59 M -> 3.59 M instructions per
+/// 8 frames).
+struct TileRowSamples<'a, P> {
+    rows: [&'a [P]; TILE_SAMPLES],
+    /// How many of `rows` are held.
+    n: usize,
+    /// Full-frame tile row of the rows held.
+    tile_row: usize,
+}
+
+impl<P> TileRowSamples<'_, P> {
+    fn new() -> Self {
+        TileRowSamples {
+            rows: [&[]; TILE_SAMPLES],
+            n: 0,
+            tile_row: 0,
+        }
+    }
+}
+
 /// The levels of the tiles that one row of a window crosses.
 #[derive(Debug, Clone, Copy)]
 pub struct TileRow<'a> {
@@ -214,9 +241,11 @@ impl LocalLevels {
     pub fn sample_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>) {
         self.layout(plane);
         self.clear_peaks();
+        let mut pending = TileRowSamples::new();
         for_sampled_rows(plane, PEAK_STEP, |row, line| {
-            self.add_row_peaks(plane, row, line)
+            self.add_row_peaks(plane, &mut pending, row, line)
         });
+        self.raise_peaks(plane, &mut pending);
     }
 
     /// The sub-sampled histogram of the window `plane` ([`histogram`], same
@@ -236,9 +265,12 @@ impl LocalLevels {
         }
         self.layout(plane);
         self.clear_peaks();
-        histogram_rows(plane, step, shift, max_value, hist, |row, line| {
-            self.add_row_peaks(plane, row, line)
-        })
+        let mut pending = TileRowSamples::new();
+        let n = histogram_rows(plane, step, shift, max_value, hist, |row, line| {
+            self.add_row_peaks(plane, &mut pending, row, line)
+        });
+        self.raise_peaks(plane, &mut pending);
+        n
     }
 
     fn clear_peaks(&mut self) {
@@ -246,17 +278,42 @@ impl LocalLevels {
         self.peaks.resize(self.cols * self.rows, 0);
     }
 
-    /// Raises the peaks of the tiles that full-frame row `row` (`line`, the
-    /// window's pixels of it) crosses.
+    /// Takes the sampled full-frame row `row` (`line`, the window's pixels
+    /// of it) into the peaks: held with the other sampled rows of its row
+    /// of tiles, whose peaks are raised once the row of tiles is complete.
     #[inline(always)]
-    fn add_row_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>, row: usize, line: &[P]) {
-        let tr = ((row >> TILE_SHIFT) - self.tile_row0) * self.cols;
+    fn add_row_peaks<'a, P: Pixel>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        pending: &mut TileRowSamples<'a, P>,
+        row: usize,
+        line: &'a [P],
+    ) {
+        let tile_row = row >> TILE_SHIFT;
+        if pending.n == TILE_SAMPLES || (pending.n > 0 && pending.tile_row != tile_row) {
+            self.raise_peaks(plane, pending);
+        }
+        pending.tile_row = tile_row;
+        pending.rows[pending.n] = line;
+        pending.n += 1;
+    }
+
+    /// Raises the peaks of the tiles that the rows held by `pending` (of
+    /// one row of tiles) cross, each tile's over all those rows at once,
+    /// and empties `pending`.
+    fn raise_peaks<P: Pixel>(&mut self, plane: &Plane<'_, P>, pending: &mut TileRowSamples<'_, P>) {
+        let rows = &pending.rows[..pending.n];
+        pending.n = 0;
+        let Some(width) = rows.first().map(|r| r.len()) else {
+            return;
+        };
+        let tr = (pending.tile_row - self.tile_row0) * self.cols;
         let peaks = &mut self.peaks[tr..tr + self.cols];
         let mut i = 0;
         let mut tc = 0;
-        while i < line.len() {
-            let end = ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(line.len());
-            let m = P::max_of(&line[i..end]);
+        while i < width {
+            let end = ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(width);
+            let m = P::max_of_rows(rows, i, end);
             if let Some(p) = peaks.get_mut(tc) {
                 *p = (*p).max(m);
             }
@@ -442,13 +499,13 @@ pub fn histogram<P: Pixel>(
 /// [`histogram`], calling `row_seen(row, pixels)` with every sampled
 /// full-frame row (all its pixels in the window) as it goes.
 #[inline(always)]
-fn histogram_rows<P: Pixel>(
-    plane: &Plane<'_, P>,
+fn histogram_rows<'a, P: Pixel>(
+    plane: &Plane<'a, P>,
     step: usize,
     shift: u32,
     max_value: u32,
     hist: &mut [u32],
-    row_seen: impl FnMut(usize, &[P]),
+    row_seen: impl FnMut(usize, &'a [P]),
 ) -> u32 {
     let step = step.max(1);
     let top = (max_value >> shift) as usize;
@@ -474,7 +531,11 @@ const SAMPLED_ROWS_AHEAD: usize = 3;
 /// (every `step`-th row of the frame's grid, [`grid_start`]), having asked
 /// for the lines of the row `SAMPLED_ROWS_AHEAD` samples on.
 #[inline(always)]
-fn for_sampled_rows<P: Pixel>(plane: &Plane<'_, P>, step: usize, mut f: impl FnMut(usize, &[P])) {
+fn for_sampled_rows<'a, P: Pixel>(
+    plane: &Plane<'a, P>,
+    step: usize,
+    mut f: impl FnMut(usize, &'a [P]),
+) {
     let mut row = plane.row0 + grid_start(plane.row0, step);
     while row <= plane.last_row() {
         let ahead = row + SAMPLED_ROWS_AHEAD * step;
@@ -486,13 +547,13 @@ fn for_sampled_rows<P: Pixel>(plane: &Plane<'_, P>, step: usize, mut f: impl FnM
 
 /// [`histogram_rows`] for any pixel type, step and binning.
 #[inline(always)]
-fn histogram_any<P: Pixel>(
-    plane: &Plane<'_, P>,
+fn histogram_any<'a, P: Pixel>(
+    plane: &Plane<'a, P>,
     step: usize,
     shift: u32,
     max_value: u32,
     hist: &mut [u32],
-    mut row_seen: impl FnMut(usize, &[P]),
+    mut row_seen: impl FnMut(usize, &'a [P]),
 ) -> u32 {
     let top = (max_value >> shift) as usize;
     let mut n = 0u32;
@@ -515,10 +576,10 @@ fn histogram_any<P: Pixel>(
 /// runs of equal grey values (the background) do not wait on each other's
 /// increments.
 #[inline(always)]
-fn histogram_8bit<P: Pixel, const STEP: usize>(
-    plane: &Plane<'_, P>,
+fn histogram_8bit<'a, P: Pixel, const STEP: usize>(
+    plane: &Plane<'a, P>,
     hist: &mut [u32],
-    mut row_seen: impl FnMut(usize, &[P]),
+    mut row_seen: impl FnMut(usize, &'a [P]),
 ) -> u32 {
     let mut part = [[0u32; 256]; 4];
     let mut n = 0u32;
@@ -857,6 +918,85 @@ mod tests {
         check(&v8, w, h, 255, "8-bit");
         check(&v16, w, h, 4095, "12-bit");
         check(&v16, w, h, 65535, "16-bit");
+    }
+
+    /// The histogram's samples and the tile peaks, taken pixel by pixel
+    /// from the frame's grid (rows and columns `≡ 1 mod step`, every
+    /// column for the peaks), equal the fast passes' (sixteen samples per
+    /// step of the 8-bit histogram's loop, then four, then one; a tile's
+    /// peak over all its sampled rows at once): 8 and 16 bits, windows at
+    /// odd origins and of odd sizes, single bright pixels in every lane
+    /// of a tile and at its edges.
+    #[test]
+    fn histogram_and_tile_peaks_equal_the_pixels() {
+        use crate::testutil::Rng;
+        let (w, h) = (333usize, 150usize);
+        let mut rng = Rng::new(23);
+        for round in 0..6 {
+            let mut v: Vec<u16> = (0..w * h).map(|_| (rng.next_u64() % 40) as u16).collect();
+            for _ in 0..[0, 3, 30, 300, 3000, 30][round] {
+                let i = (rng.next_u64() % (w * h) as u64) as usize;
+                v[i] = 40 + (rng.next_u64() % 200) as u16;
+            }
+            for c in [0usize, 63, 64, 127, 191, 192, 255, 256, 332] {
+                let r = (rng.next_u64() % h as u64) as usize;
+                v[r * w + c] = 250;
+            }
+            let v8: Vec<u8> = v.iter().map(|&x| x as u8).collect();
+            let v16: Vec<u16> = v.iter().map(|&x| x * 257).collect();
+            for (c0, r0, ww, hh) in [
+                (0, 0, w, h),
+                (1, 2, 331, 147),
+                (3, 5, 200, 129),
+                (64, 63, 130, 70),
+                (70, 1, 63, 64),
+                (5, 9, 17, 3),
+            ] {
+                let at = format!("round {round}, window ({c0}, {r0}, {ww}, {hh})");
+                let samples = |step: usize| {
+                    let on = move |k: usize| step == 1 || k % step == 1;
+                    (r0..r0 + hh).filter(move |&r| on(r)).flat_map(move |r| {
+                        (c0..c0 + ww).filter(move |&c| on(c)).map(move |c| (c, r))
+                    })
+                };
+                for step in [2usize, 3, 4] {
+                    let mut want = vec![0u32; MAX_BINS];
+                    let mut n = 0;
+                    for (c, r) in samples(step) {
+                        want[v8[r * w + c] as usize] += 1;
+                        n += 1;
+                    }
+                    let mut got = vec![5u32; MAX_BINS];
+                    let plane = window(&v8, w, (c0, r0, ww, hh));
+                    assert_eq!(histogram(&plane, step, 0, 255, &mut got), n, "{at}");
+                    assert_eq!(got, want, "{at}, step {step}");
+                }
+                // The peaks: per tile of the window's layout, over the
+                // rows of the peaks' grid and every column.
+                let mut levels = LocalLevels::new(w, h);
+                let plane8 = window(&v8, w, (c0, r0, ww, hh));
+                levels.layout(&plane8);
+                let mut want = vec![0u32; levels.cols * levels.rows];
+                for r in (r0..r0 + hh).filter(|r| r % PEAK_STEP == 1) {
+                    for c in c0..c0 + ww {
+                        let t = ((r >> TILE_SHIFT) - levels.tile_row0) * levels.cols
+                            + (c >> TILE_SHIFT)
+                            - levels.tile_col0;
+                        want[t] = want[t].max(v[r * w + c] as u32);
+                    }
+                }
+                assert!(want.iter().any(|&p| p > 0) || hh < 2, "{at}");
+                levels.sample_peaks(&plane8);
+                assert_eq!(levels.peaks, want, "{at}, 8-bit");
+                let plane16 = window(&v16, w, (c0, r0, ww, hh));
+                levels.sample_peaks(&plane16);
+                let want16: Vec<u32> = want.iter().map(|&p| p * 257).collect();
+                assert_eq!(levels.peaks, want16, "{at}, 16-bit");
+                let mut hist = vec![0u32; MAX_BINS];
+                levels.histogram_and_peaks(&plane8, 4, 0, 255, &mut hist);
+                assert_eq!(levels.peaks, want, "{at}, 8-bit in one pass");
+            }
+        }
     }
 
     #[test]
