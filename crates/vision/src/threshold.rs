@@ -128,39 +128,41 @@ impl<P> TileRowSamples<'_, P> {
     }
 }
 
-/// The levels of the tiles that one row of a window crosses.
+/// The levels of the tiles that one row of a window crosses: tile `k`
+/// holds the window offsets `64 k − lead .. 64 (k + 1) − lead` of the row.
 #[derive(Debug, Clone, Copy)]
 pub struct TileRow<'a> {
     levels: &'a [u32],
-    /// Full-frame column of the window's first pixel, and of its tile's first.
-    col0: usize,
-    tile_start: usize,
+    /// Pixels of the first tile left of the window (`< TILE`).
+    lead: usize,
 }
 
 impl TileRow<'_> {
     /// The threshold of the tile holding window offset `i` of the row.
     #[inline(always)]
     pub fn at(&self, i: usize) -> Threshold {
-        Threshold::global(self.levels[(self.col0 + i - self.tile_start) >> TILE_SHIFT])
+        self.tile((i + self.lead) >> TILE_SHIFT)
     }
 
-    /// The lowest level of the tiles holding window offsets `a..b` (`a < b`).
+    /// The threshold of the row's tile `k`.
     #[inline(always)]
-    pub fn lowest(&self, a: usize, b: usize) -> Threshold {
-        let first = (self.col0 + a - self.tile_start) >> TILE_SHIFT;
-        let last = (self.col0 + b - 1 - self.tile_start) >> TILE_SHIFT;
-        let levels = &self.levels[first..=last];
-        // Four tiles (the labeller's dark stretches): no loop.
-        if let Ok(&[l0, l1, l2, l3]) = <&[u32; 4]>::try_from(levels) {
-            return Threshold::global(l0.min(l1).min(l2.min(l3)));
-        }
-        Threshold::global(levels.iter().copied().min().unwrap_or(0))
+    pub fn tile(&self, k: usize) -> Threshold {
+        Threshold::global(self.levels[k])
     }
 
-    /// Window offset where the tile after the one holding offset `i` begins.
+    /// The lowest level of the tiles `k..k + 4`.
     #[inline(always)]
-    pub fn tile_end(&self, i: usize) -> usize {
-        (((self.col0 + i) >> TILE_SHIFT) + 1) * TILE - self.col0
+    pub fn lowest4(&self, k: usize) -> Threshold {
+        let Some(&[l0, l1, l2, l3]) = self.levels.get(k..k + 4) else {
+            panic!("four tiles from {k}")
+        };
+        Threshold::global(l0.min(l1).min(l2.min(l3)))
+    }
+
+    /// How many pixels of the row's first tile lie left of the window.
+    #[inline(always)]
+    pub fn lead(&self) -> usize {
+        self.lead
     }
 }
 
@@ -391,8 +393,7 @@ impl LocalLevels {
         let tr = (row >> TILE_SHIFT) - self.tile_row0;
         TileRow {
             levels: &self.levels[tr * self.cols..(tr + 1) * self.cols],
-            col0: plane.col0,
-            tile_start: self.tile_col0 << TILE_SHIFT,
+            lead: plane.col0 - (self.tile_col0 << TILE_SHIFT),
         }
     }
 
@@ -843,9 +844,11 @@ mod tests {
         let row = l.row(&plane, 160);
         assert_eq!(row.at(0).level(), 100);
         assert_eq!(row.at(300).level(), 32);
-        assert_eq!(row.lowest(0, 256).level(), 32);
-        assert_eq!(row.lowest(0, 192).level(), 100);
-        assert_eq!(row.tile_end(70), 128);
+        assert_eq!((row.tile(2).level(), row.tile(3).level()), (100, 32));
+        assert_eq!((row.tile(4).level(), row.lead()), (32, 0));
+        assert_eq!(row.lowest4(0).level(), 32);
+        let top = l.row(&plane, 20);
+        assert_eq!((top.lowest4(0).level(), top.lowest4(1).level()), (100, 100));
         // A local floor above the dim peak, or no share: one level.
         l.compute(&plane, &t, 0.3, 45.0);
         assert!(!l.any_local());
@@ -857,6 +860,8 @@ mod tests {
         l.compute(&win, &t, 0.3, 10.0);
         assert_eq!(l.at(290, 160).level(), 32);
         assert_eq!(l.row(&win, 160).at(90).level(), 32);
+        assert_eq!(l.row(&win, 160).lead(), 200 - 192);
+        assert_eq!(l.row(&win, 160).tile(1).level(), 32);
     }
 
     #[test]
