@@ -210,10 +210,10 @@ impl Pixel for u8 {
         let Some(t) = level16(threshold) else {
             return 0;
         };
-        mask64(
-            [0, 1, 2, 3].map(|k| lanes16(&block[16 * k..16 * k + 16])),
-            t,
-        )
+        // (The four loads spelled out: `[0, 1, 2, 3].map` was left a
+        // call in the labeller.)
+        let v = |k: usize| lanes16(&block[16 * k..16 * k + 16]);
+        mask64([v(0), v(1), v(2), v(3)], t)
     }
 
     /// A tile of 64 pixels sixteen at a time: the lanes' maxima over all
