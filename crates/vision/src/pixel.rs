@@ -235,13 +235,14 @@ impl Pixel for u8 {
     }
 
     /// Sixteen pixels at a time (from the run's next pixel, or the row's
-    /// last sixteen), the lanes outside the run masked off: their maximum
-    /// as one vector, reduced once at the end; the saturated lanes counted
-    /// from a bit mask.
+    /// last sixteen), the lanes outside the run set to 0 by two masks
+    /// from a table ([`masked16`]): their maximum as one vector, reduced
+    /// once at the end; the saturated lanes counted from a bit mask (a
+    /// lane set to 0 is not saturated unless every value is, saturation
+    /// 0, where the count is the run's length).
     #[inline]
     fn run_stats(line: &[Self], start: usize, end: usize, saturation: u32) -> (u32, u32) {
         const LANES: usize = 16;
-        const IDX: u8x16 = u8x16::new([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]);
         let len = line.len();
         if len < LANES {
             return scalar_run_stats(&line[start..end], saturation);
@@ -253,13 +254,11 @@ impl Pixel for u8 {
         let mut s = start;
         while s < end {
             let p = s.min(len - LANES);
-            let v = lanes16(&line[p..p + LANES]);
             // The run's lanes: `lo..hi`.
             let (lo, hi) = (s - p, (end - p).min(LANES));
-            let run = IDX.max(u8x16::splat(lo as u8)).cmp_eq(IDX)
-                & IDX.min(u8x16::splat(hi as u8 - 1)).cmp_eq(IDX);
-            max = max.max(v & run);
-            let bits = (v.max(sat_level).cmp_eq(v) & run).move_mask() as u32 & 0xffff;
+            let v = masked16(line, p, lo as isize, hi as isize - 1);
+            max = max.max(v);
+            let bits = v.max(sat_level).cmp_eq(v).move_mask();
             if bits != 0 {
                 sat += bits.count_ones();
             }
@@ -267,6 +266,8 @@ impl Pixel for u8 {
         }
         if saturation > u8::MAX as u32 {
             sat = 0;
+        } else if saturation == 0 {
+            sat = (end - start) as u32;
         }
         (reduce_max16(max), sat)
     }
