@@ -529,29 +529,26 @@ fn block_mask<P: Pixel>(line: &[P], base: usize, n: usize, threshold: Threshold)
 fn lit_blocks<P: Pixel, L: BlockLevels>(line: &[P], levels: L, first: usize, last: usize) -> u64 {
     let (width, lead) = (line.len(), levels.lead());
     debug_assert!(first < last && last - first <= 64);
-    let mut lit = 0u64;
-    let mut k = first;
-    let single = |k: usize| {
-        let base = (64 * k).saturating_sub(lead);
-        let end = (64 * k + 64 - lead).min(width);
-        (block_mask(line, base, end - base, levels.block(k)) != 0) as u64
-    };
+    // Block `k` starts at `base` and sets bit `bit`.
+    let (mut lit, mut k, mut bit) = (0u64, first, 0);
+    let mut base = (64 * k).saturating_sub(lead);
     if k == 0 && lead > 0 {
-        lit = single(0);
-        k = 1;
+        let end = (64 - lead).min(width);
+        lit = (block_mask(line, 0, end, levels.block(0)) != 0) as u64;
+        (k, base, bit) = (1, end, 1);
     }
     // Whole blocks from `k` on: four of them end inside the row.
-    while k + 4 <= last && 64 * k + 256 <= width + lead {
-        let base = 64 * k - lead;
+    while k + 4 <= last && base + 256 <= width {
         let Ok(stretch) = <&[P; 256]>::try_from(&line[base..base + 256]) else {
             unreachable!("256 pixels")
         };
-        lit |= (P::lit_quarters(stretch, levels.lowest4(k)) as u64) << (k - first);
-        k += 4;
+        lit |= (P::lit_quarters(stretch, levels.lowest4(k)) as u64) << bit;
+        (k, base, bit) = (k + 4, base + 256, bit + 4);
     }
     while k < last {
-        lit |= single(k) << (k - first);
-        k += 1;
+        let end = (base + 64).min(width);
+        lit |= ((block_mask(line, base, end - base, levels.block(k)) != 0) as u64) << bit;
+        (k, base, bit) = (k + 1, end, bit + 1);
     }
     lit
 }
