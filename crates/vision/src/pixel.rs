@@ -210,10 +210,13 @@ impl Pixel for u8 {
         let Some(t) = level16(threshold) else {
             return 0;
         };
-        // (The four loads spelled out: `[0, 1, 2, 3].map` was left a
+        // (A loop over the four vectors: `[0, 1, 2, 3].map` was left a
         // call in the labeller.)
-        let v = |k: usize| lanes16(&block[16 * k..16 * k + 16]);
-        mask64([v(0), v(1), v(2), v(3)], t)
+        let mut m = 0u64;
+        for (k, c) in block.chunks_exact(16).enumerate() {
+            m |= (above16(lanes16(c), t) as u64) << (16 * k);
+        }
+        m
     }
 
     /// A tile of 64 pixels sixteen at a time: the lanes' maxima over all
