@@ -417,6 +417,7 @@ pub struct Labeller {
 
 /// The root of run `i` (path halving). Every run's parent is itself or
 /// an older run (here and in [`union`]), which resolving relies on.
+#[inline(always)]
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         let p = parent[i as usize];
@@ -426,6 +427,7 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
+#[inline(always)]
 fn union(parent: &mut [u32], a: u32, b: u32) {
     let ra = find(parent, a);
     let rb = find(parent, b);
