@@ -24,6 +24,8 @@ pub trait BlockLevels: Copy {
     fn block(&self, k: usize) -> Threshold;
     /// The lowest threshold of blocks `k..k + 4`.
     fn lowest4(&self, k: usize) -> Threshold;
+    /// The threshold of every block of the row, if they share one.
+    fn uniform(&self) -> Option<Threshold>;
 }
 
 impl BlockLevels for Threshold {
@@ -39,6 +41,10 @@ impl BlockLevels for Threshold {
     fn lowest4(&self, _: usize) -> Threshold {
         *self
     }
+    #[inline(always)]
+    fn uniform(&self) -> Option<Threshold> {
+        Some(*self)
+    }
 }
 
 impl BlockLevels for TileRow<'_> {
@@ -53,6 +59,10 @@ impl BlockLevels for TileRow<'_> {
     #[inline(always)]
     fn lowest4(&self, k: usize) -> Threshold {
         TileRow::lowest4(self, k)
+    }
+    #[inline(always)]
+    fn uniform(&self) -> Option<Threshold> {
+        TileRow::uniform(self)
     }
 }
 
@@ -609,7 +619,15 @@ impl Labeller {
         for row in plane.row0..=plane.last_row() {
             let line = plane.row(row);
             let row_start = self.runs.len();
-            if !self.extract_runs(line, row as u32, col0, levels_of(row), saturation) {
+            // A row whose blocks share one level is labelled as with one
+            // level for the frame (the same runs: blocks serve only to
+            // skip the dark ones), without a level per block.
+            let levels = levels_of(row);
+            let complete = match levels.uniform() {
+                Some(t) => self.extract_runs(line, row as u32, col0, t, saturation),
+                None => self.extract_runs(line, row as u32, col0, levels, saturation),
+            };
+            if !complete {
                 return LabelOutcome::TooManyRuns;
             }
             let row_end = self.runs.len();
@@ -666,7 +684,7 @@ impl Labeller {
     /// frames), and runs are the masks' stretches of ones. A run still
     /// open at the end of a block ends there unless the next block holds
     /// foreground (a dark block's first pixel is background).
-    #[inline]
+    #[inline(always)]
     fn extract_runs<P: Pixel, L: BlockLevels>(
         &mut self,
         line: &[P],
@@ -1084,13 +1102,16 @@ mod tests {
         let sat = top - (rng.next_u64() % 3) as u32;
         let global = (rng.next_u64() % (top as u64 / 2)) as u32 + top / 4;
         let fh = data.len() / fw;
-        let tiles: Vec<Vec<u32>> = (0..fw.div_ceil(64))
-            .map(|_| {
-                (0..fh.div_ceil(64))
-                    .map(|_| global - (rng.next_u64() % (top as u64 / 4)) as u32)
-                    .collect()
-            })
-            .collect();
+        // Levels per tile, every second row of tiles at one level (the
+        // labeller takes such rows as with one level for the frame).
+        let mut level = || global - (rng.next_u64() % (top as u64 / 4)) as u32;
+        let mut tiles = vec![vec![0u32; fh.div_ceil(64)]; fw.div_ceil(64)];
+        for tr in 0..fh.div_ceil(64) {
+            let one = (tr % 2 == 1).then(&mut level);
+            for column in tiles.iter_mut() {
+                column[tr] = one.unwrap_or_else(&mut level);
+            }
+        }
         let mut l = Labeller::new(100_000, 100_000);
         assert_eq!(
             l.label(&plane, Threshold::global(global), sat),

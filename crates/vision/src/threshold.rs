@@ -99,7 +99,14 @@ pub struct LocalLevels {
     rows: usize,
     /// Whether any tile's level is below the global one.
     any_local: bool,
+    /// Per row of tiles, the level of all its tiles when they share one,
+    /// else [`MIXED`].
+    uniform: Vec<u32>,
 }
+
+/// [`LocalLevels::uniform`]'s mark of a row of tiles at different levels
+/// (above every level: levels are grey values, at most 16 bits).
+const MIXED: u32 = u32::MAX;
 
 /// Sampled rows per row of tiles.
 const TILE_SAMPLES: usize = TILE / PEAK_STEP;
@@ -135,6 +142,9 @@ pub struct TileRow<'a> {
     levels: &'a [u32],
     /// Pixels of the first tile left of the window (`< TILE`).
     lead: usize,
+    /// The level of all the row's tiles, if they share one, else
+    /// [`MIXED`].
+    uniform: u32,
 }
 
 impl TileRow<'_> {
@@ -159,6 +169,13 @@ impl TileRow<'_> {
         Threshold::global(l0.min(l1).min(l2.min(l3)))
     }
 
+    /// The threshold of every tile of the row, if they share one (most
+    /// rows of a frame: only tiles in dim surroundings are lowered).
+    #[inline(always)]
+    pub fn uniform(&self) -> Option<Threshold> {
+        (self.uniform != MIXED).then_some(Threshold::global(self.uniform))
+    }
+
     /// How many pixels of the row's first tile lie left of the window.
     #[inline(always)]
     pub fn lead(&self) -> usize {
@@ -180,6 +197,18 @@ impl LocalLevels {
             cols: 0,
             rows: 0,
             any_local: false,
+            uniform: Vec::with_capacity(max_height.div_ceil(TILE) + 1),
+        }
+    }
+
+    /// Marks the rows of tiles whose tiles share one level
+    /// ([`TileRow::uniform`]).
+    fn mark_uniform_rows(&mut self) {
+        self.uniform.clear();
+        for tiles in self.levels.chunks_exact(self.cols) {
+            let first = tiles[0];
+            let same = tiles.iter().all(|&l| l == first);
+            self.uniform.push(if same { first } else { MIXED });
         }
     }
 
@@ -197,6 +226,8 @@ impl LocalLevels {
         self.layout(plane);
         self.levels.clear();
         self.levels.resize(self.cols * self.rows, t.level());
+        self.uniform.clear();
+        self.uniform.resize(self.rows, t.level());
     }
 
     /// Tests: the window's tiles at the levels `level(tile_col, tile_row)`
@@ -216,6 +247,7 @@ impl LocalLevels {
             }
         }
         self.any_local = true;
+        self.mark_uniform_rows();
     }
 
     /// The local levels of the window `plane`: per tile, the largest value
@@ -379,6 +411,7 @@ impl LocalLevels {
                 }
             }
         }
+        self.mark_uniform_rows();
     }
 
     /// Whether any tile's level lies below the global level.
@@ -394,6 +427,7 @@ impl LocalLevels {
         TileRow {
             levels: &self.levels[tr * self.cols..(tr + 1) * self.cols],
             lead: plane.col0 - (self.tile_col0 << TILE_SHIFT),
+            uniform: self.uniform[tr],
         }
     }
 
@@ -849,6 +883,9 @@ mod tests {
         assert_eq!(row.lowest4(0).level(), 32);
         let top = l.row(&plane, 20);
         assert_eq!((top.lowest4(0).level(), top.lowest4(1).level()), (100, 100));
+        // A row of tiles at one level says so; one with a lowered tile not.
+        assert_eq!(top.uniform(), Some(Threshold::global(100)));
+        assert_eq!(row.uniform(), None);
         // A local floor above the dim peak, or no share: one level.
         l.compute(&plane, &t, 0.3, 45.0);
         assert!(!l.any_local());
