@@ -519,8 +519,9 @@ fn grid_start(origin: usize, step: usize) -> usize {
     (phase + step - origin % step) % step
 }
 
-/// Fills `hist` (length ≥ `(max_value >> shift) + 1`) with the sub-sampled
-/// histogram of the window `plane` and returns the number of samples.
+/// Fills `hist[..=max_value >> shift]` (`hist` holds at least that many
+/// bins; those above are left as they are) with the sub-sampled histogram
+/// of the window `plane` and returns the number of samples.
 pub fn histogram<P: Pixel>(
     plane: &Plane<'_, P>,
     step: usize,
@@ -544,14 +545,18 @@ fn histogram_rows<'a, P: Pixel>(
 ) -> u32 {
     let step = step.max(1);
     let top = (max_value >> shift) as usize;
-    hist.iter_mut().for_each(|h| *h = 0);
-    if shift == 0 && P::MAX <= 255 && top >= 255 {
-        match step {
-            2 => return histogram_8bit::<P, 2>(plane, hist, row_seen),
-            4 => return histogram_8bit::<P, 4>(plane, hist, row_seen),
-            _ => {}
-        }
+    // Only the bins up to the top are cleared (not all of `MAX_BINS` for
+    // 8-bit frames: the 8-bit pass writes its 256 bins whole).
+    let hist = &mut hist[..=top];
+    if shift == 0 && P::MAX <= 255 && top >= 255 && matches!(step, 2 | 4) {
+        hist[256..].fill(0);
+        return if step == 2 {
+            histogram_8bit::<P, 2>(plane, hist, row_seen)
+        } else {
+            histogram_8bit::<P, 4>(plane, hist, row_seen)
+        };
     }
+    hist.fill(0);
     histogram_any(plane, step, shift, max_value, hist, row_seen)
 }
 
@@ -957,7 +962,10 @@ mod tests {
                     plain.sample_peaks(&plane);
                     let n2 = fused.histogram_and_peaks(&plane, step, shift, max, &mut h2);
                     let at = format!("{what}, step {step}, window at ({c0}, {r0})");
-                    assert_eq!((n1, &h1), (n2, &h2), "{at}");
+                    // The bins up to the top; those above left as they were.
+                    let top = (max >> shift) as usize;
+                    assert_eq!((n1, &h1[..=top]), (n2, &h2[..=top]), "{at}");
+                    assert!(h1[top + 1..].iter().all(|&b| b == 7), "{at}");
                     assert_eq!(plain.peaks, fused.peaks, "{at}");
                     assert!(plain.peaks.iter().any(|&p| p > 0), "{at}");
                     let t = threshold(&h1, n1, shift, max, &P);
@@ -1021,7 +1029,12 @@ mod tests {
                     let mut got = vec![5u32; MAX_BINS];
                     let plane = window(&v8, w, (c0, r0, ww, hh));
                     assert_eq!(histogram(&plane, step, 0, 255, &mut got), n, "{at}");
-                    assert_eq!(got, want, "{at}, step {step}");
+                    assert_eq!(got[..256], want[..256], "{at}, step {step}");
+                    assert!(got[256..].iter().all(|&b| b == 5), "{at}");
+                    // An 8-bit frame binned up to 12 bits: the bins above
+                    // 255 cleared.
+                    assert_eq!(histogram(&plane, step, 0, 4095, &mut got), n, "{at}");
+                    assert_eq!(got, want, "{at}, step {step}, 12 bits");
                 }
                 // The peaks: per tile of the window's layout, over the
                 // rows of the peaks' grid and every column.
