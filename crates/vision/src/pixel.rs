@@ -142,9 +142,10 @@ fn above16(v: u8x16, t: u8x16) -> u32 {
 /// The largest lane of `v`.
 #[inline(always)]
 fn reduce_max16(v: u8x16) -> u32 {
+    // (Through `u8`: the callers see a value below 256.)
     i16x8::from_u8x16_low(v)
         .max(i16x8::from_u8x16_high(v))
-        .reduce_max() as u32
+        .reduce_max() as u8 as u32
 }
 
 /// [`Pixel::lit_mask`] of 8-bit pixels given as four vectors.
