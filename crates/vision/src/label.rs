@@ -549,9 +549,11 @@ fn lit_blocks<P: Pixel, L: BlockLevels>(line: &[P], levels: L, first: usize, las
         lit = (block_mask(line, 0, end, levels.block(0)) != 0) as u64;
         (k, base, bit) = (1, end, 1);
     }
-    // Whole blocks from `k` on: four of them end inside the row.
-    while k + 4 <= last && base + 256 <= width {
-        let Ok(stretch) = <&[P; 256]>::try_from(&line[base..base + 256]) else {
+    // Whole blocks from `k` on, four at a time while four end inside the
+    // row and among the blocks asked for.
+    let stretches = (last - k) / 4;
+    for stretch in line[base..].chunks_exact(256).take(stretches) {
+        let Ok(stretch) = <&[P; 256]>::try_from(stretch) else {
             unreachable!("256 pixels")
         };
         lit |= (P::lit_quarters(stretch, levels.lowest4(k)) as u64) << bit;
