@@ -238,42 +238,32 @@ impl Pixel for u8 {
         reduce_max16(m)
     }
 
-    /// Sixteen pixels at a time (from the run's next pixel, or the row's
-    /// last sixteen), the lanes outside the run set to 0 by two masks
-    /// from a table ([`masked16`]): their maximum as one vector, reduced
-    /// once at the end; the saturated lanes counted from a bit mask (a
-    /// lane set to 0 is not saturated unless every value is, saturation
-    /// 0, where the count is the run's length).
+    /// Sixteen pixels at a time ([`run_lanes`]): their maximum as one
+    /// vector, reduced once at the end. The saturated pixels are counted
+    /// only when that maximum reaches the saturation level (a run below
+    /// it has none; most runs), from bit masks in a second pass (a lane
+    /// set to 0 is not saturated unless every value is, at saturation 0,
+    /// where the count is the run's length).
     #[inline]
     fn run_stats(line: &[Self], start: usize, end: usize, saturation: u32) -> (u32, u32) {
-        const LANES: usize = 16;
-        let len = line.len();
-        if len < LANES {
+        if line.len() < 16 {
             return scalar_run_stats(&line[start..end], saturation);
         }
-        debug_assert!(start <= end && end <= len);
-        // `v ≥ saturation` where `max(v, saturation) = v` (none above 255).
-        let sat_level = u8x16::splat(saturation.min(255) as u8);
-        let (mut max, mut sat) = (u8x16::splat(0), 0u32);
-        let mut s = start;
-        while s < end {
-            let p = s.min(len - LANES);
-            // The run's lanes: `lo..hi`.
-            let (lo, hi) = (s - p, (end - p).min(LANES));
-            let v = masked16(line, p, lo as isize, hi as isize - 1);
-            max = max.max(v);
-            let bits = v.max(sat_level).cmp_eq(v).move_mask();
-            if bits != 0 {
-                sat += bits.count_ones();
-            }
-            s = p + hi;
+        let mut max = u8x16::splat(0);
+        run_lanes(line, start, end, |v| max = max.max(v));
+        let max = reduce_max16(max);
+        if max < saturation {
+            return (max, 0);
         }
-        if saturation > u8::MAX as u32 {
-            sat = 0;
-        } else if saturation == 0 {
-            sat = (end - start) as u32;
+        if saturation == 0 {
+            return (max, (end - start) as u32);
         }
-        (reduce_max16(max), sat)
+        // `v ≥ saturation` where `max(v, saturation) = v` (here ≤ 255).
+        let (sat_level, mut sat) = (u8x16::splat(saturation as u8), 0);
+        run_lanes(line, start, end, |v| {
+            sat += v.max(sat_level).cmp_eq(v).move_mask().count_ones()
+        });
+        (max, sat)
     }
 
     /// Sixteen pixels at a time: the largest value of each quarter, and of
@@ -620,6 +610,25 @@ const FROM_32: [u8; 64] = {
     }
     t
 };
+
+/// Calls `f` with the pixels `line[start..end]` (a run; `line` holds at
+/// least 16) sixteen at a time, as the vectors of the run's next pixels or
+/// of the row's last sixteen ([`masked16`]), the lanes outside the run or
+/// already given set to 0.
+#[inline(always)]
+fn run_lanes(line: &[u8], start: usize, end: usize, mut f: impl FnMut(u8x16)) {
+    const LANES: usize = 16;
+    let len = line.len();
+    debug_assert!(start <= end && end <= len && len >= LANES);
+    let mut s = start;
+    while s < end {
+        let p = s.min(len - LANES);
+        // The run's lanes: `lo..hi`.
+        let (lo, hi) = (s - p, (end - p).min(LANES));
+        f(masked16(line, p, lo as isize, hi as isize - 1));
+        s = p + hi;
+    }
+}
 
 /// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
 /// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
