@@ -238,7 +238,7 @@ impl Pixel for u8 {
         reduce_max16(m)
     }
 
-    /// Sixteen pixels at a time ([`run_lanes`]): their maximum as one
+    /// Sixteen pixels at a time (`run_lanes`): their maximum as one
     /// vector, reduced once at the end. The saturated pixels are counted
     /// only when that maximum reaches the saturation level (a run below
     /// it has none; most runs), from bit masks in a second pass (a lane
