@@ -723,7 +723,7 @@ impl Labeller {
                     Ok(block) => P::lit_mask(block, levels.block(k)),
                     Err(_) => block_mask(line, base, n, levels.block(k)),
                 };
-                let valid = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
+                let valid = u64::MAX >> (64 - n);
                 let mut pos = 0u32;
                 loop {
                     if open == NONE {
