@@ -49,11 +49,13 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         lit
     }
-    /// The largest value of the pixels `a..b` of each of `rows` (0 if
-    /// none): a tile's peak over its sampled rows.
+    /// The largest values of the `N` tiles of 64 pixels from `a` on
+    /// (`a + 64 k .. a + 64 (k + 1)`) over all of `rows` (each holds the
+    /// pixels up to `a + 64 N`; 0 if no rows): the peaks of `N` tiles over
+    /// their sampled rows.
     #[inline]
-    fn max_of_rows(rows: &[&[Self]], a: usize, b: usize) -> u32 {
-        plain_max_of_rows(rows, a, b)
+    fn tile_peaks<const N: usize>(rows: &[&[Self]], a: usize) -> [u32; N] {
+        std::array::from_fn(|k| max_of_rows(rows, a + 64 * k, a + 64 * k + 64))
     }
     /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
     /// running from `k0`: a row's grey-value moments.
@@ -69,9 +71,11 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     }
 }
 
-/// [`Pixel::max_of_rows`] a row at a time ([`Pixel::max_of`] of each).
+/// The largest value of the pixels `a..b` of each of `rows` (0 if
+/// none), a row at a time ([`Pixel::max_of`] of each): a tile's peak over
+/// its sampled rows.
 #[inline(always)]
-fn plain_max_of_rows<P: Pixel>(rows: &[&[P]], a: usize, b: usize) -> u32 {
+pub(crate) fn max_of_rows<P: Pixel>(rows: &[&[P]], a: usize, b: usize) -> u32 {
     rows.iter().fold(0, |m, r| m.max(P::max_of(&r[a..b])))
 }
 
@@ -220,22 +224,20 @@ impl Pixel for u8 {
         m
     }
 
-    /// A tile of 64 pixels sixteen at a time: the lanes' maxima over all
-    /// the rows, reduced once.
+    /// Sixteen pixels at a time: each tile's lanes' maxima over all the
+    /// rows, reduced once per tile (for `N = 4` a row's 256 pixels with
+    /// one range check).
     #[inline]
-    fn max_of_rows(rows: &[&[Self]], a: usize, b: usize) -> u32 {
-        if b.wrapping_sub(a) != 64 {
-            return plain_max_of_rows(rows, a, b);
-        }
-        let mut m = u8x16::splat(0);
+    fn tile_peaks<const N: usize>(rows: &[&[Self]], a: usize) -> [u32; N] {
+        let mut m = [u8x16::splat(0); N];
         for r in rows {
-            let Ok(t) = <&[u8; 64]>::try_from(&r[a..b]) else {
-                unreachable!("64 pixels")
-            };
-            let v = |k: usize| lanes16(&t[16 * k..16 * k + 16]);
-            m = m.max(v(0).max(v(1)).max(v(2).max(v(3))));
+            let tiles = &r[a..a + 64 * N];
+            for (k, m) in m.iter_mut().enumerate() {
+                let v = |j: usize| lanes16(&tiles[64 * k + 16 * j..64 * k + 16 * j + 16]);
+                *m = m.max(v(0).max(v(1)).max(v(2).max(v(3))));
+            }
         }
-        reduce_max16(m)
+        m.map(reduce_max16)
     }
 
     /// Sixteen pixels at a time (`run_lanes`): their maximum as one

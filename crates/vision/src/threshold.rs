@@ -26,7 +26,7 @@
 //! global level. With the histogram on the same rows, one pass over them
 //! gives both ([`LocalLevels::histogram_and_peaks`]).
 
-use crate::pixel::{Pixel, Plane};
+use crate::pixel::{max_of_rows, Pixel, Plane};
 
 /// What separates a target's pixels from the background: a pixel is
 /// foreground when its grey value lies strictly above the level. One
@@ -342,17 +342,29 @@ impl LocalLevels {
             return;
         };
         let tr = (pending.tile_row - self.tile_row0) * self.cols;
-        let peaks = &mut self.peaks[tr..tr + self.cols];
-        let mut i = 0;
-        let mut tc = 0;
-        while i < width {
-            let end = ((((plane.col0 + i) >> TILE_SHIFT) + 1) * TILE - plane.col0).min(width);
-            let m = P::max_of_rows(rows, i, end);
-            if let Some(p) = peaks.get_mut(tc) {
+        let mut peaks = self.peaks[tr..tr + self.cols].iter_mut();
+        let mut raise = |m: u32| {
+            if let Some(p) = peaks.next() {
                 *p = (*p).max(m);
             }
-            i = end;
-            tc += 1;
+        };
+        // The first tile (short when the window starts inside it), whole
+        // tiles four at a time, then one at a time, then a short last one.
+        let mut i = 0;
+        if !plane.col0.is_multiple_of(TILE) {
+            i = (TILE - plane.col0 % TILE).min(width);
+            raise(max_of_rows(rows, 0, i));
+        }
+        while i + 4 * TILE <= width {
+            P::tile_peaks::<4>(rows, i).into_iter().for_each(&mut raise);
+            i += 4 * TILE;
+        }
+        while i + TILE <= width {
+            P::tile_peaks::<1>(rows, i).into_iter().for_each(&mut raise);
+            i += TILE;
+        }
+        if i < width {
+            raise(max_of_rows(rows, i, width));
         }
     }
 
