@@ -661,19 +661,22 @@ impl Labeller {
         // same component (union and find only ever point to older runs),
         // whose entry already holds its blob: so blob indices replace the
         // parents in one pass, with no find.
-        for (k, run) in self.runs.iter().enumerate() {
-            let p = self.parent[k] as usize;
+        // (The buffers taken apart first: a blob's statistics are not
+        // seen to move the buffers, which stay in registers.)
+        let (runs, parent, blobs) = (&self.runs[..], &mut self.parent[..], &mut self.blobs);
+        for (k, run) in runs.iter().enumerate() {
+            let p = parent[k] as usize;
             let b = if p == k {
-                if self.blobs.len() >= self.max_blobs {
+                if blobs.len() >= self.max_blobs {
                     return LabelOutcome::TooManyBlobs;
                 }
-                self.blobs.push(Blob::empty());
-                self.blobs.len() - 1
+                blobs.push(Blob::empty());
+                blobs.len() - 1
             } else {
-                self.parent[p] as usize
+                parent[p] as usize
             };
-            self.parent[k] = b as u32;
-            self.blobs[b].add_run(run);
+            parent[k] = b as u32;
+            blobs[b].add_run(run);
         }
         LabelOutcome::Complete
     }
