@@ -49,6 +49,14 @@ pub trait Pixel: Copy + Send + Sync + 'static {
         }
         lit
     }
+    /// The largest values of the `N` tiles of 64 pixels from `a` on
+    /// (`a + 64 k .. a + 64 (k + 1)`) over all of `rows` (each holds the
+    /// pixels up to `a + 64 N`; 0 if no rows): the peaks of `N` tiles over
+    /// their sampled rows.
+    #[inline]
+    fn tile_peaks<const N: usize>(rows: &[&[Self]], a: usize) -> [u32; N] {
+        std::array::from_fn(|k| max_of_rows(rows, a + 64 * k, a + 64 * k + 64))
+    }
     /// `[Σ v, Σ v k, Σ v k²]` over the `n` pixels `line[a..a + n]`, `k`
     /// running from `k0`: a row's grey-value moments.
     #[inline]
@@ -61,6 +69,14 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn bytes(_px: &[Self]) -> Option<&[u8]> {
         None
     }
+}
+
+/// The largest value of the pixels `a..b` of each of `rows` (0 if
+/// none), a row at a time ([`Pixel::max_of`] of each): a tile's peak over
+/// its sampled rows.
+#[inline(always)]
+pub(crate) fn max_of_rows<P: Pixel>(rows: &[&[P]], a: usize, b: usize) -> u32 {
+    rows.iter().fold(0, |m, r| m.max(P::max_of(&r[a..b])))
 }
 
 /// [`Pixel::run_stats`] one pixel at a time.
@@ -127,6 +143,15 @@ fn above16(v: u8x16, t: u8x16) -> u32 {
     !(v.saturating_sub(t).cmp_eq(u8x16::splat(0)).move_mask() as u32) & 0xffff
 }
 
+/// The largest lane of `v`.
+#[inline(always)]
+fn reduce_max16(v: u8x16) -> u32 {
+    // (Through `u8`: the callers see a value below 256.)
+    i16x8::from_u8x16_low(v)
+        .max(i16x8::from_u8x16_high(v))
+        .reduce_max() as u8 as u32
+}
+
 /// [`Pixel::lit_mask`] of 8-bit pixels given as four vectors.
 #[inline(always)]
 fn mask64(v: [u8x16; 4], t: u8x16) -> u64 {
@@ -190,50 +215,57 @@ impl Pixel for u8 {
         let Some(t) = level16(threshold) else {
             return 0;
         };
-        mask64(
-            [0, 1, 2, 3].map(|k| lanes16(&block[16 * k..16 * k + 16])),
-            t,
-        )
+        // (A loop over the four vectors: `[0, 1, 2, 3].map` was left a
+        // call in the labeller.)
+        let mut m = 0u64;
+        for (k, c) in block.chunks_exact(16).enumerate() {
+            m |= (above16(lanes16(c), t) as u64) << (16 * k);
+        }
+        m
     }
 
-    /// Sixteen pixels at a time (from the run's next pixel, or the row's
-    /// last sixteen), the lanes outside the run masked off: their maximum
-    /// as one vector, reduced once at the end; the saturated lanes counted
-    /// from a bit mask.
+    /// Sixteen pixels at a time: each tile's lanes' maxima over all the
+    /// rows, reduced once per tile (for `N = 4` a row's 256 pixels with
+    /// one range check).
+    #[inline]
+    fn tile_peaks<const N: usize>(rows: &[&[Self]], a: usize) -> [u32; N] {
+        let mut m = [u8x16::splat(0); N];
+        for r in rows {
+            let tiles = &r[a..a + 64 * N];
+            for (k, m) in m.iter_mut().enumerate() {
+                let v = |j: usize| lanes16(&tiles[64 * k + 16 * j..64 * k + 16 * j + 16]);
+                *m = m.max(v(0).max(v(1)).max(v(2).max(v(3))));
+            }
+        }
+        m.map(reduce_max16)
+    }
+
+    /// Sixteen pixels at a time (`run_lanes`): their maximum as one
+    /// vector, reduced once at the end. The saturated pixels are counted
+    /// only when that maximum reaches the saturation level (a run below
+    /// it has none; most runs), from bit masks in a second pass (a lane
+    /// set to 0 is not saturated unless every value is, at saturation 0,
+    /// where the count is the run's length).
     #[inline]
     fn run_stats(line: &[Self], start: usize, end: usize, saturation: u32) -> (u32, u32) {
-        const LANES: usize = 16;
-        const IDX: u8x16 = u8x16::new([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15]);
-        let len = line.len();
-        if len < LANES {
+        if line.len() < 16 {
             return scalar_run_stats(&line[start..end], saturation);
         }
-        debug_assert!(start <= end && end <= len);
-        // `v ≥ saturation` where `max(v, saturation) = v` (none above 255).
-        let sat_level = u8x16::splat(saturation.min(255) as u8);
-        let (mut max, mut sat) = (u8x16::splat(0), 0u32);
-        let mut s = start;
-        while s < end {
-            let p = s.min(len - LANES);
-            let v = lanes16(&line[p..p + LANES]);
-            // The run's lanes: `lo..hi`.
-            let (lo, hi) = (s - p, (end - p).min(LANES));
-            let run = IDX.max(u8x16::splat(lo as u8)).cmp_eq(IDX)
-                & IDX.min(u8x16::splat(hi as u8 - 1)).cmp_eq(IDX);
-            max = max.max(v & run);
-            let bits = (v.max(sat_level).cmp_eq(v) & run).move_mask() as u32 & 0xffff;
-            if bits != 0 {
-                sat += bits.count_ones();
-            }
-            s = p + hi;
+        let mut max = u8x16::splat(0);
+        run_lanes(line, start, end, |v| max = max.max(v));
+        let max = reduce_max16(max);
+        if max < saturation {
+            return (max, 0);
         }
-        if saturation > u8::MAX as u32 {
-            sat = 0;
+        if saturation == 0 {
+            return (max, (end - start) as u32);
         }
-        let max = i16x8::from_u8x16_low(max)
-            .max(i16x8::from_u8x16_high(max))
-            .reduce_max();
-        (max as u32, sat)
+        // `v ≥ saturation` where `max(v, saturation) = v` (here ≤ 255).
+        let (sat_level, mut sat) = (u8x16::splat(saturation as u8), 0);
+        run_lanes(line, start, end, |v| {
+            sat += v.max(sat_level).cmp_eq(v).move_mask().count_ones()
+        });
+        (max, sat)
     }
 
     /// Sixteen pixels at a time: the largest value of each quarter, and of
@@ -580,6 +612,25 @@ const FROM_32: [u8; 64] = {
     }
     t
 };
+
+/// Calls `f` with the pixels `line[start..end]` (a run; `line` holds at
+/// least 16) sixteen at a time, as the vectors of the run's next pixels or
+/// of the row's last sixteen ([`masked16`]), the lanes outside the run or
+/// already given set to 0.
+#[inline(always)]
+fn run_lanes(line: &[u8], start: usize, end: usize, mut f: impl FnMut(u8x16)) {
+    const LANES: usize = 16;
+    let len = line.len();
+    debug_assert!(start <= end && end <= len && len >= LANES);
+    let mut s = start;
+    while s < end {
+        let p = s.min(len - LANES);
+        // The run's lanes: `lo..hi`.
+        let (lo, hi) = (s - p, (end - p).min(LANES));
+        f(masked16(line, p, lo as isize, hi as isize - 1));
+        s = p + hi;
+    }
+}
 
 /// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
 /// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
