@@ -26,10 +26,10 @@
 //! ring is counted by grey value in bytes instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, round_i64, ROUND};
-use crate::pixel::{masked16, scalar_moment_sums, Pixel, Plane};
+use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64, ROUND};
+use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, CmpGe, CmpLe};
+use wide::{f64x2, i16x8, i32x4, i64x2, u8x16, CmpGe, CmpLe};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -284,54 +284,64 @@ impl Window {
     /// of the window only, which the callers pick: no blend per row pair,
     /// `measure_weighted` 49.17 M → 47.50 M).
     #[inline(always)]
-    fn blocks(&self, mut f: impl FnMut(usize, &[[i32; 6]])) {
-        let q = &self.q;
-        let (r0, r1) = self.rows;
-        // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole,
-        // and of the window.
-        let (hr0, hr1) = (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1));
+    fn blocks(&self, f: impl FnMut(usize, &[[i32; 6]])) {
         let (one, zero) = (f64x2::splat(ROUND + 1.0), f64x2::splat(ROUND));
-        // Clipping as floats (see `near_f64x2`).
-        let at = |c: i64| f64x2::splat(c as f64 + ROUND);
-        let (c0, c1) = (at(self.cols.0), at(self.cols.1));
-        let (bc0, bc1) = (at(self.box_cols.0), at(self.box_cols.1));
-        let (wc0, wc1) = (at(self.wcols.0), at(self.wcols.1));
-        // A block of rows at a time: first the spans of all its rows, two
-        // rows in the lanes of each vector (their outer spans, holes and
-        // the window's spans, clipped as floats), then the rows. (The
-        // spans' square roots overlap, and neither loop holds the other's
-        // values.)
-        let mut spans = [[0i32; 6]; SPAN_BLOCK];
+        self.blocks_of(
+            |[oa, ob, xa, xb, a, b], hole| {
+                // (Outside its rows the hole is `(1, 0)`.)
+                let (xa, xb) = (hole.blend(xa, one), hole.blend(xb, zero));
+                let ends = [oa, ob, xa, xb, a, b].map(low_i32x2);
+                [0, 1].map(|lane| ends.map(|e| e[lane]))
+            },
+            f,
+        );
+    }
+
+    /// The box's rows a block at a time: each pair of rows' spans (see
+    /// [`PairSpans::at`]) made into a record of each row by `each`, then
+    /// the block's records into `f` with the block's first row. (The
+    /// spans' square roots overlap, and neither loop holds the other's
+    /// values.)
+    #[inline(always)]
+    fn blocks_of<T: Copy + Default>(
+        &self,
+        mut each: impl FnMut([f64x2; 6], f64x2) -> [T; 2],
+        mut f: impl FnMut(usize, &[T]),
+    ) {
+        let spans = self.pair_spans();
+        let (r0, r1) = self.rows;
+        let mut block = [T::default(); SPAN_BLOCK];
         let mut first = r0;
         while first <= r1 {
             let last = r1.min(first + SPAN_BLOCK - 1);
             // (The rows as floats stepped by 2: exact integers.)
             let top = first as f64;
-            let mut rows = f64x2::new([top - 2.0, top - 1.0]);
-            for pair in spans[..=last - first].chunks_mut(2) {
-                rows += f64x2::splat(2.0);
-                let [ia, ib, oa, ob] = q.spans(rows - f64x2::splat(self.by), self.s_in, self.s_out);
-                let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
-                // (Outside its rows the hole is `(1, 0)`.)
-                let hole = rows.cmp_ge(hr0) & rows.cmp_le(hr1);
-                let ends = [
-                    oa,
-                    ob,
-                    // (Inside the outer span as it is: the inner roots
-                    // are inside the outer ones, `s_in ≤ s_out`, and every
-                    // step from `s` to the ends is monotonic in floats.)
-                    hole.blend(ia.fast_max(bc0), one),
-                    hole.blend(ib.fast_min(bc1), zero),
-                    ia.fast_max(wc0),
-                    ib.fast_min(wc1),
-                ]
-                .map(low_i32x2);
-                for (lane, sp) in pair.iter_mut().enumerate() {
-                    *sp = ends.map(|e| e[lane]);
+            let mut rows = f64x2::new([top, top + 1.0]);
+            for pair in block[..=last - first].chunks_mut(2) {
+                let (ends, hole) = spans.at(rows);
+                for (r, e) in pair.iter_mut().zip(each(ends, hole)) {
+                    *r = e;
                 }
+                rows += f64x2::splat(2.0);
             }
-            f(first, &spans[..=last - first]);
+            f(first, &block[..=last - first]);
             first = last + 1;
+        }
+    }
+
+    /// What [`PairSpans::at`] needs, as floats.
+    #[inline(always)]
+    fn pair_spans(&self) -> PairSpans {
+        // Clipping as floats (see `near_f64x2`).
+        let at = |c: i64| f64x2::splat(c as f64 + ROUND);
+        PairSpans {
+            q: self.q,
+            by: f64x2::splat(self.by),
+            s: (self.s_in, self.s_out),
+            hole_rows: (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1)),
+            cols: (at(self.cols.0), at(self.cols.1)),
+            box_cols: (at(self.box_cols.0), at(self.box_cols.1)),
+            wcols: (at(self.wcols.0), at(self.wcols.1)),
         }
     }
 
@@ -377,15 +387,13 @@ impl Window {
     /// [`Window::sums`] of an 8-bit window with the linear weight whose
     /// ring box is at most 32 columns wide, its window at most 16 columns
     /// wide and 64 rows high (`None` otherwise), the ring counted in
-    /// `ring`: each row's ring pixels picked from one copy of the box's 32
-    /// columns by a bit mask from the span ends (no slices, no loop per
-    /// run), the window's as one masked vector ([`Lanes`]). The same sums
-    /// and counts as [`Window::sums`] (tracking: 5.3 k instead of 5.5 k
-    /// instructions per measurement, the window in lanes through
-    /// [`Window::sums`] included). Each block of rows in two loops, its
-    /// ring then its window (`measure_weighted` 53.83 M → 52.45 M), the
-    /// window's every row through [`Lanes`] (an empty span as `(1, 0)`:
-    /// no branch, no stepping over rows left out; 51.00 M → 49.17 M).
+    /// `ring`: each row's ring pixels picked from the box's 32 columns by
+    /// a bit mask (no slices, no loop per run), the window's as one masked
+    /// vector ([`Lanes`]). The same sums and counts as [`Window::sums`].
+    /// Each pair of rows straight from its spans ([`Window::pairs`]): the
+    /// ring's masks of both rows formed from the span ends as floats
+    /// ([`run_bits`]), and the window's ends as lanes, without storing
+    /// the spans.
     #[inline(always)]
     fn sums_8bit(
         &self,
@@ -403,78 +411,82 @@ impl Window {
         // Lane 0 of the box's copy and of the window's vector (row indices).
         let pr = ((c0 - first_col) as usize).min(plane.width - 32);
         let pw = ((wc0 - first_col) as usize).min(plane.width - 16);
-        let cr = first_col + pr as i64;
         let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
-        let stride = plane.stride;
-        // Each block's rows twice: their ring pixels, then their window
-        // (fewer live values in each loop than in one).
-        self.blocks(|first, spans| {
-            let mut start = (first - plane.row0) * stride;
-            for sp in spans {
-                let [oa, ob, xa, xb, _, _] = sp.map(i64::from);
-                if oa <= ob {
-                    let Ok(px) = <&[u8; 32]>::try_from(&plane.data[start + pr..start + pr + 32])
-                    else {
-                        unreachable!("32 pixels")
-                    };
-                    // (`0 ≤ oa − cr ≤ ob − cr ≤ 31`; the hole inside.)
-                    let mut bits = lanes(oa - cr, ob - cr);
-                    if xa <= xb {
-                        bits &= !lanes(xa - cr, xb - cr);
+        let (data, stride, row0) = (plane.data, plane.stride, plane.row0);
+        // The span ends relative to the lanes (`n + ROUND` less an
+        // integer): the ring's from `first_col + pr`, the window's from
+        // `first_col + pw` (the last ends one past).
+        let at = |c: usize| f64x2::splat((first_col + c as i64) as f64);
+        let one = f64x2::splat(1.0);
+        let (ring_at, window_at) = (at(pr), at(pw));
+        let (ring_past, window_past) = (ring_at - one, window_at - one);
+        let last = f64x2::splat(ROUND + 16.0);
+        // The masks' table offsets `32 − l` (see `lanes_from16`).
+        let from = f64x2::splat(2.0 * ROUND + 32.0);
+        let bits = |v: f64x2| i64x2::from(v.to_array().map(|v| v.to_bits() as i64));
+        self.blocks_of(
+            |[oa, ob, xa, xb, a, b], hole| {
+                // Each row's record: the ring's bit mask (the hole inside
+                // the outer span when not empty), and the window's mask
+                // offsets from 32 up.
+                let ring = run_bits(oa - ring_at, ob - ring_past)
+                    - (run_bits(xa - ring_at, xb - ring_past) & hole)
+                    + f64x2::splat(TWO_52);
+                // The window's lanes `lo..hi` (an empty span as `lo = hi`;
+                // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
+                let lo = (a - window_at).fast_min(last);
+                let hi = (b - window_past).fast_max(lo);
+                // (The fields' neighbours above them are left: 52 bits up.)
+                let record: i64x2 = bits(ring) | bits(from - lo) << 32 | bits(from - hi) << 40;
+                record.to_array().map(|r| r as u64)
+            },
+            |first, records| {
+                let mut start = (first - row0) * stride;
+                for &r in records {
+                    let bits = r as u32;
+                    if bits != 0 {
+                        let Ok(px) = <&[u8; 32]>::try_from(&data[start + pr..start + pr + 32])
+                        else {
+                            unreachable!("32 pixels")
+                        };
+                        ring.add_lanes(px, bits);
                     }
-                    ring.add_lanes(px, bits);
+                    start += stride;
                 }
-                start += stride;
-            }
-            let last = first + spans.len() - 1;
-            let (lo, hi) = (wr0.max(first), wr1.min(last));
-            if lo <= hi {
-                // (The rows' lane 0 by the stride, not by row.)
-                let mut at = (lo - plane.row0) * stride + pw;
-                let base = (first_col + pw as i64) as isize;
-                // (Every row of the window, an empty span as `(1, 0)`: no
-                // branch.)
-                for sp in &spans[lo - first..=hi - first] {
-                    let (a, b) = (sp[4] as isize - base, sp[5] as isize - base);
-                    let (a, b) = if a <= b { (a, b) } else { (1, 0) };
-                    m.lanes(plane.data, at, a, b);
-                    at += stride;
+                let last = first + records.len() - 1;
+                let (lo, hi) = (wr0.max(first), wr1.min(last));
+                if lo <= hi {
+                    let mut at = (lo - row0) * stride + pw;
+                    for &r in &records[lo - first..=hi - first] {
+                        let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
+                        // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
+                        // `2 Σ l = (63 − ge − gt) n`.
+                        let n = ge as i64 - gt as i64;
+                        let counts = (n, (63 - (ge + gt) as i64) * n);
+                        m.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+                        at += stride;
+                    }
                 }
-            }
-        });
+            },
+        );
         Some(m.sums())
     }
 }
 
-/// Bits `lo..=hi` of a `u32` (`0 ≤ lo ≤ hi ≤ 31`).
+/// `2⁵²`: adding it to an integer-valued `x` with `0 ≤ x < 2⁵²` leaves `x`
+/// in the low bits of the mantissa.
+const TWO_52: f64 = 4_503_599_627_370_496.0;
+
+/// For two rows (lanes), the bits `lo..hi` of a `u32` as the float
+/// `2^hi − 2^lo` (`0` if `lo ≥ hi`), from `lo + ROUND` and `hi + ROUND`
+/// with `lo ≥ 0` and `hi ≤ 32`: each end clamped to `0..=32` (which keeps
+/// an empty run empty), then a power of two ([`pow2_f64x2`]). Exact.
 #[inline(always)]
-fn lanes(lo: i64, hi: i64) -> u32 {
-    debug_assert!(0 <= lo && lo <= hi && hi <= 31);
-    // (From two tables: fewer instructions than two shifts by `cl`.)
-    FROM_BIT[lo as usize & 31] & UP_TO_BIT[hi as usize & 31]
+fn run_bits(lo: f64x2, hi: f64x2) -> f64x2 {
+    let (zero, top) = (f64x2::splat(ROUND), f64x2::splat(ROUND + 32.0));
+    let (lo, hi) = (lo.fast_min(top).fast_max(zero), hi.fast_max(zero));
+    (pow2_f64x2(hi) - pow2_f64x2(lo)).fast_max(f64x2::ZERO)
 }
-
-/// `FROM_BIT[i]`: the bits `i..32` of a `u32`.
-const FROM_BIT: [u32; 32] = {
-    let mut t = [0; 32];
-    let mut i = 0;
-    while i < 32 {
-        t[i] = u32::MAX << i;
-        i += 1;
-    }
-    t
-};
-
-/// `UP_TO_BIT[i]`: the bits `0..=i` of a `u32`.
-const UP_TO_BIT: [u32; 32] = {
-    let mut t = [0; 32];
-    let mut i = 0;
-    while i < 32 {
-        t[i] = u32::MAX >> (31 - i);
-        i += 1;
-    }
-    t
-};
 
 /// Where [`Window::sums`] puts the window's pixels: the exact integer sums
 /// `Σw·(1, k, k², j, j², k j)` and `Σ1·(...)` of the weights `w` and the
@@ -490,17 +502,25 @@ trait Moments<P: Pixel> {
 }
 
 /// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, 0)` moved to the origin
-/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`:
-/// exact.
-fn moved<A: Exact>(s: [A; 6], dk: A, dj: A) -> [A; 6] {
-    let two = A::from(2);
+/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`,
+/// of two sets of sums at once (lanes): exact while every sum, product
+/// and result is an integer below `2⁵³` in magnitude.
+#[inline(always)]
+fn moved(s: [f64x2; 6], dk: f64, dj: f64) -> [f64x2; 6] {
+    let (k, j) = (f64x2::splat(dk), f64x2::splat(dj));
+    let (k2, j2) = (f64x2::splat(2.0 * dk), f64x2::splat(2.0 * dj));
+    let (kk, jj, kj) = (
+        f64x2::splat(dk * dk),
+        f64x2::splat(dj * dj),
+        f64x2::splat(dk * dj),
+    );
     [
         s[0],
-        s[1] + dk * s[0],
-        s[2] + two * dk * s[1] + dk * dk * s[0],
-        s[3] + dj * s[0],
-        s[4] + two * dj * s[3] + dj * dj * s[0],
-        s[5] + dj * s[1] + dk * s[3] + dk * dj * s[0],
+        s[1] + k * s[0],
+        s[2] + k2 * s[1] + kk * s[0],
+        s[3] + j * s[0],
+        s[4] + j2 * s[3] + jj * s[0],
+        s[5] + j * s[1] + k * s[3] + kj * s[0],
     ]
 }
 
@@ -624,12 +644,13 @@ impl<P: Pixel, W: Weight, A: Exact> Moments<P> for RowByRow<W, A> {
 /// sums: after `T` rows `A₁ = Σ P_j`, `A₂ = Σ D_j P_j`, `A₃ = Σ D_j (D_j +
 /// 1)/2 P_j`, `B₁ = Σ Q_j`, `B₂ = Σ D_j Q_j` with `D_j = T − j`, from which
 /// the moments in `j` follow once at the end (no multiplication by `j` per
-/// row, every accumulator in a register). The pixel counts from the span's
-/// ends. The same integers as [`RowByRow`] (tracking: `measure_weighted`
-/// 53.99 M → 53.83 M instructions against multiplying by `j` per row).
-/// With at most 64 rows and 32 lanes no 16-bit lane passes `64 · 255` and
-/// no 32-bit lane `8 · 255 · 45760 < 2³¹` (`A₃`) or `8 · 255 · 31 · 2080`
-/// (`B₂`).
+/// row, every accumulator in a register). The pixel counts the same way:
+/// per lane from the masks, and the row's count `n_j` and `2 Σ_l l` as
+/// running sums from the span's ends. The same integers as [`RowByRow`]
+/// (tracking: `measure_weighted` 53.99 M → 53.83 M instructions against
+/// multiplying by `j` per row). With at most 64 rows and 32 lanes no
+/// 8-bit count passes 64, no 16-bit lane `64 · 255` and no 32-bit lane
+/// `8 · 255 · 45760 < 2³¹` (`A₃`) or `8 · 255 · 31 · 2080` (`B₂`).
 struct Lanes<const B: usize> {
     /// Index in a row of lane 0, and the frame row of `j = 0`.
     p: usize,
@@ -641,14 +662,17 @@ struct Lanes<const B: usize> {
     j0: i64,
     /// Per lane `Σ_j w`.
     col: [[i16x8; 2]; B],
+    /// Per lane `Σ_j 1`, the pixels taken.
+    count: [u8x16; B],
     /// The running sums (see above).
     a1: i32x4,
     a2: i32x4,
     a3: i32x4,
     b1: i32x4,
     b2: i32x4,
-    /// `(Σ1, Σl, Σl², Σj, Σj², Σl j)` of the pixel counts.
-    n: [i64; 6],
+    /// The counts' running sums `(Σ n, Σ D n, Σ D (D + 1)/2 n, Σ 2 l,
+    /// Σ D 2 l)` (see above).
+    n: [i64; 5],
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -669,12 +693,13 @@ impl<const B: usize> Lanes<B> {
             k0,
             j0,
             col: [[i16x8::ZERO; 2]; B],
+            count: [u8x16::ZERO; B],
             a1: i32x4::ZERO,
             a2: i32x4::ZERO,
             a3: i32x4::ZERO,
             b1: i32x4::ZERO,
             b2: i32x4::ZERO,
-            n: [0; 6],
+            n: [0; 5],
         }
     }
 }
@@ -690,9 +715,23 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
             self.a2 += self.a1;
             self.a3 += self.a2;
             self.b2 += self.b1;
+            let n = &mut self.n;
+            n[1] += n[0];
+            n[2] += n[1];
+            n[4] += n[3];
             self.next += 1;
         }
-        self.lanes(line, self.p, lo, hi);
+        let (l0, l1) = (lo as i64, hi as i64);
+        let n = l1 - l0 + 1;
+        self.take(
+            line,
+            self.p,
+            |i| {
+                let off = 16 * i as isize;
+                run16(lo - off, hi - off)
+            },
+            (n, (l0 + l1) * n),
+        );
     }
 
     fn sums(self) -> ([f64; 6], [f64; 6]) {
@@ -701,19 +740,25 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
 }
 
 impl<const B: usize> Lanes<B> {
-    /// [`Moments::row`] of the lanes `lo..=hi` (`0 ≤ lo ≤ hi < 16 B`, or
-    /// `(1, 0)`: none) of the next row, whose lane 0 is `data[at]`.
+    /// Takes the next row's pixels in the lanes set in `mask(i)` of each
+    /// block `i`, lane 0 at `data[at]`: `(n, 2 Σ l)` of them in `counts`.
     #[inline(always)]
-    fn lanes(&mut self, data: &[u8], at: usize, lo: isize, hi: isize) {
-        debug_assert!(0 <= lo && lo <= hi && hi < 16 * B as isize || (lo, hi) == (1, 0));
+    fn take(
+        &mut self,
+        data: &[u8],
+        at: usize,
+        mask: impl Fn(usize) -> u8x16,
+        (count, l2): (i64, i64),
+    ) {
         debug_assert!(self.next - self.r0 < Self::ROWS);
-        let j = (self.next - self.r0) as i64;
         self.next += 1;
         let ones = i16x8::splat(1);
         let (mut pw, mut qw) = (i32x4::ZERO, i32x4::ZERO);
-        for (i, col) in self.col.iter_mut().enumerate() {
-            let off = 16 * i as isize;
-            let v = masked16(data, at + 16 * i, lo - off, hi - off);
+        for (i, (col, cnt)) in self.col.iter_mut().zip(&mut self.count).enumerate() {
+            let m = mask(i);
+            let v = lanes16(&data[at + 16 * i..at + 16 * i + 16]) & m;
+            // (`0xff` is −1: one more pixel.)
+            *cnt -= m;
             let half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
             for h in 0..2 {
                 col[h] += half[h];
@@ -731,24 +776,26 @@ impl<const B: usize> Lanes<B> {
         self.a3 += self.a2;
         self.b1 += qw;
         self.b2 += self.b1;
-        // The counts: `l` over `lo..=hi`.
-        let (lo, hi) = (lo as i64, hi as i64);
-        let n = hi - lo + 1;
-        let l1 = ((lo + hi) * n) >> 1;
-        let l2 = SQUARES[(hi + 1) as usize & 63] - SQUARES[lo as usize & 63];
-        let s = &mut self.n;
-        s[0] += n;
-        s[1] += l1;
-        s[2] += l2;
-        s[3] += j * n;
-        s[4] += j * j * n;
-        s[5] += j * l1;
+        let n = &mut self.n;
+        n[0] += count;
+        n[1] += n[0];
+        n[2] += n[1];
+        n[3] += l2;
+        n[4] += n[3];
     }
 
-    /// See [`Moments::sums`].
+    /// See [`Moments::sums`]. (Every sum about lane 0 and row `r0` is an
+    /// integer far below `2⁵³`: exact as `f64`, and so are the moments in
+    /// `j` and about the origin formed from them in floats.)
+    #[inline(always)]
     fn sums(self) -> ([f64; 6], [f64; 6]) {
-        let (mut c0, mut c1, mut c2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
-        for (i, col) in self.col.iter().enumerate() {
+        // `Σ_l c_l · (1, l, l²)` of per-lane sums `c` in 16-bit lanes.
+        let (mut c0, mut c1, mut c2, mut n2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
+        for (i, (col, count)) in self.col.iter().zip(&self.count).enumerate() {
+            let count = [
+                i16x8::from_u8x16_low(*count),
+                i16x8::from_u8x16_high(*count),
+            ];
             for h in 0..2 {
                 let off = i16x8::splat(16 * i as i16);
                 let l = LANE[h] + off;
@@ -756,35 +803,39 @@ impl<const B: usize> Lanes<B> {
                 c1 += col[h].dot(l);
                 // (`l²` up to 961 in 16 bits.)
                 c2 += col[h].dot(l * l);
+                n2 += count[h].dot(l * l);
             }
         }
-        let r = |v: i32x4| v.reduce_add() as i64;
-        let (sw, slw) = (r(c0), r(c1));
-        // `Σ D w`, `Σ D² w`, `Σ D l w`, and `j = T − D`.
-        let (dw, d2w, dlw) = (r(self.a2), 2 * r(self.a3) - r(self.a2), r(self.b2));
-        let t = (self.next - self.r0) as i64;
-        let jw = t * sw - dw;
-        let j2w = t * t * sw - 2 * t * dw + d2w;
-        let jlw = t * slw - dlw;
-        let g = [sw, slw, r(c2), jw, j2w, jlw];
+        let r = |v: i32x4| v.reduce_add() as f64;
+        let n = self.n.map(|n| n as f64);
+        let pair = |g: f64, n: f64| f64x2::new([g, n]);
+        // `Σ(1, l, l²)`, `Σ D`, `Σ D²`, `Σ D l` of the weights and counts.
+        let s = [
+            pair(r(c0), n[0]),
+            pair(r(c1), 0.5 * n[3]),
+            pair(r(c2), r(n2)),
+        ];
+        let (a2, a3) = (r(self.a2), r(self.a3));
+        let d = pair(a2, n[1]);
+        let d2 = pair(2.0 * a3 - a2, 2.0 * n[2] - n[1]);
+        let dl = pair(r(self.b2), 0.5 * n[4]);
+        // `j = T − D`.
+        let t = f64x2::splat((self.next - self.r0) as f64);
+        let sums = [
+            s[0],
+            s[1],
+            s[2],
+            t * s[0] - d,
+            t * t * s[0] - f64x2::splat(2.0) * t * d + d2,
+            t * s[1] - dl,
+        ];
         // From lane and row to the origin.
-        let dk = (self.p as i64) - self.k0;
-        let dj = self.r0 as i64 - self.j0;
-        let f = |s| moved(s, dk, dj).map(|x: i64| x as f64);
-        (f(g), f(self.n))
+        let dk = (self.p as i64 - self.k0) as f64;
+        let dj = (self.r0 as i64 - self.j0) as f64;
+        let m = moved(sums, dk, dj).map(|v| v.to_array());
+        (m.map(|v| v[0]), m.map(|v| v[1]))
     }
 }
-
-/// `SQUARES[x] = Σ_{i < x} i²`.
-const SQUARES: [i64; 64] = {
-    let mut t = [0i64; 64];
-    let mut i = 1;
-    while i < 64 {
-        t[i] = t[i - 1] + ((i - 1) * (i - 1)) as i64;
-        i += 1;
-    }
-    t
-};
 
 /// A blob's ellipse as the quadratic form
 /// `ρ²(dx, dy) = qxx dx² + 2 qxy dx dy + qyy dy²` about `(bx, ·)`: the
@@ -799,8 +850,48 @@ struct Conic {
     bx: f64,
 }
 
+/// A [`Window`]'s span ends of two rows at a time (see [`PairSpans::at`]).
+struct PairSpans {
+    q: Conic,
+    by: f64x2,
+    s: (f64, f64),
+    /// The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole.
+    hole_rows: (f64x2, f64x2),
+    /// The columns of the ring's box, the box proper and the window as
+    /// `c + ROUND`.
+    cols: (f64x2, f64x2),
+    box_cols: (f64x2, f64x2),
+    wcols: (f64x2, f64x2),
+}
+
+impl PairSpans {
+    /// The spans of the rows `rows` (lanes): `[oa, ob, xa, xb, a, b]` as
+    /// in [`Window::blocks`] but the hole in every row (inside the outer
+    /// span when not empty), with the mask of the rows that have it (the
+    /// box proper); each end the integer `n` as the float `n + ROUND` (see
+    /// [`near_f64x2`]), clipped as floats.
+    #[inline(always)]
+    fn at(&self, rows: f64x2) -> ([f64x2; 6], f64x2) {
+        let [ia, ib, oa, ob] = self.q.spans(rows - self.by, self.s.0, self.s.1);
+        let ends = [
+            oa.fast_max(self.cols.0),
+            ob.fast_min(self.cols.1),
+            // (Inside the outer span as it is: the inner roots are inside
+            // the outer ones, `s_in ≤ s_out`, and every step from `s` to
+            // the ends is monotonic in floats.)
+            ia.fast_max(self.box_cols.0),
+            ib.fast_min(self.box_cols.1),
+            ia.fast_max(self.wcols.0),
+            ib.fast_min(self.wcols.1),
+        ];
+        let (hr0, hr1) = self.hole_rows;
+        (ends, rows.cmp_ge(hr0) & rows.cmp_le(hr1))
+    }
+}
+
 /// Rows whose spans [`Window::rows`] computes ahead at a time.
 const SPAN_BLOCK: usize = 24;
+const _: () = assert!(SPAN_BLOCK.is_multiple_of(2));
 
 impl Conic {
     /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`

@@ -3,7 +3,7 @@
 //! per-target paths (centroid windows, tracking windows) would make
 //! thousands of times per frame.
 
-use wide::f64x2;
+use wide::{f64x2, i64x2};
 
 /// `1.5 · 2⁵²`: adding it to an `x` with `|x| < 2³¹` leaves the nearest
 /// integer (ties to even) in the low bits of the mantissa.
@@ -21,6 +21,16 @@ pub(crate) fn near_f64x2(x: f64x2) -> f64x2 {
 #[inline(always)]
 pub(crate) fn low_i32x2(r: f64x2) -> [i32; 2] {
     r.to_array().map(|r| r.to_bits() as u32 as i32)
+}
+
+/// `2ˣ` of both lanes from `x + ROUND` (see [`near_f64x2`]), for integers
+/// `−1022 ≤ x ≤ 1023`: `x` moved from the low bits of the mantissa into
+/// the exponent field with its bias (exact, no conversion).
+#[inline(always)]
+pub(crate) fn pow2_f64x2(r: f64x2) -> f64x2 {
+    let x = i64x2::from(r.to_array().map(|r| r.to_bits() as i64));
+    let p: i64x2 = (x + i64x2::splat(1023)) << 52;
+    f64x2::from(p.to_array().map(|p| f64::from_bits(p as u64)))
 }
 
 /// `floor` (no libm call on baseline x86-64), saturating at the ends of
