@@ -149,13 +149,8 @@ impl Ring for Counts<'_> {
 
     #[inline]
     fn quantile(&mut self, level: u32) -> Option<u32> {
-        let dark = &self.count[..=(level.min(255) as usize)];
-        // (In bytes, sixteen at a time: no sum of counts passes 255.)
-        let n = dark.iter().fold(0u8, |n, &c| n.wrapping_add(c)) as usize;
-        if n < 4 {
-            return None;
-        }
-        kth_counted(dark, n * 3 / 10)
+        let n = counted_up_to(self.count, level.min(255) as usize) as usize;
+        (n >= 4).then(|| kth_counted(self.count, n * 3 / 10))
     }
 }
 
@@ -934,26 +929,57 @@ fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
         for &v in values.iter() {
             count[v as usize & (SMALL - 1)] += 1;
         }
-        if let Some(q) = kth_counted(&count, k) {
-            return q;
-        }
+        return kth_counted(&count, k);
     }
     let (_, &mut q, _) = values.select_nth_unstable(k);
     q
 }
 
-/// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
-/// values equal `v`); `None` if fewer than `k + 1` are counted.
-#[inline]
-fn kth_counted(count: &[u8], k: usize) -> Option<u32> {
-    let mut acc = 0usize;
-    for (v, &c) in count.iter().enumerate() {
-        acc += c as usize;
-        if acc > k {
-            return Some(v as u32);
-        }
+/// How many values `count` holds up to `last` (`count[v]` values equal
+/// `v`; at most 255 in all, so that no sum of counts wraps): sixteen
+/// counts at a time, the last sixteen masked.
+#[inline(always)]
+fn counted_up_to(count: &[u8; 256], last: usize) -> u8 {
+    let whole = (last + 1) / 16;
+    let mut n = u8x16::ZERO;
+    for c in count.chunks_exact(16).take(whole) {
+        n += lanes16(c);
     }
-    None
+    if whole < 16 {
+        // (The lanes `< (last + 1) % 16` of the next sixteen.)
+        let next = lanes16(&count[16 * whole..16 * whole + 16]);
+        n += next & !lanes_from16(32 - (last + 1) % 16);
+    }
+    n.to_array().iter().fold(0, |n, &c| n.wrapping_add(c))
+}
+
+/// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
+/// values equal `v`; more than `k` in all, at most 255): the counts summed
+/// eight at a time as the bytes of a `u64` (a product sums them without a
+/// carry), then one at a time.
+#[inline]
+fn kth_counted(count: &[u8; 256], k: usize) -> u32 {
+    let mut acc = 0;
+    let mut v = 0;
+    for c in count.chunks_exact(8) {
+        let Ok(c) = <[u8; 8]>::try_from(c) else {
+            unreachable!("eight counts")
+        };
+        let eight = (u64::from_le_bytes(c).wrapping_mul(0x0101_0101_0101_0101) >> 56) as usize;
+        if acc + eight > k {
+            break;
+        }
+        acc += eight;
+        v += 8;
+    }
+    debug_assert!(v < 256, "fewer than {} counted", k + 1);
+    loop {
+        acc += count[v & 255] as usize;
+        if acc > k || v >= 255 {
+            return v as u32;
+        }
+        v += 1;
+    }
 }
 
 /// The weight a grey value gets in the centroid sums (in units of
