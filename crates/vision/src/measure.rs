@@ -155,14 +155,27 @@ impl Ring for Counts<'_> {
 }
 
 impl Counts<'_> {
-    /// Takes the pixels `px[i]` of the bits `i` set in `bits`.
+    /// Takes the pixels `px[i]` of the bits `i` set in `bits` (not 0) but
+    /// for `total`: returns how many.
     #[inline(always)]
-    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) {
-        while bits != 0 {
+    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) -> usize {
+        debug_assert!(bits != 0);
+        let mut n = 0;
+        // (Two at a time: one count of them per two.)
+        loop {
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
-            self.total += 1;
             bits &= bits - 1;
+            if bits == 0 {
+                return n + 1;
+            }
+            let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
+            *c = c.wrapping_add(1);
+            n += 2;
+            bits &= bits - 1;
+            if bits == 0 {
+                return n;
+            }
         }
     }
 }
@@ -437,6 +450,8 @@ impl Window {
             },
             |first, records| {
                 let mut start = (first - row0) * stride;
+                // (The ring's pixels counted here: no store per row.)
+                let mut taken = 0;
                 for &r in records {
                     let bits = r as u32;
                     if bits != 0 {
@@ -444,10 +459,11 @@ impl Window {
                         else {
                             unreachable!("32 pixels")
                         };
-                        ring.add_lanes(px, bits);
+                        taken += ring.add_lanes(px, bits);
                     }
                     start += stride;
                 }
+                ring.total += taken;
                 let last = first + records.len() - 1;
                 let (lo, hi) = (wr0.max(first), wr1.min(last));
                 if lo <= hi {
