@@ -29,7 +29,7 @@ use crate::label::Blob;
 use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64, ROUND};
 use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, i64x2, u8x16, CmpGe, CmpLe};
+use wide::{f64x2, i16x8, i32x4, u8x16, CmpGe, CmpLe};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -322,15 +322,11 @@ impl Window {
         let mut first = r0;
         while first <= r1 {
             let last = r1.min(first + SPAN_BLOCK - 1);
-            // (The rows as floats stepped by 2: exact integers.)
-            let top = first as f64;
-            let mut rows = f64x2::new([top, top + 1.0]);
-            for pair in block[..=last - first].chunks_mut(2) {
-                let (ends, hole) = spans.at(rows);
+            for (pair, (ends, hole)) in block[..=last - first].chunks_mut(2).zip(spans.from(first))
+            {
                 for (r, e) in pair.iter_mut().zip(each(ends, hole)) {
                     *r = e;
                 }
-                rows += f64x2::splat(2.0);
             }
             f(first, &block[..=last - first]);
             first = last + 1;
@@ -411,16 +407,15 @@ impl Window {
     ) -> Option<([f64; 6], [f64; 6])> {
         let first_col = self.first_col;
         let (c0, c1) = self.cols;
+        let (r0, r1) = self.rows;
         let (wr0, wr1) = self.wrows;
         let (wc0, wc1) = self.wcols;
-        if c1 - c0 >= 32 || wc1 - wc0 >= 16 || wr1 >= wr0 + Lanes::<1>::ROWS || plane.width < 32 {
+        if c1 - c0 >= 32 || wc1 - wc0 >= 16 || r1 - r0 >= 32 || plane.width < 32 {
             return None;
         }
         // Lane 0 of the box's copy and of the window's vector (row indices).
         let pr = ((c0 - first_col) as usize).min(plane.width - 32);
         let pw = ((wc0 - first_col) as usize).min(plane.width - 16);
-        let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
-        let (data, stride, row0) = (plane.data, plane.stride, plane.row0);
         // The span ends relative to the lanes (`n + ROUND` less an
         // integer): the ring's from `first_col + pr`, the window's from
         // `first_col + pw` (the last ends one past).
@@ -429,57 +424,59 @@ impl Window {
         let (ring_at, window_at) = (at(pr), at(pw));
         let (ring_past, window_past) = (ring_at - one, window_at - one);
         let last = f64x2::splat(ROUND + 16.0);
-        // The masks' table offsets `32 − l` (see `lanes_from16`).
-        let from = f64x2::splat(2.0 * ROUND + 32.0);
-        let bits = |v: f64x2| i64x2::from(v.to_array().map(|v| v.to_bits() as i64));
-        self.blocks_of(
-            |[oa, ob, xa, xb, a, b], hole| {
-                // Each row's record: the ring's bit mask (the hole inside
-                // the outer span when not empty), and the window's mask
-                // offsets from 32 up.
-                let ring = run_bits(oa - ring_at, ob - ring_past)
-                    - (run_bits(xa - ring_at, xb - ring_past) & hole)
-                    + f64x2::splat(TWO_52);
-                // The window's lanes `lo..hi` (an empty span as `lo = hi`;
-                // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
-                let lo = (a - window_at).fast_min(last);
-                let hi = (b - window_past).fast_max(lo);
-                // (The fields' neighbours above them are left: 52 bits up.)
-                let record: i64x2 = bits(ring) | bits(from - lo) << 32 | bits(from - hi) << 40;
-                record.to_array().map(|r| r as u64)
-            },
-            |first, records| {
-                let mut start = (first - row0) * stride;
-                // (The ring's pixels counted here: no store per row.)
-                let mut taken = 0;
-                for &r in records {
-                    let bits = r as u32;
-                    if bits != 0 {
-                        let Ok(px) = <&[u8; 32]>::try_from(&data[start + pr..start + pr + 32])
-                        else {
-                            unreachable!("32 pixels")
-                        };
-                        taken += ring.add_lanes(px, bits);
-                    }
-                    start += stride;
-                }
-                ring.total += taken;
-                let last = first + records.len() - 1;
-                let (lo, hi) = (wr0.max(first), wr1.min(last));
-                if lo <= hi {
-                    let mut at = (lo - row0) * stride + pw;
-                    for &r in &records[lo - first..=hi - first] {
-                        let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
-                        // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
-                        // `2 Σ l = (63 − ge − gt) n`.
-                        let n = ge as i64 - gt as i64;
-                        let counts = (n, (63 - (ge + gt) as i64) * n);
-                        m.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
-                        at += stride;
-                    }
-                }
-            },
-        );
+        // The window's mask offsets `32 − l` (see `lanes_from16`).
+        let from = f64x2::splat(ROUND + 32.0);
+        // Each row's record, two rows at a time straight from their spans:
+        // the ring's bit mask in the low 32 bits, the window's mask
+        // offsets above (summed as integers below 2⁴⁶, exact, the bits
+        // then from the float plus 2⁵²).
+        let rows = r1 - r0 + 1;
+        let mut records = [0u64; 32];
+        for (record, ([oa, ob, xa, xb, a, b], hole)) in records[..2 * rows.div_ceil(2)]
+            .chunks_exact_mut(2)
+            .zip(self.pair_spans().from(r0))
+        {
+            // (The hole inside the outer span when not empty.)
+            let ring = run_bits(oa - ring_at, ob - ring_past)
+                - (run_bits(xa - ring_at, xb - ring_past) & hole);
+            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
+            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`), as
+            // the offsets `32 − lo + 256 (32 − hi)`.
+            let lo = (a - window_at).fast_min(last);
+            let hi = (b - window_past).fast_max(lo);
+            let offsets = (from - lo) + (from - hi) * f64x2::splat(256.0);
+            let r = ring + offsets * f64x2::splat(TWO_32) + f64x2::splat(TWO_52);
+            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        }
+        let (data, stride) = (plane.data, plane.stride);
+        // The ring's pixels (counted here: no store per row).
+        let mut start = (r0 - plane.row0) * stride + pr;
+        let mut taken = 0;
+        for &r in &records[..rows] {
+            let bits = r as u32;
+            if bits != 0 {
+                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
+                    unreachable!("32 pixels")
+                };
+                taken += ring.add_lanes(px, bits);
+            }
+            start += stride;
+        }
+        ring.total += taken;
+        // The window's (its rows inside the box's).
+        let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
+        if wr0 <= wr1 {
+            let mut at = (wr0 - plane.row0) * stride + pw;
+            for &r in &records[wr0 - r0..=wr1 - r0] {
+                let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
+                // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
+                // `2 Σ l = (63 − ge − gt) n`.
+                let n = ge as i64 - gt as i64;
+                let counts = (n, (63 - (ge + gt) as i64) * n);
+                m.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+                at += stride;
+            }
+        }
         Some(m.sums())
     }
 }
@@ -487,6 +484,8 @@ impl Window {
 /// `2⁵²`: adding it to an integer-valued `x` with `0 ≤ x < 2⁵²` leaves `x`
 /// in the low bits of the mantissa.
 const TWO_52: f64 = 4_503_599_627_370_496.0;
+/// `2³²`.
+const TWO_32: f64 = 4_294_967_296.0;
 
 /// For two rows (lanes), the bits `lo..hi` of a `u32` as the float
 /// `2^hi − 2^lo` (`0` if `lo ≥ hi`), from `lo + ROUND` and `hi + ROUND`
@@ -875,7 +874,36 @@ struct PairSpans {
     wcols: (f64x2, f64x2),
 }
 
+/// [`PairSpans::at`] of the rows from `rows` on, two at a time (without
+/// end).
+struct Pairs<'a> {
+    spans: &'a PairSpans,
+    rows: f64x2,
+}
+
+impl Iterator for Pairs<'_> {
+    type Item = ([f64x2; 6], f64x2);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        let at = self.spans.at(self.rows);
+        // (The rows as floats stepped by 2: exact integers.)
+        self.rows += f64x2::splat(2.0);
+        Some(at)
+    }
+}
+
 impl PairSpans {
+    /// The pairs of rows from `first` on (see [`Pairs`]).
+    #[inline(always)]
+    fn from(&self, first: usize) -> Pairs<'_> {
+        let top = first as f64;
+        Pairs {
+            spans: self,
+            rows: f64x2::new([top, top + 1.0]),
+        }
+    }
+
     /// The spans of the rows `rows` (lanes): `[oa, ob, xa, xb, a, b]` as
     /// in [`Window::blocks`] but the hole in every row (inside the outer
     /// span when not empty), with the mask of the rows that have it (the
