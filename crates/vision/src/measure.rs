@@ -467,7 +467,7 @@ impl Window {
         let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
         if wr0 <= wr1 {
             let mut at = (wr0 - plane.row0) * stride + pw;
-            for &r in &records[wr0 - r0..=wr1 - r0] {
+            for &r in &records[wr0 - r0..wr1 + 1 - r0] {
                 let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
                 // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
                 // `2 Σ l = (63 − ge − gt) n`.
@@ -817,18 +817,15 @@ impl<const B: usize> Lanes<B> {
             }
         }
         let r = |v: i32x4| v.reduce_add() as f64;
+        let [c0, c1, c2, n2] = [c0, c1, c2, n2].map(r);
+        let [a2, a3, b2] = [self.a2, self.a3, self.b2].map(r);
         let n = self.n.map(|n| n as f64);
         let pair = |g: f64, n: f64| f64x2::new([g, n]);
         // `Σ(1, l, l²)`, `Σ D`, `Σ D²`, `Σ D l` of the weights and counts.
-        let s = [
-            pair(r(c0), n[0]),
-            pair(r(c1), 0.5 * n[3]),
-            pair(r(c2), r(n2)),
-        ];
-        let (a2, a3) = (r(self.a2), r(self.a3));
+        let s = [pair(c0, n[0]), pair(c1, 0.5 * n[3]), pair(c2, n2)];
         let d = pair(a2, n[1]);
         let d2 = pair(2.0 * a3 - a2, 2.0 * n[2] - n[1]);
-        let dl = pair(r(self.b2), 0.5 * n[4]);
+        let dl = pair(b2, 0.5 * n[4]);
         // `j = T − D`.
         let t = f64x2::splat((self.next - self.r0) as f64);
         let sums = [
@@ -842,8 +839,11 @@ impl<const B: usize> Lanes<B> {
         // From lane and row to the origin.
         let dk = (self.p as i64 - self.k0) as f64;
         let dj = (self.r0 as i64 - self.j0) as f64;
-        let m = moved(sums, dk, dj).map(|v| v.to_array());
-        (m.map(|v| v[0]), m.map(|v| v[1]))
+        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj).map(f64x2::to_array);
+        (
+            [m0[0], m1[0], m2[0], m3[0], m4[0], m5[0]],
+            [m0[1], m1[1], m2[1], m3[1], m4[1], m5[1]],
+        )
     }
 }
 
