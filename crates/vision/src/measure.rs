@@ -416,20 +416,19 @@ impl Window {
         // Lane 0 of the box's copy and of the window's vector (row indices).
         let pr = ((c0 - first_col) as usize).min(plane.width - 32);
         let pw = ((wc0 - first_col) as usize).min(plane.width - 16);
-        // The span ends relative to the lanes (`n + ROUND` less an
-        // integer): the ring's from `first_col + pr`, the window's from
-        // `first_col + pw` (the last ends one past).
+        // The span ends relative to the lanes: the ring's from `first_col +
+        // pr` as `n + ROUND` less an integer (the last ends one past), the
+        // window's from `first_col + pw` as plain integers.
         let at = |c: usize| f64x2::splat((first_col + c as i64) as f64);
         let one = f64x2::splat(1.0);
-        let (ring_at, window_at) = (at(pr), at(pw));
+        let (ring_at, window_at) = (at(pr), at(pw) + f64x2::splat(ROUND));
         let (ring_past, window_past) = (ring_at - one, window_at - one);
-        let last = f64x2::splat(ROUND + 16.0);
-        // The window's mask offsets `32 − l` (see `lanes_from16`).
-        let from = f64x2::splat(ROUND + 32.0);
         // Each row's record, two rows at a time straight from their spans:
-        // the ring's bit mask in the low 32 bits, the window's mask
-        // offsets above (summed as integers below 2⁴⁶, exact, the bits
-        // then from the float plus 2⁵²).
+        // the ring's bit mask in the low 32 bits, above it the window's
+        // mask offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed
+        // as integers below 2⁴⁶ (exact), the bits then from the float plus
+        // 2⁵².
+        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
         let rows = r1 - r0 + 1;
         let mut records = [0u64; 32];
         for (record, ([oa, ob, xa, xb, a, b], hole)) in records[..2 * rows.div_ceil(2)]
@@ -440,12 +439,10 @@ impl Window {
             let ring = run_bits(oa - ring_at, ob - ring_past)
                 - (run_bits(xa - ring_at, xb - ring_past) & hole);
             // The window's lanes `lo..hi` (an empty span as `lo = hi`;
-            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`), as
-            // the offsets `32 − lo + 256 (32 − hi)`.
-            let lo = (a - window_at).fast_min(last);
+            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
+            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
             let hi = (b - window_past).fast_max(lo);
-            let offsets = (from - lo) + (from - hi) * f64x2::splat(256.0);
-            let r = ring + offsets * f64x2::splat(TWO_32) + f64x2::splat(TWO_52);
+            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
             record.copy_from_slice(&r.to_array().map(f64::to_bits));
         }
         let (data, stride) = (plane.data, plane.stride);
@@ -494,7 +491,7 @@ const TWO_32: f64 = 4_294_967_296.0;
 #[inline(always)]
 fn run_bits(lo: f64x2, hi: f64x2) -> f64x2 {
     let (zero, top) = (f64x2::splat(ROUND), f64x2::splat(ROUND + 32.0));
-    let (lo, hi) = (lo.fast_min(top).fast_max(zero), hi.fast_max(zero));
+    let (lo, hi) = (lo.fast_min(top), hi.fast_max(zero));
     (pow2_f64x2(hi) - pow2_f64x2(lo)).fast_max(f64x2::ZERO)
 }
 
