@@ -423,6 +423,12 @@ impl Window {
         let one = f64x2::splat(1.0);
         let (ring_at, window_at) = (at(pr), at(pw) + f64x2::splat(ROUND));
         let (ring_past, window_past) = (ring_at - one, window_at - one);
+        // The hole (the box proper's columns, inside the window's: the
+        // window's lanes clipped to them) in the ring's lanes as `n + ROUND`.
+        let (cw, cr) = (first_col + pw as i64, first_col + pr as i64);
+        let to_ring = f64x2::splat((cw - cr) as f64 + ROUND);
+        let hole_cols =
+            [self.box_cols.0 - cw, self.box_cols.1 + 1 - cw].map(|c| f64x2::splat(c as f64));
         // Each row's record, two rows at a time straight from their spans:
         // the ring's bit mask in the low 32 bits, above it the window's
         // mask offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed
@@ -431,17 +437,21 @@ impl Window {
         let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
         let rows = r1 - r0 + 1;
         let mut records = [0u64; 32];
-        for (record, ([oa, ob, xa, xb, a, b], hole)) in records[..2 * rows.div_ceil(2)]
+        for (record, ([oa, ob, _, _, a, b], hole)) in records[..2 * rows.div_ceil(2)]
             .chunks_exact_mut(2)
             .zip(self.pair_spans().from(r0))
         {
-            // (The hole inside the outer span when not empty.)
-            let ring = run_bits(oa - ring_at, ob - ring_past)
-                - (run_bits(xa - ring_at, xb - ring_past) & hole);
             // The window's lanes `lo..hi` (an empty span as `lo = hi`;
             // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
             let lo = (a - window_at).fast_min(f64x2::splat(16.0));
             let hi = (b - window_past).fast_max(lo);
+            // The ring: the outer span less the hole (inside it when not
+            // empty; its lanes `cw − cr` up from the window's, at most 32).
+            let hole = (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
+                - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
+            .fast_max(f64x2::ZERO)
+                & hole;
+            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
             let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
             record.copy_from_slice(&r.to_array().map(f64::to_bits));
         }
@@ -796,25 +806,23 @@ impl<const B: usize> Lanes<B> {
     /// `j` and about the origin formed from them in floats.)
     #[inline(always)]
     fn sums(self) -> ([f64; 6], [f64; 6]) {
-        // `Σ_l c_l · (1, l, l²)` of per-lane sums `c` in 16-bit lanes.
-        let (mut c0, mut c1, mut c2, mut n2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
+        // `Σ_l c_l l²` of the per-lane sums `c` (16-bit lanes); `Σ w` and
+        // `Σ l w` are `A₁` and `B₁`.
+        let (mut c2, mut n2) = (i32x4::ZERO, i32x4::ZERO);
         for (i, (col, count)) in self.col.iter().zip(&self.count).enumerate() {
             let count = [
                 i16x8::from_u8x16_low(*count),
                 i16x8::from_u8x16_high(*count),
             ];
             for h in 0..2 {
-                let off = i16x8::splat(16 * i as i16);
-                let l = LANE[h] + off;
-                c0 += col[h].dot(i16x8::splat(1));
-                c1 += col[h].dot(l);
+                let l = LANE[h] + i16x8::splat(16 * i as i16);
                 // (`l²` up to 961 in 16 bits.)
                 c2 += col[h].dot(l * l);
                 n2 += count[h].dot(l * l);
             }
         }
         let r = |v: i32x4| v.reduce_add() as f64;
-        let [c0, c1, c2, n2] = [c0, c1, c2, n2].map(r);
+        let [c0, c1, c2, n2] = [self.a1, self.b1, c2, n2].map(r);
         let [a2, a3, b2] = [self.a2, self.a3, self.b2].map(r);
         let n = self.n.map(|n| n as f64);
         let pair = |g: f64, n: f64| f64x2::new([g, n]);
