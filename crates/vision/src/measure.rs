@@ -1003,32 +1003,37 @@ fn counted_up_to(count: &[u8; 256], last: usize) -> u8 {
 }
 
 /// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
-/// values equal `v`; more than `k` in all, at most 255): the counts summed
-/// eight at a time as the bytes of a `u64` (a product sums them without a
-/// carry), then one at a time.
+/// values equal `v`; more than `k` in all, at most 255): eight counts at
+/// a time as the bytes of a `u64`, whose product with `0x0101…01` holds
+/// their running sums (no carry: at most 255), the chunk that passes `k`
+/// then searched in those sums without a loop.
 #[inline]
 fn kth_counted(count: &[u8; 256], k: usize) -> u32 {
+    const BYTES: u64 = 0x0101_0101_0101_0101;
+    const LANES: u64 = 0x0001_0001_0001_0001;
+    const EVEN: u64 = 0x00ff_00ff_00ff_00ff;
     let mut acc = 0;
-    let mut v = 0;
-    for c in count.chunks_exact(8) {
+    for (i, c) in count.chunks_exact(8).enumerate() {
         let Ok(c) = <[u8; 8]>::try_from(c) else {
             unreachable!("eight counts")
         };
-        let eight = (u64::from_le_bytes(c).wrapping_mul(0x0101_0101_0101_0101) >> 56) as usize;
+        // Byte `j`: the counts `0..=j` of the eight summed.
+        let sums = u64::from_le_bytes(c).wrapping_mul(BYTES);
+        let eight = (sums >> 56) as usize;
         if acc + eight > k {
-            break;
+            // The first byte of at least `t = k + 1 − acc` (1 to 255): the
+            // bytes of at least `t` counted in 16-bit lanes, even bytes
+            // and odd ones (`v + 256 − t` reaches bit 8 where `v ≥ t`).
+            let below = (256 - (k + 1 - acc) as u64) * LANES;
+            let even = ((sums & EVEN) + below) >> 8 & LANES;
+            let odd = ((sums >> 8 & EVEN) + below) >> 8 & LANES;
+            let at_least = ((even + odd).wrapping_mul(LANES) >> 48) as u32;
+            return 8 * i as u32 + 8 - at_least;
         }
         acc += eight;
-        v += 8;
     }
-    debug_assert!(v < 256, "fewer than {} counted", k + 1);
-    loop {
-        acc += count[v & 255] as usize;
-        if acc > k || v >= 255 {
-            return v as u32;
-        }
-        v += 1;
-    }
+    debug_assert!(false, "fewer than {} counted", k + 1);
+    255
 }
 
 /// The weight a grey value gets in the centroid sums (in units of
@@ -1669,6 +1674,37 @@ mod tests {
                         assert_eq!(got[3].max(0) as usize, (whi as usize).min(last as usize));
                     }
                 }
+            }
+        }
+    }
+
+    /// The counted percentile's parts against plain loops: the counts up
+    /// to every level (the last sixteen masked) and every `k`-th value,
+    /// tables sparse and full (sums up to 255).
+    #[test]
+    fn counted_sums_and_order_statistics_are_the_plain_ones() {
+        let mut rng = Rng::new(17);
+        for case in 0..300 {
+            let mut count = [0u8; 256];
+            let n = 1 + (rng.next_u64() % 255) as usize;
+            let spread = 1 + (rng.next_u64() % 256) as usize;
+            let base = (rng.next_u64() % (257 - spread as u64)) as usize;
+            for _ in 0..n {
+                count[base + (rng.next_u64() as usize % spread)] += 1;
+            }
+            for last in 0..256 {
+                let want: usize = count[..=last].iter().map(|&c| c as usize).sum();
+                assert_eq!(counted_up_to(&count, last) as usize, want, "{case} {last}");
+            }
+            for k in 0..n {
+                let mut acc = 0;
+                let want = (0..256)
+                    .find(|&v| {
+                        acc += count[v] as usize;
+                        acc > k
+                    })
+                    .unwrap() as u32;
+                assert_eq!(kth_counted(&count, k), want, "{case} {k}");
             }
         }
     }
