@@ -155,6 +155,27 @@ impl Ring for Counts<'_> {
 }
 
 impl Counts<'_> {
+    /// Takes rows of 32 pixels, row `i` at `data[start + i stride..]`:
+    /// its pixels `px[b]` of the bits `b` set in the low 32 bits of
+    /// `masks[i]`. (A function of its own: its registers apart from those
+    /// of the window's sums around it.)
+    #[inline(never)]
+    fn add_rows(&mut self, data: &[u8], mut start: usize, stride: usize, masks: &[u64]) {
+        // (The pixels counted here: no store per row.)
+        let mut taken = 0;
+        for &m in masks {
+            let bits = m as u32;
+            if bits != 0 {
+                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
+                    unreachable!("32 pixels")
+                };
+                taken += self.add_lanes(px, bits);
+            }
+            start += stride;
+        }
+        self.total += taken;
+    }
+
     /// Takes the pixels `px[i]` of the bits `i` set in `bits` (not 0) but
     /// for `total`: returns how many.
     #[inline(always)]
@@ -456,20 +477,12 @@ impl Window {
             record.copy_from_slice(&r.to_array().map(f64::to_bits));
         }
         let (data, stride) = (plane.data, plane.stride);
-        // The ring's pixels (counted here: no store per row).
-        let mut start = (r0 - plane.row0) * stride + pr;
-        let mut taken = 0;
-        for &r in &records[..rows] {
-            let bits = r as u32;
-            if bits != 0 {
-                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
-                    unreachable!("32 pixels")
-                };
-                taken += ring.add_lanes(px, bits);
-            }
-            start += stride;
-        }
-        ring.total += taken;
+        ring.add_rows(
+            data,
+            (r0 - plane.row0) * stride + pr,
+            stride,
+            &records[..rows],
+        );
         // The window's (its rows inside the box's).
         let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
         if wr0 <= wr1 {
