@@ -107,6 +107,59 @@ pub const MAX_SCALE: f64 = 1.5;
 pub const CODED_GROW: f64 = 1.5;
 /// See [`CODED_GROW`].
 pub const CODED_MAX_SCALE: f64 = 1.35;
+
+/// A centroid window's margin, px, and the most multiple of the blob's
+/// ellipse it may reach: any pair `(grow, max_scale)`, or a type whose
+/// values are constants ([`DotMargin`], [`CodedMargin`]; the window's
+/// bounds then fold to constants where they depend on the margin alone).
+pub trait Margin: Copy {
+    /// The margin, px.
+    fn grow(self) -> f64;
+    /// The most multiple of the blob's ellipse.
+    fn max_scale(self) -> f64;
+}
+
+impl Margin for (f64, f64) {
+    #[inline(always)]
+    fn grow(self) -> f64 {
+        self.0
+    }
+    #[inline(always)]
+    fn max_scale(self) -> f64 {
+        self.1
+    }
+}
+
+/// The window of a dot: [`GROW`] and [`MAX_SCALE`].
+#[derive(Debug, Clone, Copy)]
+pub struct DotMargin;
+
+impl Margin for DotMargin {
+    #[inline(always)]
+    fn grow(self) -> f64 {
+        GROW
+    }
+    #[inline(always)]
+    fn max_scale(self) -> f64 {
+        MAX_SCALE
+    }
+}
+
+/// The window of a coded target's dot: [`CODED_GROW`] and
+/// [`CODED_MAX_SCALE`].
+#[derive(Debug, Clone, Copy)]
+pub struct CodedMargin;
+
+impl Margin for CodedMargin {
+    #[inline(always)]
+    fn grow(self) -> f64 {
+        CODED_GROW
+    }
+    #[inline(always)]
+    fn max_scale(self) -> f64 {
+        CODED_MAX_SCALE
+    }
+}
 /// Background ring: from the window out to this multiple (inside a coded
 /// target's gap, which ends at 2).
 const BG_OUTER: f64 = 1.75;
@@ -1128,24 +1181,15 @@ impl Weight for Knee {
 }
 
 /// Measures a blob (full-frame coordinates, pixels read inside `plane`
-/// only); `None` if the window holds no signal.
+/// only) in the window of `margin`; `None` if the window holds no signal.
 pub fn measure<P: Pixel>(
     plane: &Plane<P>,
     blob: &Blob,
     threshold: Threshold,
     fallback_background: f64,
-    grow: f64,
-    max_scale: f64,
+    margin: impl Margin,
 ) -> Option<Measurement> {
-    measure_weighted(
-        plane,
-        blob,
-        threshold,
-        fallback_background,
-        grow,
-        max_scale,
-        Linear,
-    )
+    measure_weighted(plane, blob, threshold, fallback_background, margin, Linear)
 }
 
 /// [`measure`] with the grey values weighted by `w` in the centroid and
@@ -1155,10 +1199,10 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     blob: &Blob,
     threshold: Threshold,
     fallback_background: f64,
-    grow: f64,
-    max_scale: f64,
+    margin: impl Margin,
     w: W,
 ) -> Option<Measurement> {
+    let (grow, max_scale) = (margin.grow(), margin.max_scale());
     let (bx, by) = blob.centre();
     let (cxx, cyy, cxy) = blob.covariance();
     // Semi-minor axis as in `ellipse` (without its angle).
@@ -1481,34 +1525,21 @@ mod tests {
             }
             let mut n = 0;
             for blob in labeller.blobs() {
-                for (grow, scale) in [(GROW, MAX_SCALE), (CODED_GROW, CODED_MAX_SCALE)] {
-                    let m8 = measure(&whole8, blob, threshold, 20.0, grow, scale);
-                    let m16 = measure(
-                        &Plane::whole(&px16, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
+                for margin in [(GROW, MAX_SCALE), (CODED_GROW, CODED_MAX_SCALE)] {
+                    let m8 = measure(&whole8, blob, threshold, 20.0, margin);
+                    let whole16 = Plane::whole(&px16, width, height);
+                    let m16 = measure(&whole16, blob, threshold, 20.0, margin);
                     assert_eq!(m8, m16, "{frame} {blob:?}");
-                    let c8 = measure(
-                        &crop(&px8, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
-                    let c16 = measure(
-                        &crop(&px16, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
+                    let c8 = measure(&crop(&px8, width, height), blob, threshold, 20.0, margin);
+                    let c16 = measure(&crop(&px16, width, height), blob, threshold, 20.0, margin);
                     assert_eq!(c8, c16, "{frame} {blob:?}");
+                    // The margins as constants: the same.
+                    let constant = if margin.0 == GROW {
+                        measure(&whole8, blob, threshold, 20.0, DotMargin)
+                    } else {
+                        measure(&whole8, blob, threshold, 20.0, CodedMargin)
+                    };
+                    assert_eq!(constant, m8, "{frame} {blob:?}");
                     n += m8.is_some() as usize;
                 }
             }
