@@ -26,7 +26,7 @@
 //! ring is counted by grey value in bytes instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64, ROUND};
+use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND};
 use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
 use wide::{f64x2, i16x8, i32x4, u8x16, CmpGe, CmpLe};
@@ -1281,7 +1281,7 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     let level = threshold.level();
     // The window's sums are exact integers about the pixel nearest the
     // blob's centre.
-    let (cc, rr) = (round_i64(bx), round_i64(by));
+    let [cc, rr] = round_i64x2(f64x2::new([bx, by]));
     let mut counted = None;
     // (`est ≤ COUNTED_RING < BG_SAMPLES` keeps every dark pixel: stride 1.)
     if est <= COUNTED_RING && (P::MAX <= 255 || level < 255) {

@@ -3,7 +3,7 @@
 //! per-target paths (centroid windows, tracking windows) would make
 //! thousands of times per frame.
 
-use wide::{f64x2, i64x2};
+use wide::{f64x2, i64x2, CmpGt, CmpLe};
 
 /// `1.5 · 2⁵²`: adding it to an `x` with `|x| < 2³¹` leaves the nearest
 /// integer (ties to even) in the low bits of the mantissa.
@@ -41,6 +41,22 @@ pub(crate) fn floor_i64(x: f64) -> i64 {
     t.saturating_sub(((t as f64) > x) as i64)
 }
 
+/// [`round_i64`] of both lanes, in floats while both lie within ±2³⁰
+/// (the nearest integer of `x + 0.5`, less one where it lies above: exact
+/// there), else one at a time.
+#[inline(always)]
+pub(crate) fn round_i64x2(x: f64x2) -> [i64; 2] {
+    const LIMIT: f64 = (1u64 << 30) as f64;
+    let y = x + f64x2::splat(0.5);
+    // (NaN fails the comparison: one at a time.)
+    if !y.abs().cmp_le(f64x2::splat(LIMIT)).all() {
+        return x.to_array().map(round_i64);
+    }
+    let n = near_f64x2(y) - f64x2::splat(ROUND);
+    let floor = n - (n.cmp_gt(y) & f64x2::splat(1.0));
+    low_i32x2(near_f64x2(floor)).map(i64::from)
+}
+
 /// `ceil`, see [`floor_i64`].
 #[inline(always)]
 pub(crate) fn ceil_i64(x: f64) -> i64 {
@@ -75,6 +91,37 @@ mod tests {
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
             assert_eq!(round_i64(x), (x + 0.5).floor() as i64, "{x}");
+        }
+        // Two at a time: within ±2³⁰ in floats, else (NaN, past it) one
+        // at a time, the same either way.
+        let xs = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            1073741823.5,
+            -1073741824.5,
+            1073741824.0,
+            1e9 + 0.5,
+            4e9,
+            -4e9,
+            1e300,
+            f64::INFINITY,
+            f64::NAN,
+            3.7,
+            -3.7,
+            1299.51,
+        ];
+        for &a in &xs {
+            for &b in &xs {
+                let got = round_i64x2(f64x2::new([a, b]));
+                assert_eq!(got, [round_i64(a), round_i64(b)], "{a} {b}");
+            }
         }
     }
 }
