@@ -172,6 +172,10 @@ const BG_SAMPLES: usize = 512;
 const COUNTED_RING: f64 = 180.0;
 const _: () = assert!(COUNTED_RING < BG_SAMPLES as f64);
 
+/// A window's sums (see [`Moments::sums`]) and its background from the
+/// ring (`None`: too few dark pixels).
+type Counted = (([f64; 6], [f64; 6]), Option<u32>);
+
 /// Where [`Window::sums`] puts the pixels of the background ring.
 trait Ring {
     /// Takes a run of ring pixels.
@@ -477,8 +481,9 @@ impl Window {
         &self,
         plane: &Plane<u8>,
         ring: &mut Counts,
-        (k0, j0): (i64, i64),
-    ) -> Option<([f64; 6], [f64; 6])> {
+        level: u32,
+        origin: (i64, i64),
+    ) -> Option<Counted> {
         let first_col = self.first_col;
         let (c0, c1) = self.cols;
         let (r0, r1) = self.rows;
@@ -536,21 +541,31 @@ impl Window {
             stride,
             &records[..rows],
         );
-        // The window's (its rows inside the box's).
-        let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
-        if wr0 <= wr1 {
-            let mut at = (wr0 - plane.row0) * stride + pw;
-            for &r in &records[wr0 - r0..wr1 + 1 - r0] {
-                let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
-                // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
-                // `2 Σ l = (63 − ge − gt) n`.
-                let n = ge as i64 - gt as i64;
-                let counts = (n, (63 - (ge + gt) as i64) * n);
-                m.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
-                at += stride;
+        // The background (the ring's percentile, when its counts are
+        // exact), then the window's sums: with the background taken off
+        // every pixel where it is known (exact integers: the pixel counts
+        // are then not needed), else with the counts (for the caller's
+        // fallback background; a ring of too many pixels is measured
+        // again by the caller).
+        let background = if ring.total <= u8::MAX as usize {
+            ring.quantile(level)
+        } else {
+            None
+        };
+        let window = if wr0 <= wr1 {
+            &records[wr0 - r0..wr1 + 1 - r0]
+        } else {
+            &[]
+        };
+        let at = (wr0 - plane.row0) * stride + pw;
+        let sums = match background {
+            Some(b) => {
+                let m = Lanes::<1, true>::new(pw, wr0, origin, b as u8);
+                m.take_records(data, at, stride, window)
             }
-        }
-        Some(m.sums())
+            None => Lanes::<1>::new(pw, wr0, origin, 0).take_records(data, at, stride, window),
+        };
+        Some((sums, background))
     }
 }
 
@@ -734,7 +749,12 @@ impl<P: Pixel, W: Weight, A: Exact> Moments<P> for RowByRow<W, A> {
 /// multiplying by `j` per row). With at most 64 rows and 32 lanes no
 /// 8-bit count passes 64, no 16-bit lane `64 · 255` and no 32-bit lane
 /// `8 · 255 · 45760 < 2³¹` (`A₃`) or `8 · 255 · 31 · 2080` (`B₂`).
-struct Lanes<const B: usize> {
+///
+/// With `LESS` every pixel counts less a background known beforehand
+/// (`w − b`, between −255 and 255: the same bounds): the sums less the
+/// background times the pixel counts, the counts themselves not kept
+/// (their sums are then zero).
+struct Lanes<const B: usize, const LESS: bool = false> {
     /// Index in a row of lane 0, and the frame row of `j = 0`.
     p: usize,
     r0: usize,
@@ -756,6 +776,8 @@ struct Lanes<const B: usize> {
     /// The counts' running sums `(Σ n, Σ D n, Σ D (D + 1)/2 n, Σ 2 l,
     /// Σ D 2 l)` (see above).
     n: [i64; 5],
+    /// With `LESS`, the background taken off every pixel (16-bit lanes).
+    background: i16x8,
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -764,11 +786,12 @@ const LANE: [i16x8; 2] = [
     i16x8::new([8, 9, 10, 11, 12, 13, 14, 15]),
 ];
 
-impl<const B: usize> Lanes<B> {
+impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
     /// Most rows.
     const ROWS: usize = 64;
 
-    fn new(p: usize, r0: usize, k0: i64, j0: i64) -> Self {
+    /// With `LESS`, `background` taken off every pixel (else 0).
+    fn new(p: usize, r0: usize, (k0, j0): (i64, i64), background: u8) -> Self {
         Lanes {
             p,
             r0,
@@ -783,6 +806,7 @@ impl<const B: usize> Lanes<B> {
             b1: i32x4::ZERO,
             b2: i32x4::ZERO,
             n: [0; 5],
+            background: i16x8::splat(background as i16),
         }
     }
 }
@@ -822,7 +846,32 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
     }
 }
 
-impl<const B: usize> Lanes<B> {
+impl<const LESS: bool> Lanes<1, LESS> {
+    /// Takes the rows of `records`, row `i` at `data[at + i stride..]`,
+    /// its lanes from the mask offsets in bytes 4 and 5 of `records[i]`
+    /// (see [`lanes_from16`]); returns the sums.
+    #[inline(always)]
+    fn take_records(
+        mut self,
+        data: &[u8],
+        mut at: usize,
+        stride: usize,
+        records: &[u64],
+    ) -> ([f64; 6], [f64; 6]) {
+        for &r in records {
+            let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
+            // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
+            // `2 Σ l = (63 − ge − gt) n`.
+            let n = ge as i64 - gt as i64;
+            let counts = (n, (63 - (ge + gt) as i64) * n);
+            self.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+            at += stride;
+        }
+        self.sums()
+    }
+}
+
+impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
     /// Takes the next row's pixels in the lanes set in `mask(i)` of each
     /// block `i`, lane 0 at `data[at]`: `(n, 2 Σ l)` of them in `counts`.
     #[inline(always)]
@@ -840,9 +889,15 @@ impl<const B: usize> Lanes<B> {
         for (i, (col, cnt)) in self.col.iter_mut().zip(&mut self.count).enumerate() {
             let m = mask(i);
             let v = lanes16(&data[at + 16 * i..at + 16 * i + 16]) & m;
-            // (`0xff` is −1: one more pixel.)
-            *cnt -= m;
-            let half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
+            let mut half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
+            if LESS {
+                // (The mask's lanes as 255: `& b` is `b` in them, 0 else.)
+                half[0] -= i16x8::from_u8x16_low(m) & self.background;
+                half[1] -= i16x8::from_u8x16_high(m) & self.background;
+            } else {
+                // (`0xff` is −1: one more pixel.)
+                *cnt -= m;
+            }
             for h in 0..2 {
                 col[h] += half[h];
                 let l = if i == 0 {
@@ -859,12 +914,14 @@ impl<const B: usize> Lanes<B> {
         self.a3 += self.a2;
         self.b1 += qw;
         self.b2 += self.b1;
-        let n = &mut self.n;
-        n[0] += count;
-        n[1] += n[0];
-        n[2] += n[1];
-        n[3] += l2;
-        n[4] += n[3];
+        if !LESS {
+            let n = &mut self.n;
+            n[0] += count;
+            n[1] += n[0];
+            n[2] += n[1];
+            n[3] += l2;
+            n[4] += n[3];
+        }
     }
 
     /// See [`Moments::sums`]. (Every sum about lane 0 and row `r0` is an
@@ -884,13 +941,15 @@ impl<const B: usize> Lanes<B> {
                 let l = LANE[h] + i16x8::splat(16 * i as i16);
                 // (`l²` up to 961 in 16 bits.)
                 c2 += col[h].dot(l * l);
-                n2 += count[h].dot(l * l);
+                if !LESS {
+                    n2 += count[h].dot(l * l);
+                }
             }
         }
         let r = |v: i32x4| v.reduce_add() as f64;
         let [c0, c1, c2, n2] = [self.a1, self.b1, c2, n2].map(r);
         let [a2, a3, b2] = [self.a2, self.a3, self.b2].map(r);
-        let n = self.n.map(|n| n as f64);
+        let n = self.n.map(|n| if LESS { 0.0 } else { n as f64 });
         let pair = |g: f64, n: f64| f64x2::new([g, n]);
         // `Σ(1, l, l²)`, `Σ D`, `Σ D²`, `Σ D l` of the weights and counts.
         let s = [pair(c0, n[0]), pair(c1, 0.5 * n[3]), pair(c2, n2)];
@@ -1291,12 +1350,18 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             total: 0,
         };
         let fast = match plane.bytes() {
-            Some(bytes) if W::LINEAR => window.sums_8bit(&bytes, &mut ring, (cc - first_col, rr)),
+            Some(bytes) if W::LINEAR => {
+                window.sums_8bit(&bytes, &mut ring, level, (cc - first_col, rr))
+            }
             _ => None,
         };
-        let sums = fast.unwrap_or_else(|| window_sums(&window, plane, w, &mut ring, (cc, rr)));
+        let (sums, background) = fast.unwrap_or_else(|| {
+            let sums = window_sums(&window, plane, w, &mut ring, (cc, rr));
+            let exact = ring.total <= u8::MAX as usize;
+            (sums, if exact { ring.quantile(level) } else { None })
+        });
         if ring.total <= u8::MAX as usize {
-            counted = Some((sums, ring.quantile(level)));
+            counted = Some((sums, background));
         }
     }
     let ((gm, nm), bg) = counted.unwrap_or_else(|| {
@@ -1382,10 +1447,10 @@ fn window_sums<P: Pixel, W: Weight, R: Ring>(
             let a = (wc0 - first_col) as usize;
             return if cols <= 16 {
                 let p = a.min(plane.width - 16);
-                window.sums(&bytes, Lanes::<1>::new(p, wr0, k0, rr), ring)
+                window.sums(&bytes, Lanes::<1>::new(p, wr0, (k0, rr), 0), ring)
             } else {
                 let p = a.min(plane.width - 32);
-                window.sums(&bytes, Lanes::<2>::new(p, wr0, k0, rr), ring)
+                window.sums(&bytes, Lanes::<2>::new(p, wr0, (k0, rr), 0), ring)
             };
         }
     }
@@ -1450,8 +1515,8 @@ mod tests {
             );
             let lanes = if case % 2 == 0 { 16 } else { 32 };
             let p = (rng.next_u64() % (width - 31) as u64) as usize;
-            let mut one = Lanes::<1>::new(p, r0, k0, j0);
-            let mut two = Lanes::<2>::new(p, r0, k0, j0);
+            let mut one = Lanes::<1>::new(p, r0, (k0, j0), 0);
+            let mut two = Lanes::<2>::new(p, r0, (k0, j0), 0);
             let mut by64 = RowByRow::<Linear, i64>::new(Linear, k0, j0);
             let mut by128 = RowByRow::<Linear, i128>::new(Linear, k0, j0);
             for row in r0..r0 + rows {
@@ -1477,6 +1542,56 @@ mod tests {
         }
     }
 
+    /// The window's rows from records (the 8-bit path's lanes from mask
+    /// offsets, rows without pixels as empty offsets) against the plain
+    /// sums: with the pixel counts, and with a background taken off every
+    /// pixel (the weights' sums less the background times the counts',
+    /// the counts' zero).
+    #[test]
+    fn window_records_are_the_plain_sums() {
+        let mut rng = Rng::new(23);
+        let width = 40;
+        for case in 0..400 {
+            let rows = 1 + (rng.next_u64() % 64) as usize;
+            let data: Vec<u8> = (0..width * (rows + 2))
+                .map(|_| (rng.next_u64() % 256) as u8)
+                .collect();
+            let (r0, p) = (2usize, (rng.next_u64() % (width - 15) as u64) as usize);
+            let origin = (
+                (rng.next_u64() % 40) as i64 - 6,
+                (rng.next_u64() % 70) as i64,
+            );
+            let mut plain = RowByRow::<Linear, i64>::new(Linear, origin.0, origin.1);
+            let records: Vec<u64> = (r0..r0 + rows)
+                .map(|row| {
+                    let lo = (rng.next_u64() % 17) as usize;
+                    if lo == 16 || rng.next_u64().is_multiple_of(4) {
+                        // (Empty: the two offsets equal.)
+                        return ((32 - lo as u64) << 32) | ((32 - lo as u64) << 40);
+                    }
+                    let hi = lo + (rng.next_u64() % (16 - lo) as u64) as usize;
+                    plain.row(&data[row * width..], p + lo, p + hi, row);
+                    ((32 - lo as u64) << 32) | ((31 - hi as u64) << 40)
+                })
+                .collect();
+            let at = r0 * width + p;
+            let want = Moments::<u8>::sums(plain);
+            let with_counts = Lanes::<1>::new(p, r0, origin, 0);
+            assert_eq!(
+                with_counts.take_records(&data, at, width, &records),
+                want,
+                "{case}"
+            );
+            let b = (rng.next_u64() % 256) as u8;
+            let less = Lanes::<1, true>::new(p, r0, origin, b);
+            let (g, n) = less.take_records(&data, at, width, &records);
+            assert_eq!(n, [0.0; 6], "{case}");
+            for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
+                assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+            }
+        }
+    }
+
     /// The 8-bit paths (the counted ring picked by bit masks, the window
     /// in lanes) against the plain path of the same frame in 16 bits:
     /// blobs of many sizes and shapes, at the window's edges too.
@@ -1484,6 +1599,7 @@ mod tests {
     fn eight_bit_measurement_is_the_plain_one() {
         let mut rng = Rng::new(33);
         let (width, height) = (160usize, 120usize);
+        let mut fallbacks = 0;
         for frame in 0..12 {
             let mut img = vec![0f64; width * height];
             for v in img.iter_mut() {
@@ -1541,10 +1657,17 @@ mod tests {
                     };
                     assert_eq!(constant, m8, "{frame} {blob:?}");
                     n += m8.is_some() as usize;
+                    // A level below most of the ring: rings of too few
+                    // dark pixels (the fallback background) too.
+                    let low = Threshold::global(22);
+                    let l8 = measure(&whole8, blob, low, 20.5, margin);
+                    assert_eq!(l8, measure(&whole16, blob, low, 20.5, margin), "{frame}");
+                    fallbacks += l8.is_some_and(|m| m.background == 20.5) as usize;
                 }
             }
             assert!(n >= 10, "{frame}: {n}");
         }
+        assert!(fallbacks >= 10, "{fallbacks}");
     }
 
     /// The spans of the conic's rows against the quadratic form at every
