@@ -946,10 +946,12 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
                 }
             }
         }
+        // (No array maps: not always inlined in a function this large.)
         let r = |v: i32x4| v.reduce_add() as f64;
-        let [c0, c1, c2, n2] = [self.a1, self.b1, c2, n2].map(r);
-        let [a2, a3, b2] = [self.a2, self.a3, self.b2].map(r);
-        let n = self.n.map(|n| if LESS { 0.0 } else { n as f64 });
+        let (c0, c1, c2, n2) = (r(self.a1), r(self.b1), r(c2), r(n2));
+        let (a2, a3, b2) = (r(self.a2), r(self.a3), r(self.b2));
+        let f = |i: usize| if LESS { 0.0 } else { self.n[i] as f64 };
+        let n = [f(0), f(1), f(2), f(3), f(4)];
         let pair = |g: f64, n: f64| f64x2::new([g, n]);
         // `Σ(1, l, l²)`, `Σ D`, `Σ D²`, `Σ D l` of the weights and counts.
         let s = [pair(c0, n[0]), pair(c1, 0.5 * n[3]), pair(c2, n2)];
@@ -969,7 +971,15 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
         // From lane and row to the origin.
         let dk = (self.p as i64 - self.k0) as f64;
         let dj = (self.r0 as i64 - self.j0) as f64;
-        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj).map(f64x2::to_array);
+        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj);
+        let [m0, m1, m2, m3, m4, m5] = [
+            m0.to_array(),
+            m1.to_array(),
+            m2.to_array(),
+            m3.to_array(),
+            m4.to_array(),
+            m5.to_array(),
+        ];
         (
             [m0[0], m1[0], m2[0], m3[0], m4[0], m5[0]],
             [m0[1], m1[1], m2[1], m3[1], m4[1], m5[1]],
