@@ -17,13 +17,15 @@
 //! (`Σw·(1, k, k², j, j², k j)`), turned into moments about the centre in
 //! `f64` once, with the background subtracted once it is known; so every
 //! way of summing gives the same bits. An 8-bit frame (the linear weight)
-//! takes each row's window as one masked vector whose lanes are summed
-//! across the rows (the moments in the row as running sums), and picks
-//! its ring pixels by a bit mask, a block of rows' ring and then its
-//! window in loops of their own; other rows
-//! go through [`Pixel::moment_sums`] one row at a time (in `i128` where a
-//! bound on the window does not rule out an overflow of `i64`). A small
-//! ring is counted by grey value in bytes instead of kept in a buffer.
+//! forms every row's ring mask and window lanes from the spans of two
+//! rows at a time as floats, picks its ring pixels by the masks, finds
+//! the background, and then takes each row's window as one masked vector
+//! with the background off every pixel, whose lanes are summed across
+//! the rows (the moments in the row as running sums; no pixel counts
+//! needed); other rows go through [`Pixel::moment_sums`] one row at a
+//! time (in `i128` where a bound on the window does not rule out an
+//! overflow of `i64`). A small ring is counted by grey value in bytes
+//! instead of kept in a buffer.
 
 use crate::label::Blob;
 use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND};
@@ -467,15 +469,19 @@ impl Window {
     }
 
     /// [`Window::sums`] of an 8-bit window with the linear weight whose
-    /// ring box is at most 32 columns wide, its window at most 16 columns
-    /// wide and 64 rows high (`None` otherwise), the ring counted in
-    /// `ring`: each row's ring pixels picked from the box's 32 columns by
-    /// a bit mask (no slices, no loop per run), the window's as one masked
-    /// vector ([`Lanes`]). The same sums and counts as [`Window::sums`].
-    /// Each pair of rows straight from its spans ([`Window::pairs`]): the
-    /// ring's masks of both rows formed from the span ends as floats
-    /// ([`run_bits`]), and the window's ends as lanes, without storing
-    /// the spans.
+    /// ring box is at most 32 columns wide and 32 rows high, its window at
+    /// most 16 columns wide (`None` otherwise), the ring counted in `ring`,
+    /// with the background (`level` the threshold's) as the caller would
+    /// find it. In three passes: each pair of rows' spans made into a
+    /// record of each row at once ([`PairSpans`]: the ring's bit mask of
+    /// the box's 32 columns from the span ends as floats, [`run_bits`],
+    /// and the window's mask offsets, one store a pair), then the ring's
+    /// pixels picked by the masks ([`Counts::add_rows`]), then the window
+    /// as one masked vector a row ([`Lanes`]); its loops apart, their
+    /// registers do not compete. The background known before the window,
+    /// the window's sums are taken with it off every pixel (then the pixel
+    /// counts are not needed: their sums are returned as zeros), the same
+    /// integers as [`Window::sums`] less the background times the counts.
     #[inline(always)]
     fn sums_8bit(
         &self,
@@ -577,8 +583,9 @@ const TWO_32: f64 = 4_294_967_296.0;
 
 /// For two rows (lanes), the bits `lo..hi` of a `u32` as the float
 /// `2^hi − 2^lo` (`0` if `lo ≥ hi`), from `lo + ROUND` and `hi + ROUND`
-/// with `lo ≥ 0` and `hi ≤ 32`: each end clamped to `0..=32` (which keeps
-/// an empty run empty), then a power of two ([`pow2_f64x2`]). Exact.
+/// with `lo ≥ 0` and `hi ≤ 32`: `lo` clamped to at most 32 and `hi` to at
+/// least 0 (which keeps an empty run empty), then a power of two
+/// ([`pow2_f64x2`]). Exact.
 #[inline(always)]
 fn run_bits(lo: f64x2, hi: f64x2) -> f64x2 {
     let (zero, top) = (f64x2::splat(ROUND), f64x2::splat(ROUND + 32.0));
@@ -1068,7 +1075,7 @@ impl PairSpans {
     }
 }
 
-/// Rows whose spans [`Window::rows`] computes ahead at a time.
+/// Rows whose spans [`Window::blocks`] computes ahead at a time.
 const SPAN_BLOCK: usize = 24;
 const _: () = assert!(SPAN_BLOCK.is_multiple_of(2));
 
