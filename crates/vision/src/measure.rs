@@ -174,9 +174,10 @@ const BG_SAMPLES: usize = 512;
 const COUNTED_RING: f64 = 180.0;
 const _: () = assert!(COUNTED_RING < BG_SAMPLES as f64);
 
-/// A window's sums (see [`Moments::sums`]) and its background from the
-/// ring (`None`: too few dark pixels).
-type Counted = (([f64; 6], [f64; 6]), Option<u32>);
+/// A window's sums (see [`Moments::sums`]; without the pixel counts'
+/// where the background is off every pixel already) and its background
+/// from the ring (`None`: too few dark pixels).
+type Counted = (([f64; 6], Option<[f64; 6]>), Option<u32>);
 
 /// Where [`Window::sums`] puts the pixels of the background ring.
 trait Ring {
@@ -567,9 +568,13 @@ impl Window {
         let sums = match background {
             Some(b) => {
                 let m = Lanes::<1, true>::new(pw, wr0, origin, b as u8);
-                m.take_records(data, at, stride, window)
+                (m.take_records(data, at, stride, window).0, None)
             }
-            None => Lanes::<1>::new(pw, wr0, origin, 0).take_records(data, at, stride, window),
+            None => {
+                let (g, n) =
+                    Lanes::<1>::new(pw, wr0, origin, 0).take_records(data, at, stride, window);
+                (g, Some(n))
+            }
         };
         Some((sums, background))
     }
@@ -1373,9 +1378,12 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             _ => None,
         };
         let (sums, background) = fast.unwrap_or_else(|| {
-            let sums = window_sums(&window, plane, w, &mut ring, (cc, rr));
+            let (g, n) = window_sums(&window, plane, w, &mut ring, (cc, rr));
             let exact = ring.total <= u8::MAX as usize;
-            (sums, if exact { ring.quantile(level) } else { None })
+            (
+                (g, Some(n)),
+                if exact { ring.quantile(level) } else { None },
+            )
         });
         if ring.total <= u8::MAX as usize {
             counted = Some((sums, background));
@@ -1390,14 +1398,17 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             stride: ceil_i64(est / BG_SAMPLES as f64).max(1) as usize,
             threshold,
         };
-        let sums = window_sums(&window, plane, w, &mut ring, (cc, rr));
-        (sums, ring.quantile(level))
+        let (g, n) = window_sums(&window, plane, w, &mut ring, (cc, rr));
+        ((g, Some(n)), ring.quantile(level))
     });
     let background = bg.map_or(fallback_background, |b| b as f64);
-    // The moments with the background subtracted, then about the centre.
+    // The moments with the background subtracted (unless off already),
+    // then about the centre.
     let bw = w.level(background);
-    let m = |i: usize| gm[i] - bw * nm[i];
-    let (sw, sx, sxx, sy, syy, sxy) = (m(0), m(1), m(2), m(3), m(4), m(5));
+    let [sw, sx, sxx, sy, syy, sxy] = match nm {
+        Some(n) => [0, 1, 2, 3, 4, 5].map(|i| gm[i] - bw * n[i]),
+        None => gm,
+    };
     if sw.is_nan() || sw <= 0.0 {
         return None;
     }
