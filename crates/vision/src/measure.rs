@@ -132,36 +132,41 @@ impl Margin for (f64, f64) {
     }
 }
 
-/// The window of a dot: [`GROW`] and [`MAX_SCALE`].
-#[derive(Debug, Clone, Copy)]
-pub struct DotMargin;
+/// A unit type whose [`Margin`] is a pair of constants.
+macro_rules! constant_margin {
+    ($(#[$doc:meta])* $name:ident, $grow:expr, $max_scale:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy)]
+        pub struct $name;
 
-impl Margin for DotMargin {
-    #[inline(always)]
-    fn grow(self) -> f64 {
-        GROW
-    }
-    #[inline(always)]
-    fn max_scale(self) -> f64 {
-        MAX_SCALE
-    }
+        impl Margin for $name {
+            #[inline(always)]
+            fn grow(self) -> f64 {
+                $grow
+            }
+            #[inline(always)]
+            fn max_scale(self) -> f64 {
+                $max_scale
+            }
+        }
+    };
 }
 
-/// The window of a coded target's dot: [`CODED_GROW`] and
-/// [`CODED_MAX_SCALE`].
-#[derive(Debug, Clone, Copy)]
-pub struct CodedMargin;
+constant_margin!(
+    /// The window of a dot: [`GROW`] and [`MAX_SCALE`].
+    DotMargin,
+    GROW,
+    MAX_SCALE
+);
 
-impl Margin for CodedMargin {
-    #[inline(always)]
-    fn grow(self) -> f64 {
-        CODED_GROW
-    }
-    #[inline(always)]
-    fn max_scale(self) -> f64 {
-        CODED_MAX_SCALE
-    }
-}
+constant_margin!(
+    /// The window of a coded target's dot: [`CODED_GROW`] and
+    /// [`CODED_MAX_SCALE`].
+    CodedMargin,
+    CODED_GROW,
+    CODED_MAX_SCALE
+);
+
 /// Background ring: from the window out to this multiple (inside a coded
 /// target's gap, which ends at 2).
 const BG_OUTER: f64 = 1.75;
@@ -1525,6 +1530,20 @@ mod tests {
         }
     }
 
+    /// 1 to 64 rows of random pixels `width` wide after `above` more, and
+    /// an origin near them.
+    fn random_rows(rng: &mut Rng, width: usize, above: usize) -> (usize, Vec<u8>, (i64, i64)) {
+        let rows = 1 + (rng.next_u64() % 64) as usize;
+        let data = (0..width * (rows + above))
+            .map(|_| (rng.next_u64() % 256) as u8)
+            .collect();
+        let origin = (
+            (rng.next_u64() % 40) as i64 - 6,
+            (rng.next_u64() % 70) as i64,
+        );
+        (rows, data, origin)
+    }
+
     /// The window's sums of random rows and spans from every
     /// implementation: the same integers, so the same `f64`s.
     #[test]
@@ -1532,15 +1551,8 @@ mod tests {
         let mut rng = Rng::new(21);
         let width = 48;
         for case in 0..300 {
-            let rows = 1 + (rng.next_u64() % 64) as usize;
-            let data: Vec<u8> = (0..width * (rows + 3))
-                .map(|_| (rng.next_u64() % 256) as u8)
-                .collect();
+            let (rows, data, (k0, j0)) = random_rows(&mut rng, width, 3);
             let r0 = 3usize;
-            let (k0, j0) = (
-                (rng.next_u64() % 60) as i64 - 6,
-                (rng.next_u64() % 70) as i64,
-            );
             let lanes = if case % 2 == 0 { 16 } else { 32 };
             let p = (rng.next_u64() % (width - 31) as u64) as usize;
             let mut one = Lanes::<1>::new(p, r0, (k0, j0), 0);
@@ -1580,15 +1592,8 @@ mod tests {
         let mut rng = Rng::new(23);
         let width = 40;
         for case in 0..400 {
-            let rows = 1 + (rng.next_u64() % 64) as usize;
-            let data: Vec<u8> = (0..width * (rows + 2))
-                .map(|_| (rng.next_u64() % 256) as u8)
-                .collect();
+            let (rows, data, origin) = random_rows(&mut rng, width, 2);
             let (r0, p) = (2usize, (rng.next_u64() % (width - 15) as u64) as usize);
-            let origin = (
-                (rng.next_u64() % 40) as i64 - 6,
-                (rng.next_u64() % 70) as i64,
-            );
             let mut plain = RowByRow::<Linear, i64>::new(Linear, origin.0, origin.1);
             let records: Vec<u64> = (r0..r0 + rows)
                 .map(|row| {
