@@ -1909,6 +1909,24 @@ mod tests {
         }
     }
 
+    /// The ring's runs as floats against bit masks built one bit at a
+    /// time: every run in and past the 32 lanes, empty ones too.
+    #[test]
+    fn run_bits_are_the_lanes() {
+        for lo in -3i64..40 {
+            for hi in -3i64..36 {
+                if lo < 0 || hi > 32 {
+                    continue;
+                }
+                let r = |x: i64| f64x2::splat(x as f64 + ROUND);
+                let got = (run_bits(r(lo), r(hi)) + f64x2::splat(TWO_52)).to_array()[0];
+                let want = (lo..hi.min(32)).fold(0u32, |m, b| m | 1 << b);
+                assert_eq!(got.to_bits() as u32, want, "{lo} {hi}");
+                assert_eq!(got.to_bits() >> 32, TWO_52.to_bits() >> 32, "{lo} {hi}");
+            }
+        }
+    }
+
     #[test]
     fn quantile_by_counting_is_the_order_statistic() {
         // 255 values or fewer are counted in bytes; more are selected.

@@ -74,6 +74,16 @@ pub(crate) fn round_i64(x: f64) -> i64 {
 mod tests {
     use super::*;
 
+    /// Powers of two from integers as `x + ROUND`, at the ends of the
+    /// exponent's range too.
+    #[test]
+    fn powers_of_two() {
+        for e in (-1022..=1023).step_by(7).chain([-1022, 0, 32, 1023]) {
+            let got = pow2_f64x2(f64x2::new([e as f64, -1.0]) + f64x2::splat(ROUND));
+            assert_eq!(got.to_array(), [2f64.powi(e), 0.5], "{e}");
+        }
+    }
+
     #[test]
     fn rounding_helpers() {
         for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
