@@ -786,15 +786,7 @@ pub(crate) fn centroid<P: Pixel>(
     max_value: u32,
 ) -> Result<Measurement, RejectReason> {
     shape_tested(
-        centre_in(
-            plane,
-            blob,
-            t,
-            o,
-            max_value,
-            measure::GROW,
-            measure::MAX_SCALE,
-        ),
+        centre_in(plane, blob, t, o, max_value, measure::DotMargin),
         blob,
         o,
     )
@@ -836,41 +828,23 @@ pub(crate) fn coded_centre<P: Pixel>(
     o: &DetectorOptions,
     max_value: u32,
 ) -> Option<Measurement> {
-    centre_in(
-        plane,
-        blob,
-        t,
-        o,
-        max_value,
-        measure::CODED_GROW,
-        measure::CODED_MAX_SCALE,
-    )
+    centre_in(plane, blob, t, o, max_value, measure::CodedMargin)
 }
 
-/// The centroid and moments of a blob in the window of `grow` and
-/// `max_scale`, its centre rolled off below saturation when most of it is
-/// saturated ([`saturated_centre`]).
+/// The centroid and moments of a blob in the window of `margin`, its
+/// centre rolled off below saturation when most of it is saturated
+/// ([`saturated_centre`]).
 fn centre_in<P: Pixel>(
     plane: &Plane<'_, P>,
     blob: &Blob,
     t: &ThresholdResult,
     o: &DetectorOptions,
     max_value: u32,
-    grow: f64,
-    max_scale: f64,
+    margin: impl measure::Margin,
 ) -> Option<Measurement> {
-    let mut m = measure::measure(plane, blob, t.threshold, t.background, grow, max_scale)?;
+    let mut m = measure::measure(plane, blob, t.threshold, t.background, margin)?;
     if blob.saturated > 0 {
-        saturated_centre(
-            plane,
-            blob,
-            t,
-            max_value,
-            o.saturated_knee,
-            grow,
-            max_scale,
-            &mut m,
-        );
+        saturated_centre(plane, blob, t, max_value, o.saturated_knee, margin, &mut m);
     }
     Some(m)
 }
@@ -882,15 +856,13 @@ fn centre_in<P: Pixel>(
 /// those of the clipped profile). Blobs with fewer clipped pixels keep the
 /// plain centroid: there the roll-off would throw away more signal than
 /// the kink costs (see the detector's over-exposure test).
-#[allow(clippy::too_many_arguments)]
 fn saturated_centre<P: Pixel>(
     plane: &Plane<'_, P>,
     blob: &Blob,
     t: &ThresholdResult,
     max_value: u32,
     knee: f64,
-    grow: f64,
-    max_scale: f64,
+    margin: impl measure::Margin,
     m: &mut Measurement,
 ) {
     if 2 * blob.saturated < blob.area || knee >= 1.0 {
@@ -900,15 +872,8 @@ fn saturated_centre<P: Pixel>(
         knee: (m.background + knee * (max_value as f64 - m.background)) as u32,
         top: max_value,
     };
-    if let Some(k) = measure::measure_weighted(
-        plane,
-        blob,
-        t.threshold,
-        t.background,
-        grow,
-        max_scale,
-        knee,
-    ) {
+    if let Some(k) = measure::measure_weighted(plane, blob, t.threshold, t.background, margin, knee)
+    {
         m.col = k.col;
         m.row = k.row;
     }

@@ -17,19 +17,21 @@
 //! (`Σw·(1, k, k², j, j², k j)`), turned into moments about the centre in
 //! `f64` once, with the background subtracted once it is known; so every
 //! way of summing gives the same bits. An 8-bit frame (the linear weight)
-//! takes each row's window as one masked vector whose lanes are summed
-//! across the rows (the moments in the row as running sums), and picks
-//! its ring pixels by a bit mask, a block of rows' ring and then its
-//! window in loops of their own; other rows
-//! go through [`Pixel::moment_sums`] one row at a time (in `i128` where a
-//! bound on the window does not rule out an overflow of `i64`). A small
-//! ring is counted by grey value in bytes instead of kept in a buffer.
+//! forms every row's ring mask and window lanes from the spans of two
+//! rows at a time as floats, picks its ring pixels by the masks, finds
+//! the background, and then takes each row's window as one masked vector
+//! with the background off every pixel, whose lanes are summed across
+//! the rows (the moments in the row as running sums; no pixel counts
+//! needed); other rows go through [`Pixel::moment_sums`] one row at a
+//! time (in `i128` where a bound on the window does not rule out an
+//! overflow of `i64`). A small ring is counted by grey value in bytes
+//! instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, round_i64, ROUND};
-use crate::pixel::{masked16, scalar_moment_sums, Pixel, Plane};
+use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND};
+use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, CmpGe, CmpLe};
+use wide::{f64x2, i16x8, i32x4, u8x16, CmpGe, CmpLe};
 
 /// Result of measuring a blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,6 +109,64 @@ pub const MAX_SCALE: f64 = 1.5;
 pub const CODED_GROW: f64 = 1.5;
 /// See [`CODED_GROW`].
 pub const CODED_MAX_SCALE: f64 = 1.35;
+
+/// A centroid window's margin, px, and the most multiple of the blob's
+/// ellipse it may reach: any pair `(grow, max_scale)`, or a type whose
+/// values are constants ([`DotMargin`], [`CodedMargin`]; the window's
+/// bounds then fold to constants where they depend on the margin alone).
+pub trait Margin: Copy {
+    /// The margin, px.
+    fn grow(self) -> f64;
+    /// The most multiple of the blob's ellipse.
+    fn max_scale(self) -> f64;
+}
+
+impl Margin for (f64, f64) {
+    #[inline(always)]
+    fn grow(self) -> f64 {
+        self.0
+    }
+    #[inline(always)]
+    fn max_scale(self) -> f64 {
+        self.1
+    }
+}
+
+/// A unit type whose [`Margin`] is a pair of constants.
+macro_rules! constant_margin {
+    ($(#[$doc:meta])* $name:ident, $grow:expr, $max_scale:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy)]
+        pub struct $name;
+
+        impl Margin for $name {
+            #[inline(always)]
+            fn grow(self) -> f64 {
+                $grow
+            }
+            #[inline(always)]
+            fn max_scale(self) -> f64 {
+                $max_scale
+            }
+        }
+    };
+}
+
+constant_margin!(
+    /// The window of a dot: [`GROW`] and [`MAX_SCALE`].
+    DotMargin,
+    GROW,
+    MAX_SCALE
+);
+
+constant_margin!(
+    /// The window of a coded target's dot: [`CODED_GROW`] and
+    /// [`CODED_MAX_SCALE`].
+    CodedMargin,
+    CODED_GROW,
+    CODED_MAX_SCALE
+);
+
 /// Background ring: from the window out to this multiple (inside a coded
 /// target's gap, which ends at 2).
 const BG_OUTER: f64 = 1.75;
@@ -118,6 +178,11 @@ const BG_SAMPLES: usize = 512;
 /// every dark pixel counts).
 const COUNTED_RING: f64 = 180.0;
 const _: () = assert!(COUNTED_RING < BG_SAMPLES as f64);
+
+/// A window's sums (see [`Moments::sums`]; without the pixel counts'
+/// where the background is off every pixel already) and its background
+/// from the ring (`None`: too few dark pixels).
+type Counted = (([f64; 6], Option<[f64; 6]>), Option<u32>);
 
 /// Where [`Window::sums`] puts the pixels of the background ring.
 trait Ring {
@@ -149,25 +214,54 @@ impl Ring for Counts<'_> {
 
     #[inline]
     fn quantile(&mut self, level: u32) -> Option<u32> {
-        let dark = &self.count[..=(level.min(255) as usize)];
-        // (In bytes, sixteen at a time: no sum of counts passes 255.)
-        let n = dark.iter().fold(0u8, |n, &c| n.wrapping_add(c)) as usize;
-        if n < 4 {
-            return None;
-        }
-        kth_counted(dark, n * 3 / 10)
+        let n = counted_up_to(self.count, level.min(255) as usize) as usize;
+        (n >= 4).then(|| kth_counted(self.count, n * 3 / 10))
     }
 }
 
 impl Counts<'_> {
-    /// Takes the pixels `px[i]` of the bits `i` set in `bits`.
+    /// Takes rows of 32 pixels, row `i` at `data[start + i stride..]`:
+    /// its pixels `px[b]` of the bits `b` set in the low 32 bits of
+    /// `masks[i]`. (A function of its own: its registers apart from those
+    /// of the window's sums around it.)
+    #[inline(never)]
+    fn add_rows(&mut self, data: &[u8], mut start: usize, stride: usize, masks: &[u64]) {
+        // (The pixels counted here: no store per row.)
+        let mut taken = 0;
+        for &m in masks {
+            let bits = m as u32;
+            if bits != 0 {
+                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
+                    unreachable!("32 pixels")
+                };
+                taken += self.add_lanes(px, bits);
+            }
+            start += stride;
+        }
+        self.total += taken;
+    }
+
+    /// Takes the pixels `px[i]` of the bits `i` set in `bits` (not 0) but
+    /// for `total`: returns how many.
     #[inline(always)]
-    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) {
-        while bits != 0 {
+    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) -> usize {
+        debug_assert!(bits != 0);
+        let mut n = 0;
+        // (Two at a time: one count of them per two.)
+        loop {
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
-            self.total += 1;
             bits &= bits - 1;
+            if bits == 0 {
+                return n + 1;
+            }
+            let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
+            *c = c.wrapping_add(1);
+            n += 2;
+            bits &= bits - 1;
+            if bits == 0 {
+                return n;
+            }
         }
     }
 }
@@ -284,54 +378,60 @@ impl Window {
     /// of the window only, which the callers pick: no blend per row pair,
     /// `measure_weighted` 49.17 M → 47.50 M).
     #[inline(always)]
-    fn blocks(&self, mut f: impl FnMut(usize, &[[i32; 6]])) {
-        let q = &self.q;
-        let (r0, r1) = self.rows;
-        // The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole,
-        // and of the window.
-        let (hr0, hr1) = (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1));
+    fn blocks(&self, f: impl FnMut(usize, &[[i32; 6]])) {
         let (one, zero) = (f64x2::splat(ROUND + 1.0), f64x2::splat(ROUND));
-        // Clipping as floats (see `near_f64x2`).
-        let at = |c: i64| f64x2::splat(c as f64 + ROUND);
-        let (c0, c1) = (at(self.cols.0), at(self.cols.1));
-        let (bc0, bc1) = (at(self.box_cols.0), at(self.box_cols.1));
-        let (wc0, wc1) = (at(self.wcols.0), at(self.wcols.1));
-        // A block of rows at a time: first the spans of all its rows, two
-        // rows in the lanes of each vector (their outer spans, holes and
-        // the window's spans, clipped as floats), then the rows. (The
-        // spans' square roots overlap, and neither loop holds the other's
-        // values.)
-        let mut spans = [[0i32; 6]; SPAN_BLOCK];
+        self.blocks_of(
+            |[oa, ob, xa, xb, a, b], hole| {
+                // (Outside its rows the hole is `(1, 0)`.)
+                let (xa, xb) = (hole.blend(xa, one), hole.blend(xb, zero));
+                let ends = [oa, ob, xa, xb, a, b].map(low_i32x2);
+                [0, 1].map(|lane| ends.map(|e| e[lane]))
+            },
+            f,
+        );
+    }
+
+    /// The box's rows a block at a time: each pair of rows' spans (see
+    /// [`PairSpans::at`]) made into a record of each row by `each`, then
+    /// the block's records into `f` with the block's first row. (The
+    /// spans' square roots overlap, and neither loop holds the other's
+    /// values.)
+    #[inline(always)]
+    fn blocks_of<T: Copy + Default>(
+        &self,
+        mut each: impl FnMut([f64x2; 6], f64x2) -> [T; 2],
+        mut f: impl FnMut(usize, &[T]),
+    ) {
+        let spans = self.pair_spans();
+        let (r0, r1) = self.rows;
+        let mut block = [T::default(); SPAN_BLOCK];
         let mut first = r0;
         while first <= r1 {
             let last = r1.min(first + SPAN_BLOCK - 1);
-            // (The rows as floats stepped by 2: exact integers.)
-            let top = first as f64;
-            let mut rows = f64x2::new([top - 2.0, top - 1.0]);
-            for pair in spans[..=last - first].chunks_mut(2) {
-                rows += f64x2::splat(2.0);
-                let [ia, ib, oa, ob] = q.spans(rows - f64x2::splat(self.by), self.s_in, self.s_out);
-                let (oa, ob) = (oa.fast_max(c0), ob.fast_min(c1));
-                // (Outside its rows the hole is `(1, 0)`.)
-                let hole = rows.cmp_ge(hr0) & rows.cmp_le(hr1);
-                let ends = [
-                    oa,
-                    ob,
-                    // (Inside the outer span as it is: the inner roots
-                    // are inside the outer ones, `s_in ≤ s_out`, and every
-                    // step from `s` to the ends is monotonic in floats.)
-                    hole.blend(ia.fast_max(bc0), one),
-                    hole.blend(ib.fast_min(bc1), zero),
-                    ia.fast_max(wc0),
-                    ib.fast_min(wc1),
-                ]
-                .map(low_i32x2);
-                for (lane, sp) in pair.iter_mut().enumerate() {
-                    *sp = ends.map(|e| e[lane]);
+            for (pair, (ends, hole)) in block[..=last - first].chunks_mut(2).zip(spans.from(first))
+            {
+                for (r, e) in pair.iter_mut().zip(each(ends, hole)) {
+                    *r = e;
                 }
             }
-            f(first, &spans[..=last - first]);
+            f(first, &block[..=last - first]);
             first = last + 1;
+        }
+    }
+
+    /// What [`PairSpans::at`] needs, as floats.
+    #[inline(always)]
+    fn pair_spans(&self) -> PairSpans {
+        // Clipping as floats (see `near_f64x2`).
+        let at = |c: i64| f64x2::splat(c as f64 + ROUND);
+        PairSpans {
+            q: self.q,
+            by: f64x2::splat(self.by),
+            s: (self.s_in, self.s_out),
+            hole_rows: (f64x2::splat(self.wr.0), f64x2::splat(self.wr.1)),
+            cols: (at(self.cols.0), at(self.cols.1)),
+            box_cols: (at(self.box_cols.0), at(self.box_cols.1)),
+            wcols: (at(self.wcols.0), at(self.wcols.1)),
         }
     }
 
@@ -375,106 +475,133 @@ impl Window {
     }
 
     /// [`Window::sums`] of an 8-bit window with the linear weight whose
-    /// ring box is at most 32 columns wide, its window at most 16 columns
-    /// wide and 64 rows high (`None` otherwise), the ring counted in
-    /// `ring`: each row's ring pixels picked from one copy of the box's 32
-    /// columns by a bit mask from the span ends (no slices, no loop per
-    /// run), the window's as one masked vector ([`Lanes`]). The same sums
-    /// and counts as [`Window::sums`] (tracking: 5.3 k instead of 5.5 k
-    /// instructions per measurement, the window in lanes through
-    /// [`Window::sums`] included). Each block of rows in two loops, its
-    /// ring then its window (`measure_weighted` 53.83 M → 52.45 M), the
-    /// window's every row through [`Lanes`] (an empty span as `(1, 0)`:
-    /// no branch, no stepping over rows left out; 51.00 M → 49.17 M).
+    /// ring box is at most 32 columns wide and 32 rows high, its window at
+    /// most 16 columns wide (`None` otherwise), the ring counted in `ring`,
+    /// with the background (`level` the threshold's) as the caller would
+    /// find it. In three passes: each pair of rows' spans made into a
+    /// record of each row at once ([`PairSpans`]: the ring's bit mask of
+    /// the box's 32 columns from the span ends as floats, [`run_bits`],
+    /// and the window's mask offsets, one store a pair), then the ring's
+    /// pixels picked by the masks ([`Counts::add_rows`]), then the window
+    /// as one masked vector a row ([`Lanes`]); its loops apart, their
+    /// registers do not compete. The background known before the window,
+    /// the window's sums are taken with it off every pixel (then the pixel
+    /// counts are not needed: their sums are returned as zeros), the same
+    /// integers as [`Window::sums`] less the background times the counts.
     #[inline(always)]
     fn sums_8bit(
         &self,
         plane: &Plane<u8>,
         ring: &mut Counts,
-        (k0, j0): (i64, i64),
-    ) -> Option<([f64; 6], [f64; 6])> {
+        level: u32,
+        origin: (i64, i64),
+    ) -> Option<Counted> {
         let first_col = self.first_col;
         let (c0, c1) = self.cols;
+        let (r0, r1) = self.rows;
         let (wr0, wr1) = self.wrows;
         let (wc0, wc1) = self.wcols;
-        if c1 - c0 >= 32 || wc1 - wc0 >= 16 || wr1 >= wr0 + Lanes::<1>::ROWS || plane.width < 32 {
+        if c1 - c0 >= 32 || wc1 - wc0 >= 16 || r1 - r0 >= 32 || plane.width < 32 {
             return None;
         }
         // Lane 0 of the box's copy and of the window's vector (row indices).
         let pr = ((c0 - first_col) as usize).min(plane.width - 32);
         let pw = ((wc0 - first_col) as usize).min(plane.width - 16);
-        let cr = first_col + pr as i64;
-        let mut m = Lanes::<1>::new(pw, wr0, k0, j0);
-        let stride = plane.stride;
-        // Each block's rows twice: their ring pixels, then their window
-        // (fewer live values in each loop than in one).
-        self.blocks(|first, spans| {
-            let mut start = (first - plane.row0) * stride;
-            for sp in spans {
-                let [oa, ob, xa, xb, _, _] = sp.map(i64::from);
-                if oa <= ob {
-                    let Ok(px) = <&[u8; 32]>::try_from(&plane.data[start + pr..start + pr + 32])
-                    else {
-                        unreachable!("32 pixels")
-                    };
-                    // (`0 ≤ oa − cr ≤ ob − cr ≤ 31`; the hole inside.)
-                    let mut bits = lanes(oa - cr, ob - cr);
-                    if xa <= xb {
-                        bits &= !lanes(xa - cr, xb - cr);
-                    }
-                    ring.add_lanes(px, bits);
-                }
-                start += stride;
+        // The span ends relative to the lanes: the ring's from `first_col +
+        // pr` as `n + ROUND` less an integer (the last ends one past), the
+        // window's from `first_col + pw` as plain integers.
+        let at = |c: usize| f64x2::splat((first_col + c as i64) as f64);
+        let one = f64x2::splat(1.0);
+        let (ring_at, window_at) = (at(pr), at(pw) + f64x2::splat(ROUND));
+        let (ring_past, window_past) = (ring_at - one, window_at - one);
+        // The hole (the box proper's columns, inside the window's: the
+        // window's lanes clipped to them) in the ring's lanes as `n + ROUND`.
+        let (cw, cr) = (first_col + pw as i64, first_col + pr as i64);
+        let to_ring = f64x2::splat((cw - cr) as f64 + ROUND);
+        let hole_cols =
+            [self.box_cols.0 - cw, self.box_cols.1 + 1 - cw].map(|c| f64x2::splat(c as f64));
+        // Each row's record, two rows at a time straight from their spans:
+        // the ring's bit mask in the low 32 bits, above it the window's
+        // mask offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed
+        // as integers below 2⁴⁶ (exact), the bits then from the float plus
+        // 2⁵².
+        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
+        let rows = r1 - r0 + 1;
+        let mut records = [0u64; 32];
+        for (record, ([oa, ob, _, _, a, b], hole)) in records[..2 * rows.div_ceil(2)]
+            .chunks_exact_mut(2)
+            .zip(self.pair_spans().from(r0))
+        {
+            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
+            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
+            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
+            let hi = (b - window_past).fast_max(lo);
+            // The ring: the outer span less the hole (inside it when not
+            // empty; its lanes `cw − cr` up from the window's, at most 32).
+            let hole = (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
+                - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
+            .fast_max(f64x2::ZERO)
+                & hole;
+            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
+            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
+            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        }
+        let (data, stride) = (plane.data, plane.stride);
+        ring.add_rows(
+            data,
+            (r0 - plane.row0) * stride + pr,
+            stride,
+            &records[..rows],
+        );
+        // The background (the ring's percentile, when its counts are
+        // exact), then the window's sums: with the background taken off
+        // every pixel where it is known (exact integers: the pixel counts
+        // are then not needed), else with the counts (for the caller's
+        // fallback background; a ring of too many pixels is measured
+        // again by the caller).
+        let background = if ring.total <= u8::MAX as usize {
+            ring.quantile(level)
+        } else {
+            None
+        };
+        let window = if wr0 <= wr1 {
+            &records[wr0 - r0..wr1 + 1 - r0]
+        } else {
+            &[]
+        };
+        let at = (wr0 - plane.row0) * stride + pw;
+        let sums = match background {
+            Some(b) => {
+                let m = Lanes::<1, true>::new(pw, wr0, origin, b as u8);
+                (m.take_records(data, at, stride, window).0, None)
             }
-            let last = first + spans.len() - 1;
-            let (lo, hi) = (wr0.max(first), wr1.min(last));
-            if lo <= hi {
-                // (The rows' lane 0 by the stride, not by row.)
-                let mut at = (lo - plane.row0) * stride + pw;
-                let base = (first_col + pw as i64) as isize;
-                // (Every row of the window, an empty span as `(1, 0)`: no
-                // branch.)
-                for sp in &spans[lo - first..=hi - first] {
-                    let (a, b) = (sp[4] as isize - base, sp[5] as isize - base);
-                    let (a, b) = if a <= b { (a, b) } else { (1, 0) };
-                    m.lanes(plane.data, at, a, b);
-                    at += stride;
-                }
+            None => {
+                let (g, n) =
+                    Lanes::<1>::new(pw, wr0, origin, 0).take_records(data, at, stride, window);
+                (g, Some(n))
             }
-        });
-        Some(m.sums())
+        };
+        Some((sums, background))
     }
 }
 
-/// Bits `lo..=hi` of a `u32` (`0 ≤ lo ≤ hi ≤ 31`).
+/// `2⁵²`: adding it to an integer-valued `x` with `0 ≤ x < 2⁵²` leaves `x`
+/// in the low bits of the mantissa.
+const TWO_52: f64 = 4_503_599_627_370_496.0;
+/// `2³²`.
+const TWO_32: f64 = 4_294_967_296.0;
+
+/// For two rows (lanes), the bits `lo..hi` of a `u32` as the float
+/// `2^hi − 2^lo` (`0` if `lo ≥ hi`), from `lo + ROUND` and `hi + ROUND`
+/// with `lo ≥ 0` and `hi ≤ 32`: `lo` clamped to at most 32 and `hi` to at
+/// least 0 (which keeps an empty run empty), then a power of two
+/// ([`pow2_f64x2`]). Exact.
 #[inline(always)]
-fn lanes(lo: i64, hi: i64) -> u32 {
-    debug_assert!(0 <= lo && lo <= hi && hi <= 31);
-    // (From two tables: fewer instructions than two shifts by `cl`.)
-    FROM_BIT[lo as usize & 31] & UP_TO_BIT[hi as usize & 31]
+fn run_bits(lo: f64x2, hi: f64x2) -> f64x2 {
+    let (zero, top) = (f64x2::splat(ROUND), f64x2::splat(ROUND + 32.0));
+    let (lo, hi) = (lo.fast_min(top), hi.fast_max(zero));
+    (pow2_f64x2(hi) - pow2_f64x2(lo)).fast_max(f64x2::ZERO)
 }
-
-/// `FROM_BIT[i]`: the bits `i..32` of a `u32`.
-const FROM_BIT: [u32; 32] = {
-    let mut t = [0; 32];
-    let mut i = 0;
-    while i < 32 {
-        t[i] = u32::MAX << i;
-        i += 1;
-    }
-    t
-};
-
-/// `UP_TO_BIT[i]`: the bits `0..=i` of a `u32`.
-const UP_TO_BIT: [u32; 32] = {
-    let mut t = [0; 32];
-    let mut i = 0;
-    while i < 32 {
-        t[i] = u32::MAX >> (31 - i);
-        i += 1;
-    }
-    t
-};
 
 /// Where [`Window::sums`] puts the window's pixels: the exact integer sums
 /// `Σw·(1, k, k², j, j², k j)` and `Σ1·(...)` of the weights `w` and the
@@ -490,17 +617,25 @@ trait Moments<P: Pixel> {
 }
 
 /// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, 0)` moved to the origin
-/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`:
-/// exact.
-fn moved<A: Exact>(s: [A; 6], dk: A, dj: A) -> [A; 6] {
-    let two = A::from(2);
+/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`,
+/// of two sets of sums at once (lanes): exact while every sum, product
+/// and result is an integer below `2⁵³` in magnitude.
+#[inline(always)]
+fn moved(s: [f64x2; 6], dk: f64, dj: f64) -> [f64x2; 6] {
+    let (k, j) = (f64x2::splat(dk), f64x2::splat(dj));
+    let (k2, j2) = (f64x2::splat(2.0 * dk), f64x2::splat(2.0 * dj));
+    let (kk, jj, kj) = (
+        f64x2::splat(dk * dk),
+        f64x2::splat(dj * dj),
+        f64x2::splat(dk * dj),
+    );
     [
         s[0],
-        s[1] + dk * s[0],
-        s[2] + two * dk * s[1] + dk * dk * s[0],
-        s[3] + dj * s[0],
-        s[4] + two * dj * s[3] + dj * dj * s[0],
-        s[5] + dj * s[1] + dk * s[3] + dk * dj * s[0],
+        s[1] + k * s[0],
+        s[2] + k2 * s[1] + kk * s[0],
+        s[3] + j * s[0],
+        s[4] + j2 * s[3] + jj * s[0],
+        s[5] + j * s[1] + k * s[3] + kj * s[0],
     ]
 }
 
@@ -624,13 +759,19 @@ impl<P: Pixel, W: Weight, A: Exact> Moments<P> for RowByRow<W, A> {
 /// sums: after `T` rows `A₁ = Σ P_j`, `A₂ = Σ D_j P_j`, `A₃ = Σ D_j (D_j +
 /// 1)/2 P_j`, `B₁ = Σ Q_j`, `B₂ = Σ D_j Q_j` with `D_j = T − j`, from which
 /// the moments in `j` follow once at the end (no multiplication by `j` per
-/// row, every accumulator in a register). The pixel counts from the span's
-/// ends. The same integers as [`RowByRow`] (tracking: `measure_weighted`
-/// 53.99 M → 53.83 M instructions against multiplying by `j` per row).
-/// With at most 64 rows and 32 lanes no 16-bit lane passes `64 · 255` and
-/// no 32-bit lane `8 · 255 · 45760 < 2³¹` (`A₃`) or `8 · 255 · 31 · 2080`
-/// (`B₂`).
-struct Lanes<const B: usize> {
+/// row, every accumulator in a register). The pixel counts the same way:
+/// per lane from the masks, and the row's count `n_j` and `2 Σ_l l` as
+/// running sums from the span's ends. The same integers as [`RowByRow`]
+/// (tracking: `measure_weighted` 53.99 M → 53.83 M instructions against
+/// multiplying by `j` per row). With at most 64 rows and 32 lanes no
+/// 8-bit count passes 64, no 16-bit lane `64 · 255` and no 32-bit lane
+/// `8 · 255 · 45760 < 2³¹` (`A₃`) or `8 · 255 · 31 · 2080` (`B₂`).
+///
+/// With `LESS` every pixel counts less a background known beforehand
+/// (`w − b`, between −255 and 255: the same bounds): the sums less the
+/// background times the pixel counts, the counts themselves not kept
+/// (their sums are then zero).
+struct Lanes<const B: usize, const LESS: bool = false> {
     /// Index in a row of lane 0, and the frame row of `j = 0`.
     p: usize,
     r0: usize,
@@ -641,14 +782,19 @@ struct Lanes<const B: usize> {
     j0: i64,
     /// Per lane `Σ_j w`.
     col: [[i16x8; 2]; B],
+    /// Per lane `Σ_j 1`, the pixels taken.
+    count: [u8x16; B],
     /// The running sums (see above).
     a1: i32x4,
     a2: i32x4,
     a3: i32x4,
     b1: i32x4,
     b2: i32x4,
-    /// `(Σ1, Σl, Σl², Σj, Σj², Σl j)` of the pixel counts.
-    n: [i64; 6],
+    /// The counts' running sums `(Σ n, Σ D n, Σ D (D + 1)/2 n, Σ 2 l,
+    /// Σ D 2 l)` (see above).
+    n: [i64; 5],
+    /// With `LESS`, the background taken off every pixel (16-bit lanes).
+    background: i16x8,
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -657,11 +803,12 @@ const LANE: [i16x8; 2] = [
     i16x8::new([8, 9, 10, 11, 12, 13, 14, 15]),
 ];
 
-impl<const B: usize> Lanes<B> {
+impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
     /// Most rows.
     const ROWS: usize = 64;
 
-    fn new(p: usize, r0: usize, k0: i64, j0: i64) -> Self {
+    /// With `LESS`, `background` taken off every pixel (else 0).
+    fn new(p: usize, r0: usize, (k0, j0): (i64, i64), background: u8) -> Self {
         Lanes {
             p,
             r0,
@@ -669,12 +816,14 @@ impl<const B: usize> Lanes<B> {
             k0,
             j0,
             col: [[i16x8::ZERO; 2]; B],
+            count: [u8x16::ZERO; B],
             a1: i32x4::ZERO,
             a2: i32x4::ZERO,
             a3: i32x4::ZERO,
             b1: i32x4::ZERO,
             b2: i32x4::ZERO,
-            n: [0; 6],
+            n: [0; 5],
+            background: i16x8::splat(background as i16),
         }
     }
 }
@@ -690,9 +839,23 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
             self.a2 += self.a1;
             self.a3 += self.a2;
             self.b2 += self.b1;
+            let n = &mut self.n;
+            n[1] += n[0];
+            n[2] += n[1];
+            n[4] += n[3];
             self.next += 1;
         }
-        self.lanes(line, self.p, lo, hi);
+        let (l0, l1) = (lo as i64, hi as i64);
+        let n = l1 - l0 + 1;
+        self.take(
+            line,
+            self.p,
+            |i| {
+                let off = 16 * i as isize;
+                run16(lo - off, hi - off)
+            },
+            (n, (l0 + l1) * n),
+        );
     }
 
     fn sums(self) -> ([f64; 6], [f64; 6]) {
@@ -700,21 +863,58 @@ impl<const B: usize> Moments<u8> for Lanes<B> {
     }
 }
 
-impl<const B: usize> Lanes<B> {
-    /// [`Moments::row`] of the lanes `lo..=hi` (`0 ≤ lo ≤ hi < 16 B`, or
-    /// `(1, 0)`: none) of the next row, whose lane 0 is `data[at]`.
+impl<const LESS: bool> Lanes<1, LESS> {
+    /// Takes the rows of `records`, row `i` at `data[at + i stride..]`,
+    /// its lanes from the mask offsets in bytes 4 and 5 of `records[i]`
+    /// (see [`lanes_from16`]); returns the sums.
     #[inline(always)]
-    fn lanes(&mut self, data: &[u8], at: usize, lo: isize, hi: isize) {
-        debug_assert!(0 <= lo && lo <= hi && hi < 16 * B as isize || (lo, hi) == (1, 0));
+    fn take_records(
+        mut self,
+        data: &[u8],
+        mut at: usize,
+        stride: usize,
+        records: &[u64],
+    ) -> ([f64; 6], [f64; 6]) {
+        for &r in records {
+            let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
+            // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
+            // `2 Σ l = (63 − ge − gt) n`.
+            let n = ge as i64 - gt as i64;
+            let counts = (n, (63 - (ge + gt) as i64) * n);
+            self.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+            at += stride;
+        }
+        self.sums()
+    }
+}
+
+impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
+    /// Takes the next row's pixels in the lanes set in `mask(i)` of each
+    /// block `i`, lane 0 at `data[at]`: `(n, 2 Σ l)` of them in `counts`.
+    #[inline(always)]
+    fn take(
+        &mut self,
+        data: &[u8],
+        at: usize,
+        mask: impl Fn(usize) -> u8x16,
+        (count, l2): (i64, i64),
+    ) {
         debug_assert!(self.next - self.r0 < Self::ROWS);
-        let j = (self.next - self.r0) as i64;
         self.next += 1;
         let ones = i16x8::splat(1);
         let (mut pw, mut qw) = (i32x4::ZERO, i32x4::ZERO);
-        for (i, col) in self.col.iter_mut().enumerate() {
-            let off = 16 * i as isize;
-            let v = masked16(data, at + 16 * i, lo - off, hi - off);
-            let half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
+        for (i, (col, cnt)) in self.col.iter_mut().zip(&mut self.count).enumerate() {
+            let m = mask(i);
+            let v = lanes16(&data[at + 16 * i..at + 16 * i + 16]) & m;
+            let mut half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
+            if LESS {
+                // (The mask's lanes as 255: `& b` is `b` in them, 0 else.)
+                half[0] -= i16x8::from_u8x16_low(m) & self.background;
+                half[1] -= i16x8::from_u8x16_high(m) & self.background;
+            } else {
+                // (`0xff` is −1: one more pixel.)
+                *cnt -= m;
+            }
             for h in 0..2 {
                 col[h] += half[h];
                 let l = if i == 0 {
@@ -731,60 +931,78 @@ impl<const B: usize> Lanes<B> {
         self.a3 += self.a2;
         self.b1 += qw;
         self.b2 += self.b1;
-        // The counts: `l` over `lo..=hi`.
-        let (lo, hi) = (lo as i64, hi as i64);
-        let n = hi - lo + 1;
-        let l1 = ((lo + hi) * n) >> 1;
-        let l2 = SQUARES[(hi + 1) as usize & 63] - SQUARES[lo as usize & 63];
-        let s = &mut self.n;
-        s[0] += n;
-        s[1] += l1;
-        s[2] += l2;
-        s[3] += j * n;
-        s[4] += j * j * n;
-        s[5] += j * l1;
+        if !LESS {
+            let n = &mut self.n;
+            n[0] += count;
+            n[1] += n[0];
+            n[2] += n[1];
+            n[3] += l2;
+            n[4] += n[3];
+        }
     }
 
-    /// See [`Moments::sums`].
+    /// See [`Moments::sums`]. (Every sum about lane 0 and row `r0` is an
+    /// integer far below `2⁵³`: exact as `f64`, and so are the moments in
+    /// `j` and about the origin formed from them in floats.)
+    #[inline(always)]
     fn sums(self) -> ([f64; 6], [f64; 6]) {
-        let (mut c0, mut c1, mut c2) = (i32x4::ZERO, i32x4::ZERO, i32x4::ZERO);
-        for (i, col) in self.col.iter().enumerate() {
+        // `Σ_l c_l l²` of the per-lane sums `c` (16-bit lanes); `Σ w` and
+        // `Σ l w` are `A₁` and `B₁`.
+        let (mut c2, mut n2) = (i32x4::ZERO, i32x4::ZERO);
+        for (i, (col, count)) in self.col.iter().zip(&self.count).enumerate() {
+            let count = [
+                i16x8::from_u8x16_low(*count),
+                i16x8::from_u8x16_high(*count),
+            ];
             for h in 0..2 {
-                let off = i16x8::splat(16 * i as i16);
-                let l = LANE[h] + off;
-                c0 += col[h].dot(i16x8::splat(1));
-                c1 += col[h].dot(l);
+                let l = LANE[h] + i16x8::splat(16 * i as i16);
                 // (`l²` up to 961 in 16 bits.)
                 c2 += col[h].dot(l * l);
+                if !LESS {
+                    n2 += count[h].dot(l * l);
+                }
             }
         }
-        let r = |v: i32x4| v.reduce_add() as i64;
-        let (sw, slw) = (r(c0), r(c1));
-        // `Σ D w`, `Σ D² w`, `Σ D l w`, and `j = T − D`.
-        let (dw, d2w, dlw) = (r(self.a2), 2 * r(self.a3) - r(self.a2), r(self.b2));
-        let t = (self.next - self.r0) as i64;
-        let jw = t * sw - dw;
-        let j2w = t * t * sw - 2 * t * dw + d2w;
-        let jlw = t * slw - dlw;
-        let g = [sw, slw, r(c2), jw, j2w, jlw];
+        // (No array maps: not always inlined in a function this large.)
+        let r = |v: i32x4| v.reduce_add() as f64;
+        let (c0, c1, c2, n2) = (r(self.a1), r(self.b1), r(c2), r(n2));
+        let (a2, a3, b2) = (r(self.a2), r(self.a3), r(self.b2));
+        let f = |i: usize| if LESS { 0.0 } else { self.n[i] as f64 };
+        let n = [f(0), f(1), f(2), f(3), f(4)];
+        let pair = |g: f64, n: f64| f64x2::new([g, n]);
+        // `Σ(1, l, l²)`, `Σ D`, `Σ D²`, `Σ D l` of the weights and counts.
+        let s = [pair(c0, n[0]), pair(c1, 0.5 * n[3]), pair(c2, n2)];
+        let d = pair(a2, n[1]);
+        let d2 = pair(2.0 * a3 - a2, 2.0 * n[2] - n[1]);
+        let dl = pair(b2, 0.5 * n[4]);
+        // `j = T − D`.
+        let t = f64x2::splat((self.next - self.r0) as f64);
+        let sums = [
+            s[0],
+            s[1],
+            s[2],
+            t * s[0] - d,
+            t * t * s[0] - f64x2::splat(2.0) * t * d + d2,
+            t * s[1] - dl,
+        ];
         // From lane and row to the origin.
-        let dk = (self.p as i64) - self.k0;
-        let dj = self.r0 as i64 - self.j0;
-        let f = |s| moved(s, dk, dj).map(|x: i64| x as f64);
-        (f(g), f(self.n))
+        let dk = (self.p as i64 - self.k0) as f64;
+        let dj = (self.r0 as i64 - self.j0) as f64;
+        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj);
+        let [m0, m1, m2, m3, m4, m5] = [
+            m0.to_array(),
+            m1.to_array(),
+            m2.to_array(),
+            m3.to_array(),
+            m4.to_array(),
+            m5.to_array(),
+        ];
+        (
+            [m0[0], m1[0], m2[0], m3[0], m4[0], m5[0]],
+            [m0[1], m1[1], m2[1], m3[1], m4[1], m5[1]],
+        )
     }
 }
-
-/// `SQUARES[x] = Σ_{i < x} i²`.
-const SQUARES: [i64; 64] = {
-    let mut t = [0i64; 64];
-    let mut i = 1;
-    while i < 64 {
-        t[i] = t[i - 1] + ((i - 1) * (i - 1)) as i64;
-        i += 1;
-    }
-    t
-};
 
 /// A blob's ellipse as the quadratic form
 /// `ρ²(dx, dy) = qxx dx² + 2 qxy dx dy + qyy dy²` about `(bx, ·)`: the
@@ -799,8 +1017,77 @@ struct Conic {
     bx: f64,
 }
 
-/// Rows whose spans [`Window::rows`] computes ahead at a time.
+/// A [`Window`]'s span ends of two rows at a time (see [`PairSpans::at`]).
+struct PairSpans {
+    q: Conic,
+    by: f64x2,
+    s: (f64, f64),
+    /// The rows of the box proper (`wr.0 ≤ row ≤ wr.1`), for the hole.
+    hole_rows: (f64x2, f64x2),
+    /// The columns of the ring's box, the box proper and the window as
+    /// `c + ROUND`.
+    cols: (f64x2, f64x2),
+    box_cols: (f64x2, f64x2),
+    wcols: (f64x2, f64x2),
+}
+
+/// [`PairSpans::at`] of the rows from `rows` on, two at a time (without
+/// end).
+struct Pairs<'a> {
+    spans: &'a PairSpans,
+    rows: f64x2,
+}
+
+impl Iterator for Pairs<'_> {
+    type Item = ([f64x2; 6], f64x2);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        let at = self.spans.at(self.rows);
+        // (The rows as floats stepped by 2: exact integers.)
+        self.rows += f64x2::splat(2.0);
+        Some(at)
+    }
+}
+
+impl PairSpans {
+    /// The pairs of rows from `first` on (see [`Pairs`]).
+    #[inline(always)]
+    fn from(&self, first: usize) -> Pairs<'_> {
+        let top = first as f64;
+        Pairs {
+            spans: self,
+            rows: f64x2::new([top, top + 1.0]),
+        }
+    }
+
+    /// The spans of the rows `rows` (lanes): `[oa, ob, xa, xb, a, b]` as
+    /// in [`Window::blocks`] but the hole in every row (inside the outer
+    /// span when not empty), with the mask of the rows that have it (the
+    /// box proper); each end the integer `n` as the float `n + ROUND` (see
+    /// [`near_f64x2`]), clipped as floats.
+    #[inline(always)]
+    fn at(&self, rows: f64x2) -> ([f64x2; 6], f64x2) {
+        let [ia, ib, oa, ob] = self.q.spans(rows - self.by, self.s.0, self.s.1);
+        let ends = [
+            oa.fast_max(self.cols.0),
+            ob.fast_min(self.cols.1),
+            // (Inside the outer span as it is: the inner roots are inside
+            // the outer ones, `s_in ≤ s_out`, and every step from `s` to
+            // the ends is monotonic in floats.)
+            ia.fast_max(self.box_cols.0),
+            ib.fast_min(self.box_cols.1),
+            ia.fast_max(self.wcols.0),
+            ib.fast_min(self.wcols.1),
+        ];
+        let (hr0, hr1) = self.hole_rows;
+        (ends, rows.cmp_ge(hr0) & rows.cmp_le(hr1))
+    }
+}
+
+/// Rows whose spans [`Window::blocks`] computes ahead at a time.
 const SPAN_BLOCK: usize = 24;
+const _: () = assert!(SPAN_BLOCK.is_multiple_of(2));
 
 impl Conic {
     /// The columns with `ρ²(col − bx, dy) ≤ s_in` and `≤ s_out`
@@ -843,26 +1130,62 @@ fn quantile(values: &mut [u32], k: usize, max: u32) -> u32 {
         for &v in values.iter() {
             count[v as usize & (SMALL - 1)] += 1;
         }
-        if let Some(q) = kth_counted(&count, k) {
-            return q;
-        }
+        return kth_counted(&count, k);
     }
     let (_, &mut q, _) = values.select_nth_unstable(k);
     q
 }
 
-/// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
-/// values equal `v`); `None` if fewer than `k + 1` are counted.
-#[inline]
-fn kth_counted(count: &[u8], k: usize) -> Option<u32> {
-    let mut acc = 0usize;
-    for (v, &c) in count.iter().enumerate() {
-        acc += c as usize;
-        if acc > k {
-            return Some(v as u32);
-        }
+/// How many values `count` holds up to `last` (`count[v]` values equal
+/// `v`; at most 255 in all, so that no sum of counts wraps): sixteen
+/// counts at a time, the last sixteen masked.
+#[inline(always)]
+fn counted_up_to(count: &[u8; 256], last: usize) -> u8 {
+    let whole = (last + 1) / 16;
+    let mut n = u8x16::ZERO;
+    for c in count.chunks_exact(16).take(whole) {
+        n += lanes16(c);
     }
-    None
+    if whole < 16 {
+        // (The lanes `< (last + 1) % 16` of the next sixteen.)
+        let next = lanes16(&count[16 * whole..16 * whole + 16]);
+        n += next & !lanes_from16(32 - (last + 1) % 16);
+    }
+    n.to_array().iter().fold(0, |n, &c| n.wrapping_add(c))
+}
+
+/// The `k`-th smallest (from 0) of the values counted in `count` (`count[v]`
+/// values equal `v`; more than `k` in all, at most 255): eight counts at
+/// a time as the bytes of a `u64`, whose product with `0x0101…01` holds
+/// their running sums (no carry: at most 255), the chunk that passes `k`
+/// then searched in those sums without a loop.
+#[inline]
+fn kth_counted(count: &[u8; 256], k: usize) -> u32 {
+    const BYTES: u64 = 0x0101_0101_0101_0101;
+    const LANES: u64 = 0x0001_0001_0001_0001;
+    const EVEN: u64 = 0x00ff_00ff_00ff_00ff;
+    let mut acc = 0;
+    for (i, c) in count.chunks_exact(8).enumerate() {
+        let Ok(c) = <[u8; 8]>::try_from(c) else {
+            unreachable!("eight counts")
+        };
+        // Byte `j`: the counts `0..=j` of the eight summed.
+        let sums = u64::from_le_bytes(c).wrapping_mul(BYTES);
+        let eight = (sums >> 56) as usize;
+        if acc + eight > k {
+            // The first byte of at least `t = k + 1 − acc` (1 to 255): the
+            // bytes of at least `t` counted in 16-bit lanes, even bytes
+            // and odd ones (`v + 256 − t` reaches bit 8 where `v ≥ t`).
+            let below = (256 - (k + 1 - acc) as u64) * LANES;
+            let even = ((sums & EVEN) + below) >> 8 & LANES;
+            let odd = ((sums >> 8 & EVEN) + below) >> 8 & LANES;
+            let at_least = ((even + odd).wrapping_mul(LANES) >> 48) as u32;
+            return 8 * i as u32 + 8 - at_least;
+        }
+        acc += eight;
+    }
+    debug_assert!(false, "fewer than {} counted", k + 1);
+    255
 }
 
 /// The weight a grey value gets in the centroid sums (in units of
@@ -944,24 +1267,15 @@ impl Weight for Knee {
 }
 
 /// Measures a blob (full-frame coordinates, pixels read inside `plane`
-/// only); `None` if the window holds no signal.
+/// only) in the window of `margin`; `None` if the window holds no signal.
 pub fn measure<P: Pixel>(
     plane: &Plane<P>,
     blob: &Blob,
     threshold: Threshold,
     fallback_background: f64,
-    grow: f64,
-    max_scale: f64,
+    margin: impl Margin,
 ) -> Option<Measurement> {
-    measure_weighted(
-        plane,
-        blob,
-        threshold,
-        fallback_background,
-        grow,
-        max_scale,
-        Linear,
-    )
+    measure_weighted(plane, blob, threshold, fallback_background, margin, Linear)
 }
 
 /// [`measure`] with the grey values weighted by `w` in the centroid and
@@ -971,10 +1285,10 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     blob: &Blob,
     threshold: Threshold,
     fallback_background: f64,
-    grow: f64,
-    max_scale: f64,
+    margin: impl Margin,
     w: W,
 ) -> Option<Measurement> {
+    let (grow, max_scale) = (margin.grow(), margin.max_scale());
     let (bx, by) = blob.centre();
     let (cxx, cyy, cxy) = blob.covariance();
     // Semi-minor axis as in `ellipse` (without its angle).
@@ -1053,7 +1367,7 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     let level = threshold.level();
     // The window's sums are exact integers about the pixel nearest the
     // blob's centre.
-    let (cc, rr) = (round_i64(bx), round_i64(by));
+    let [cc, rr] = round_i64x2(f64x2::new([bx, by]));
     let mut counted = None;
     // (`est ≤ COUNTED_RING < BG_SAMPLES` keeps every dark pixel: stride 1.)
     if est <= COUNTED_RING && (P::MAX <= 255 || level < 255) {
@@ -1063,12 +1377,21 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             total: 0,
         };
         let fast = match plane.bytes() {
-            Some(bytes) if W::LINEAR => window.sums_8bit(&bytes, &mut ring, (cc - first_col, rr)),
+            Some(bytes) if W::LINEAR => {
+                window.sums_8bit(&bytes, &mut ring, level, (cc - first_col, rr))
+            }
             _ => None,
         };
-        let sums = fast.unwrap_or_else(|| window_sums(&window, plane, w, &mut ring, (cc, rr)));
+        let (sums, background) = fast.unwrap_or_else(|| {
+            let (g, n) = window_sums(&window, plane, w, &mut ring, (cc, rr));
+            let exact = ring.total <= u8::MAX as usize;
+            (
+                (g, Some(n)),
+                if exact { ring.quantile(level) } else { None },
+            )
+        });
         if ring.total <= u8::MAX as usize {
-            counted = Some((sums, ring.quantile(level)));
+            counted = Some((sums, background));
         }
     }
     let ((gm, nm), bg) = counted.unwrap_or_else(|| {
@@ -1080,14 +1403,17 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
             stride: ceil_i64(est / BG_SAMPLES as f64).max(1) as usize,
             threshold,
         };
-        let sums = window_sums(&window, plane, w, &mut ring, (cc, rr));
-        (sums, ring.quantile(level))
+        let (g, n) = window_sums(&window, plane, w, &mut ring, (cc, rr));
+        ((g, Some(n)), ring.quantile(level))
     });
     let background = bg.map_or(fallback_background, |b| b as f64);
-    // The moments with the background subtracted, then about the centre.
+    // The moments with the background subtracted (unless off already),
+    // then about the centre.
     let bw = w.level(background);
-    let m = |i: usize| gm[i] - bw * nm[i];
-    let (sw, sx, sxx, sy, syy, sxy) = (m(0), m(1), m(2), m(3), m(4), m(5));
+    let [sw, sx, sxx, sy, syy, sxy] = match nm {
+        Some(n) => [0, 1, 2, 3, 4, 5].map(|i| gm[i] - bw * n[i]),
+        None => gm,
+    };
     if sw.is_nan() || sw <= 0.0 {
         return None;
     }
@@ -1154,10 +1480,10 @@ fn window_sums<P: Pixel, W: Weight, R: Ring>(
             let a = (wc0 - first_col) as usize;
             return if cols <= 16 {
                 let p = a.min(plane.width - 16);
-                window.sums(&bytes, Lanes::<1>::new(p, wr0, k0, rr), ring)
+                window.sums(&bytes, Lanes::<1>::new(p, wr0, (k0, rr), 0), ring)
             } else {
                 let p = a.min(plane.width - 32);
-                window.sums(&bytes, Lanes::<2>::new(p, wr0, k0, rr), ring)
+                window.sums(&bytes, Lanes::<2>::new(p, wr0, (k0, rr), 0), ring)
             };
         }
     }
@@ -1204,6 +1530,20 @@ mod tests {
         }
     }
 
+    /// 1 to 64 rows of random pixels `width` wide after `above` more, and
+    /// an origin near them.
+    fn random_rows(rng: &mut Rng, width: usize, above: usize) -> (usize, Vec<u8>, (i64, i64)) {
+        let rows = 1 + (rng.next_u64() % 64) as usize;
+        let data = (0..width * (rows + above))
+            .map(|_| (rng.next_u64() % 256) as u8)
+            .collect();
+        let origin = (
+            (rng.next_u64() % 40) as i64 - 6,
+            (rng.next_u64() % 70) as i64,
+        );
+        (rows, data, origin)
+    }
+
     /// The window's sums of random rows and spans from every
     /// implementation: the same integers, so the same `f64`s.
     #[test]
@@ -1211,19 +1551,12 @@ mod tests {
         let mut rng = Rng::new(21);
         let width = 48;
         for case in 0..300 {
-            let rows = 1 + (rng.next_u64() % 64) as usize;
-            let data: Vec<u8> = (0..width * (rows + 3))
-                .map(|_| (rng.next_u64() % 256) as u8)
-                .collect();
+            let (rows, data, (k0, j0)) = random_rows(&mut rng, width, 3);
             let r0 = 3usize;
-            let (k0, j0) = (
-                (rng.next_u64() % 60) as i64 - 6,
-                (rng.next_u64() % 70) as i64,
-            );
             let lanes = if case % 2 == 0 { 16 } else { 32 };
             let p = (rng.next_u64() % (width - 31) as u64) as usize;
-            let mut one = Lanes::<1>::new(p, r0, k0, j0);
-            let mut two = Lanes::<2>::new(p, r0, k0, j0);
+            let mut one = Lanes::<1>::new(p, r0, (k0, j0), 0);
+            let mut two = Lanes::<2>::new(p, r0, (k0, j0), 0);
             let mut by64 = RowByRow::<Linear, i64>::new(Linear, k0, j0);
             let mut by128 = RowByRow::<Linear, i128>::new(Linear, k0, j0);
             for row in r0..r0 + rows {
@@ -1249,6 +1582,49 @@ mod tests {
         }
     }
 
+    /// The window's rows from records (the 8-bit path's lanes from mask
+    /// offsets, rows without pixels as empty offsets) against the plain
+    /// sums: with the pixel counts, and with a background taken off every
+    /// pixel (the weights' sums less the background times the counts',
+    /// the counts' zero).
+    #[test]
+    fn window_records_are_the_plain_sums() {
+        let mut rng = Rng::new(23);
+        let width = 40;
+        for case in 0..400 {
+            let (rows, data, origin) = random_rows(&mut rng, width, 2);
+            let (r0, p) = (2usize, (rng.next_u64() % (width - 15) as u64) as usize);
+            let mut plain = RowByRow::<Linear, i64>::new(Linear, origin.0, origin.1);
+            let records: Vec<u64> = (r0..r0 + rows)
+                .map(|row| {
+                    let lo = (rng.next_u64() % 17) as usize;
+                    if lo == 16 || rng.next_u64().is_multiple_of(4) {
+                        // (Empty: the two offsets equal.)
+                        return ((32 - lo as u64) << 32) | ((32 - lo as u64) << 40);
+                    }
+                    let hi = lo + (rng.next_u64() % (16 - lo) as u64) as usize;
+                    plain.row(&data[row * width..], p + lo, p + hi, row);
+                    ((32 - lo as u64) << 32) | ((31 - hi as u64) << 40)
+                })
+                .collect();
+            let at = r0 * width + p;
+            let want = Moments::<u8>::sums(plain);
+            let with_counts = Lanes::<1>::new(p, r0, origin, 0);
+            assert_eq!(
+                with_counts.take_records(&data, at, width, &records),
+                want,
+                "{case}"
+            );
+            let b = (rng.next_u64() % 256) as u8;
+            let less = Lanes::<1, true>::new(p, r0, origin, b);
+            let (g, n) = less.take_records(&data, at, width, &records);
+            assert_eq!(n, [0.0; 6], "{case}");
+            for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
+                assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+            }
+        }
+    }
+
     /// The 8-bit paths (the counted ring picked by bit masks, the window
     /// in lanes) against the plain path of the same frame in 16 bits:
     /// blobs of many sizes and shapes, at the window's edges too.
@@ -1256,6 +1632,7 @@ mod tests {
     fn eight_bit_measurement_is_the_plain_one() {
         let mut rng = Rng::new(33);
         let (width, height) = (160usize, 120usize);
+        let mut fallbacks = 0;
         for frame in 0..12 {
             let mut img = vec![0f64; width * height];
             for v in img.iter_mut() {
@@ -1297,39 +1674,33 @@ mod tests {
             }
             let mut n = 0;
             for blob in labeller.blobs() {
-                for (grow, scale) in [(GROW, MAX_SCALE), (CODED_GROW, CODED_MAX_SCALE)] {
-                    let m8 = measure(&whole8, blob, threshold, 20.0, grow, scale);
-                    let m16 = measure(
-                        &Plane::whole(&px16, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
+                for margin in [(GROW, MAX_SCALE), (CODED_GROW, CODED_MAX_SCALE)] {
+                    let m8 = measure(&whole8, blob, threshold, 20.0, margin);
+                    let whole16 = Plane::whole(&px16, width, height);
+                    let m16 = measure(&whole16, blob, threshold, 20.0, margin);
                     assert_eq!(m8, m16, "{frame} {blob:?}");
-                    let c8 = measure(
-                        &crop(&px8, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
-                    let c16 = measure(
-                        &crop(&px16, width, height),
-                        blob,
-                        threshold,
-                        20.0,
-                        grow,
-                        scale,
-                    );
+                    let c8 = measure(&crop(&px8, width, height), blob, threshold, 20.0, margin);
+                    let c16 = measure(&crop(&px16, width, height), blob, threshold, 20.0, margin);
                     assert_eq!(c8, c16, "{frame} {blob:?}");
+                    // The margins as constants: the same.
+                    let constant = if margin.0 == GROW {
+                        measure(&whole8, blob, threshold, 20.0, DotMargin)
+                    } else {
+                        measure(&whole8, blob, threshold, 20.0, CodedMargin)
+                    };
+                    assert_eq!(constant, m8, "{frame} {blob:?}");
                     n += m8.is_some() as usize;
+                    // A level below most of the ring: rings of too few
+                    // dark pixels (the fallback background) too.
+                    let low = Threshold::global(22);
+                    let l8 = measure(&whole8, blob, low, 20.5, margin);
+                    assert_eq!(l8, measure(&whole16, blob, low, 20.5, margin), "{frame}");
+                    fallbacks += l8.is_some_and(|m| m.background == 20.5) as usize;
                 }
             }
             assert!(n >= 10, "{frame}: {n}");
         }
+        assert!(fallbacks >= 10, "{fallbacks}");
     }
 
     /// The spans of the conic's rows against the quadratic form at every
@@ -1503,6 +1874,55 @@ mod tests {
                         assert_eq!(got[3].max(0) as usize, (whi as usize).min(last as usize));
                     }
                 }
+            }
+        }
+    }
+
+    /// The counted percentile's parts against plain loops: the counts up
+    /// to every level (the last sixteen masked) and every `k`-th value,
+    /// tables sparse and full (sums up to 255).
+    #[test]
+    fn counted_sums_and_order_statistics_are_the_plain_ones() {
+        let mut rng = Rng::new(17);
+        for case in 0..300 {
+            let mut count = [0u8; 256];
+            let n = 1 + (rng.next_u64() % 255) as usize;
+            let spread = 1 + (rng.next_u64() % 256) as usize;
+            let base = (rng.next_u64() % (257 - spread as u64)) as usize;
+            for _ in 0..n {
+                count[base + (rng.next_u64() as usize % spread)] += 1;
+            }
+            for last in 0..256 {
+                let want: usize = count[..=last].iter().map(|&c| c as usize).sum();
+                assert_eq!(counted_up_to(&count, last) as usize, want, "{case} {last}");
+            }
+            for k in 0..n {
+                let mut acc = 0;
+                let want = (0..256)
+                    .find(|&v| {
+                        acc += count[v] as usize;
+                        acc > k
+                    })
+                    .unwrap() as u32;
+                assert_eq!(kth_counted(&count, k), want, "{case} {k}");
+            }
+        }
+    }
+
+    /// The ring's runs as floats against bit masks built one bit at a
+    /// time: every run in and past the 32 lanes, empty ones too.
+    #[test]
+    fn run_bits_are_the_lanes() {
+        for lo in -3i64..40 {
+            for hi in -3i64..36 {
+                if lo < 0 || hi > 32 {
+                    continue;
+                }
+                let r = |x: i64| f64x2::splat(x as f64 + ROUND);
+                let got = (run_bits(r(lo), r(hi)) + f64x2::splat(TWO_52)).to_array()[0];
+                let want = (lo..hi.min(32)).fold(0u32, |m, b| m | 1 << b);
+                assert_eq!(got.to_bits() as u32, want, "{lo} {hi}");
+                assert_eq!(got.to_bits() >> 32, TWO_52.to_bits() >> 32, "{lo} {hi}");
             }
         }
     }

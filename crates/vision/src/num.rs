@@ -3,7 +3,7 @@
 //! per-target paths (centroid windows, tracking windows) would make
 //! thousands of times per frame.
 
-use wide::f64x2;
+use wide::{f64x2, i64x2, CmpGt, CmpLe};
 
 /// `1.5 · 2⁵²`: adding it to an `x` with `|x| < 2³¹` leaves the nearest
 /// integer (ties to even) in the low bits of the mantissa.
@@ -23,12 +23,38 @@ pub(crate) fn low_i32x2(r: f64x2) -> [i32; 2] {
     r.to_array().map(|r| r.to_bits() as u32 as i32)
 }
 
+/// `2ˣ` of both lanes from `x + ROUND` (see [`near_f64x2`]), for integers
+/// `−1022 ≤ x ≤ 1023`: `x` moved from the low bits of the mantissa into
+/// the exponent field with its bias (exact, no conversion).
+#[inline(always)]
+pub(crate) fn pow2_f64x2(r: f64x2) -> f64x2 {
+    let x = i64x2::from(r.to_array().map(|r| r.to_bits() as i64));
+    let p: i64x2 = (x + i64x2::splat(1023)) << 52;
+    f64x2::from(p.to_array().map(|p| f64::from_bits(p as u64)))
+}
+
 /// `floor` (no libm call on baseline x86-64), saturating at the ends of
 /// the `i64` range like `as` (infinities included; NaN gives 0).
 #[inline(always)]
 pub(crate) fn floor_i64(x: f64) -> i64 {
     let t = x as i64;
     t.saturating_sub(((t as f64) > x) as i64)
+}
+
+/// [`round_i64`] of both lanes, in floats while both lie within ±2³⁰
+/// (the nearest integer of `x + 0.5`, less one where it lies above: exact
+/// there), else one at a time.
+#[inline(always)]
+pub(crate) fn round_i64x2(x: f64x2) -> [i64; 2] {
+    const LIMIT: f64 = (1u64 << 30) as f64;
+    let y = x + f64x2::splat(0.5);
+    // (NaN fails the comparison: one at a time.)
+    if !y.abs().cmp_le(f64x2::splat(LIMIT)).all() {
+        return x.to_array().map(round_i64);
+    }
+    let n = near_f64x2(y) - f64x2::splat(ROUND);
+    let floor = n - (n.cmp_gt(y) & f64x2::splat(1.0));
+    low_i32x2(near_f64x2(floor)).map(i64::from)
 }
 
 /// `ceil`, see [`floor_i64`].
@@ -48,6 +74,16 @@ pub(crate) fn round_i64(x: f64) -> i64 {
 mod tests {
     use super::*;
 
+    /// Powers of two from integers as `x + ROUND`, at the ends of the
+    /// exponent's range too.
+    #[test]
+    fn powers_of_two() {
+        for e in (-1022..=1023).step_by(7).chain([-1022, 0, 32, 1023]) {
+            let got = pow2_f64x2(f64x2::new([e as f64, -1.0]) + f64x2::splat(ROUND));
+            assert_eq!(got.to_array(), [2f64.powi(e), 0.5], "{e}");
+        }
+    }
+
     #[test]
     fn rounding_helpers() {
         for x in [-3.7, -3.5, -0.2, 0.0, 0.5, 1.5, 2.49, 1299.51] {
@@ -65,6 +101,37 @@ mod tests {
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
             assert_eq!(round_i64(x), (x + 0.5).floor() as i64, "{x}");
+        }
+        // Two at a time: within ±2³⁰ in floats, else (NaN, past it) one
+        // at a time, the same either way.
+        let xs = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            1073741823.5,
+            -1073741824.5,
+            1073741824.0,
+            1e9 + 0.5,
+            4e9,
+            -4e9,
+            1e300,
+            f64::INFINITY,
+            f64::NAN,
+            3.7,
+            -3.7,
+            1299.51,
+        ];
+        for &a in &xs {
+            for &b in &xs {
+                let got = round_i64x2(f64x2::new([a, b]));
+                assert_eq!(got, [round_i64(a), round_i64(b)], "{a} {b}");
+            }
         }
     }
 }

@@ -122,7 +122,7 @@ fn corners_x2<P: Pixel>(a: &[P], b: &[P], s: usize) -> [f64x2; 4] {
 
 /// Sixteen pixels of an 8-bit row as one vector.
 #[inline(always)]
-fn lanes16(c: &[u8]) -> u8x16 {
+pub(crate) fn lanes16(c: &[u8]) -> u8x16 {
     let Ok(&c) = <&[u8; 16]>::try_from(c) else {
         unreachable!("sixteen pixels")
     };
@@ -602,11 +602,11 @@ impl<'a, P: Pixel> Plane<'a, P> {
 }
 
 /// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
-/// `≥ lo` (see [`masked16`]).
-const FROM_32: [u8; 64] = {
-    let mut t = [0u8; 64];
+/// `≥ lo` (see [`lanes_from16`]).
+const FROM_32: [u8; 80] = {
+    let mut t = [0u8; 80];
     let mut i = 32;
-    while i < 64 {
+    while i < 80 {
         t[i] = 0xff;
         i += 1;
     }
@@ -632,19 +632,28 @@ fn run_lanes(line: &[u8], start: usize, end: usize, mut f: impl FnMut(u8x16)) {
     }
 }
 
+/// The lanes `≥ 32 − i` of sixteen as `0xff` bytes (`i` modulo 64; every
+/// lane for `48 ≤ i < 64`): the lanes from `lo` at `i = 32 − lo`, one
+/// unaligned load from a table instead of a loop.
+#[inline(always)]
+pub(crate) fn lanes_from16(i: usize) -> u8x16 {
+    lanes16(&FROM_32[i & 63..][..16])
+}
+
+/// The lanes `lo..=hi` of sixteen as `0xff` bytes (`−16 ≤ lo ≤ 32`,
+/// `−17 ≤ hi ≤ 31`; none for `lo > hi`): a run of a row as a mask.
+#[inline(always)]
+pub(crate) fn run16(lo: isize, hi: isize) -> u8x16 {
+    debug_assert!((-16..=32).contains(&lo) && (-17..=31).contains(&hi));
+    lanes_from16((32 - lo) as usize) & !lanes_from16((31 - hi) as usize)
+}
+
 /// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
-/// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
-/// row as one vector, masked by two unaligned loads from a table instead
-/// of a loop.
+/// (lane `i` is `line[p + i]`; [`run16`]'s ranges) set to 0: a run of a
+/// row as one vector.
 #[inline(always)]
 pub(crate) fn masked16(line: &[u8], p: usize, lo: isize, hi: isize) -> u8x16 {
-    debug_assert!((-16..=31).contains(&lo) && (-16..=31).contains(&hi));
-    // Lane `i` of the first mask is `FROM_32[32 − lo + i]`, set for
-    // `i ≥ lo`; of the second `FROM_32[32 − hi − 1 + i]`, set for `i > hi`.
-    // (The `min`s change nothing but spare the bounds checks.)
-    let ge = lanes16(&FROM_32[((32 - lo) as usize).min(48)..][..16]);
-    let gt = lanes16(&FROM_32[((31 - hi) as usize).min(48)..][..16]);
-    lanes16(&line[p..p + 16]) & ge & !gt
+    lanes16(&line[p..p + 16]) & run16(lo, hi)
 }
 
 #[cfg(test)]
