@@ -364,6 +364,12 @@ impl SmallMoments {
         self.c4 += self.c3;
     }
 
+    /// The pixels summed: [`Blob::area`] (an exact integer).
+    #[inline(always)]
+    pub(crate) fn area(&self) -> u32 {
+        self.c0[0].to_array()[0] as u32
+    }
+
     /// The moments as [`Blob::m`] and [`Blob::m4`].
     #[inline]
     pub(crate) fn to_blob_moments(self) -> ([f64; 5], [f64; 9]) {

@@ -63,21 +63,20 @@ pub struct SeedLabeller {
     col0: usize,
     /// The window is grown on row masks ([`MASK_SIDE`]).
     masked: bool,
-    /// Mask path: per window row, its foreground pixels (bit `i`: column
-    /// `col0 + i`), valid for the rows set in `known`, at `level`.
-    fg: [u64; MASK_SIDE],
-    known: u64,
-    level: Option<Threshold>,
-    /// Mask path: per window row, the pixels of the blobs grown so far
-    /// (valid for the window's `height` rows).
+    /// Mask path: per window row, the pixels of the blobs grown so far,
+    /// for the rows set in `valid` (the others hold none: a window of one
+    /// blob clears no rows).
     taken: [u64; MASK_SIDE],
-    /// Mask path: the window's height (rows of `taken` in use).
+    valid: u64,
+    /// Mask path: the window's height.
     height: usize,
     /// Mask path: the blob being grown, per window row (valid for the
     /// window's `height` rows).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
-    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
+    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]` (the
+    /// first blob's masks are `taken` until a second one is grown, and
+    /// copied there then).
     spans: Vec<(u32, u32, u32)>,
     rows: Box<[u64; ROWS]>,
     /// Mask path: rows of `rows` in use.
@@ -102,10 +101,8 @@ impl SeedLabeller {
             row0: 0,
             col0: 0,
             masked: false,
-            fg: [0; MASK_SIDE],
-            known: 0,
-            level: None,
             taken: [0; MASK_SIDE],
+            valid: 0,
             height: 0,
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
@@ -130,9 +127,7 @@ impl SeedLabeller {
         self.masked =
             (1..=MASK_SIDE).contains(&plane.width) && (1..=MASK_SIDE).contains(&plane.height);
         if self.masked {
-            self.known = 0;
-            self.level = None;
-            self.taken[..plane.height].fill(0);
+            self.valid = 0;
             self.height = plane.height;
             self.spans.clear();
             self.n_rows = 0;
@@ -154,8 +149,11 @@ impl SeedLabeller {
         if self.masked {
             let r = row.checked_sub(self.row0)?;
             let bit = 1u64 << col.checked_sub(self.col0).filter(|&c| c < MASK_SIDE)?;
-            if r >= MASK_SIDE || self.taken[r] & bit == 0 {
+            if r >= self.height || self.taken(r) & bit == 0 {
                 return None;
+            }
+            if self.spans.len() == 1 {
+                return Some(0);
             }
             return self.spans.iter().position(|&(first, a, b)| {
                 let k = r.wrapping_sub(first as usize);
@@ -185,9 +183,24 @@ impl SeedLabeller {
         if b >= MASK_SIDE || r1 >= self.height {
             return false;
         }
-        let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
+        let cols = span(a, b);
+        let rows = span(r0, r1);
+        if self.valid & rows != rows {
+            return false;
+        }
         let all = self.taken[r0..=r1].iter().fold(u64::MAX, |all, &t| all & t);
         all & cols == cols
+    }
+
+    /// Mask path: the pixels of window row `r` (below the window's
+    /// height) in the blobs grown so far.
+    #[inline(always)]
+    fn taken(&self, r: usize) -> u64 {
+        if self.valid >> r & 1 != 0 {
+            self.taken[r]
+        } else {
+            0
+        }
     }
 
     /// The run found so far that holds full-frame pixel `(col, row)`.
@@ -226,7 +239,8 @@ impl SeedLabeller {
             return Ok(None);
         }
         if self.masked {
-            return self.grow_masked(plane, threshold, saturation, col, row);
+            let reading = P::reading(plane, threshold);
+            return self.grow_masked(plane, &reading, saturation, col, row);
         }
         if !threshold.is_foreground(plane.row(row)[col - plane.col0].value()) {
             return Ok(None);
@@ -310,14 +324,13 @@ impl SeedLabeller {
                 return Ok(());
             }
             let r = row - self.row0;
-            let (a, b) = (lo - self.col0, hi - self.col0);
-            let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
-            self.set_level(threshold);
-            let mut open = self.fg_row(plane, threshold, r) & cols & !self.taken[r];
+            let cols = span(lo - self.col0, hi - self.col0);
+            let reading = P::reading(plane, threshold);
+            let mut open = P::read_row(plane, &reading, r).0 & cols & !self.taken(r);
             while open != 0 {
                 let col = self.col0 + open.trailing_zeros() as usize;
-                self.grow_masked(plane, threshold, saturation, col, row)?;
-                open &= !self.taken[r];
+                self.grow_masked(plane, &reading, saturation, col, row)?;
+                open &= !self.taken(r);
             }
             return Ok(());
         }
@@ -340,47 +353,23 @@ impl SeedLabeller {
         Ok(())
     }
 
-    /// Makes the row masks found so far those at `threshold` (forgets
-    /// them when it differs from the last one).
-    #[inline(always)]
-    fn set_level(&mut self, threshold: Threshold) {
-        if self.level != Some(threshold) {
-            self.level = Some(threshold);
-            self.known = 0;
-        }
-    }
-
-    /// The foreground mask of window row `r` at the level of
-    /// [`SeedLabeller::set_level`] (found once per window and level).
-    #[inline(always)]
-    fn fg_row<P: ShortRow>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
-        if self.known >> r & 1 == 0 {
-            // The row from its start, with the frame's pixels past the
-            // window's width where it holds them (read in whole vectors).
-            let start = r * plane.stride;
-            let row = &plane.data[start..];
-            self.fg[r] = P::short_mask(row, plane.width, threshold);
-            self.known |= 1 << r;
-        }
-        self.fg[r]
-    }
-
     /// [`SeedLabeller::grow`] on row masks (a window of at most
-    /// [`MASK_SIDE`] pixels each way, position inside it).
+    /// [`MASK_SIDE`] pixels each way, position inside it; its rows read as
+    /// `reading`, formed for `plane` at the threshold).
     fn grow_masked<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        threshold: Threshold,
+        reading: &P::Reading,
         saturation: u32,
         col: usize,
         row: usize,
     ) -> Result<Option<usize>, SeedOverflow> {
         let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
-        self.set_level(threshold);
-        if self.fg_row(plane, threshold, r) & bit == 0 {
+        let (f, p) = P::read_row(plane, reading, r);
+        if f & bit == 0 {
             return Ok(None);
         }
-        if self.taken[r] & bit != 0 {
+        if self.taken(r) & bit != 0 {
             return Ok(self.blob_at(col, row));
         }
         if self.spans.len() >= self.max_blobs {
@@ -394,30 +383,37 @@ impl SeedLabeller {
         // (a branch turning back) are noted, and only then are the rows
         // searched again until none gains a pixel (`flood`). (No list of
         // pending rows per step: SeedLabeller::grow 26.03 M -> 23.67 M in
-        // tracking.)
+        // tracking.) Each row is read once, its mask and peak together
+        // (no row kept for later: a window's rows are read again only for
+        // a second blob or a branch turning back).
         // (`grown` is all 0 between grows: no test which rows the blob
         // holds yet per step.)
         debug_assert!(self.grown.iter().all(|&g| g == 0));
-        let seed = run_holding(self.fg[r], bit);
+        let seed = run_holding(f, bit);
         self.grown[r] = seed;
+        // The rows' peak, and `others`: the foreground pixels of other
+        // blobs in the rows (then the peak is not the blob's).
+        let (mut peak, mut others) = (p, f ^ seed);
         let mut missed = 0u64;
         let (mut lo, mut hi) = (r, r);
         for step in [1, usize::MAX] {
-            let (mut k, mut g) = (r, seed);
+            let (mut k, mut g, mut fk) = (r, seed, f);
             loop {
                 // (Past either end of the window: at least `height`.)
                 let n = k.wrapping_add(step);
                 if n >= plane.height {
                     break;
                 }
-                let f = self.fg_row(plane, threshold, n);
+                let (f, p) = P::read_row(plane, reading, n);
                 let add = fill_runs(f, reach(g) & f);
                 if add == 0 {
                     break;
                 }
-                missed |= reach(add) & self.fg[k] & !g;
+                peak = P::fold(peak, p);
+                others |= f ^ add;
+                missed |= reach(add) & fk & !g;
                 self.grown[n] = add;
-                (k, g) = (n, add);
+                (k, g, fk) = (n, add, f);
             }
             if step == 1 {
                 hi = k;
@@ -426,57 +422,42 @@ impl SeedLabeller {
             }
         }
         if missed != 0 {
-            (lo, hi) = self.flood(plane, threshold, lo, hi);
+            (lo, hi) = self.flood(plane, reading, lo, hi);
+            // (The rows' peak is not the blob's when it grew.)
+            others = u64::MAX;
         }
-        // The statistics: the moments summed exactly a row at a time
-        // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
-        // the grey-value statistics over all the rows at once.
+        // The grey-value statistics: a blob alone in its rows has their
+        // peak (its other pixels are background, below every pixel of the
+        // blob), and no saturated pixel unless the peak is one; else they
+        // are read over its pixels.
+        let (max, saturated) = match P::peak(peak) {
+            max if others == 0 && max < saturation => (max, 0),
+            _ => P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation),
+        };
+        // The moments summed exactly a row at a time (`SmallMoments`: the
+        // values `Blob::add_run` gives, bit for bit).
         let origin = self.grown[lo].trailing_zeros() as i64;
-        let mut sums = SmallMoments::ZERO;
-        let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
         let first = self.n_rows;
         debug_assert!(first + hi - lo < ROWS);
-        // (A run's statistics are at most 64 pixels': no clamping.)
-        let (max, saturated) =
-            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
-        // (From the last row up: `SmallMoments::add_row_up`.)
-        for k in (lo..=hi).rev() {
-            let g = std::mem::take(&mut self.grown[k]);
-            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
-                // One run (the rule): its ends straight from the mask.
-                let (start, end) = (
-                    g.trailing_zeros() as usize,
-                    MASK_SIDE - g.leading_zeros() as usize,
-                );
-                runs += 1;
-                area += (end - start) as u32;
-                sums.add_row_up(&SmallMoments::run(
-                    start as i64 - origin,
-                    end as i64 - origin,
-                ));
-                cols |= g;
-                self.taken[k] |= g;
-                // (Below `ROWS` rows in all: every row of a blob holds a
-                // pixel of the window no other blob holds.)
-                self.rows[(first + k - lo) % ROWS] = g;
-                continue;
+        let (sums, cols, runs) = if self.spans.is_empty() {
+            self.take_rows::<true>(lo, hi, origin)
+        } else {
+            if self.spans.len() == 1 {
+                // The first blob's masks into `rows` (`taken` holds it alone).
+                let (a, _, b) = self.spans[0];
+                let a = a as usize;
+                let n = b as usize;
+                self.rows[..n].copy_from_slice(&self.taken[a..a + n]);
             }
-            let mut row: RowSums = [f64x2::ZERO; 3];
-            let mut m = g;
-            while m != 0 {
-                let start = m.trailing_zeros() as usize;
-                let len = (!(m >> start)).trailing_zeros() as usize;
-                runs += 1;
-                let end = start + len;
-                area += len as u32;
-                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
-                m &= !(u64::MAX >> (MASK_SIDE - end));
+            // Rows of `taken` not yet in use cleared.
+            let mut fresh = span(lo, hi) & !self.valid;
+            while fresh != 0 {
+                self.taken[fresh.trailing_zeros() as usize] = 0;
+                fresh &= fresh - 1;
             }
-            sums.add_row_up(&row);
-            cols |= g;
-            self.taken[k] |= g;
-            self.rows[(first + k - lo) % ROWS] = g;
-        }
+            self.take_rows::<false>(lo, hi, origin)
+        };
+        self.valid |= span(lo, hi);
         self.n_rows = first + hi - lo + 1;
         // (The capacity counted per blob: the same error, the window's
         // state after it is not used.)
@@ -486,7 +467,7 @@ impl SeedLabeller {
         self.n_runs += runs;
         let (m, m4) = sums.to_blob_moments();
         let b = Blob {
-            area,
+            area: sums.area(),
             col0: (self.col0 + cols.trailing_zeros() as usize) as u32,
             row0: (self.row0 + lo) as u32,
             col1: (self.col0 + 63 - cols.leading_zeros() as usize) as u32,
@@ -503,6 +484,56 @@ impl SeedLabeller {
         Ok(Some(self.blobs.len() - 1))
     }
 
+    /// The blob being grown (`grown`, rows `lo..=hi`, cleared here) added
+    /// to `taken` (and its masks to `rows` unless it is the window's first
+    /// blob, `FIRST`: `taken` holds it alone): its moments about column
+    /// `origin` (from the last row up: `SmallMoments::add_row_up`), the
+    /// columns it holds, its runs.
+    #[inline(always)]
+    fn take_rows<const FIRST: bool>(
+        &mut self,
+        lo: usize,
+        hi: usize,
+        origin: i64,
+    ) -> (SmallMoments, u64, usize) {
+        let mut sums = SmallMoments::ZERO;
+        let (mut cols, mut runs) = (0u64, hi - lo + 1);
+        let first = self.n_rows;
+        for k in (lo..=hi).rev() {
+            let g = std::mem::take(&mut self.grown[k]);
+            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
+                // One run (the rule): its ends straight from the mask.
+                let (start, end) = (
+                    g.trailing_zeros() as i64,
+                    MASK_SIDE as i64 - g.leading_zeros() as i64,
+                );
+                sums.add_row_up(&SmallMoments::run(start - origin, end - origin));
+            } else {
+                let mut row: RowSums = [f64x2::ZERO; 3];
+                let mut m = g;
+                runs -= 1;
+                while m != 0 {
+                    let start = m.trailing_zeros() as usize;
+                    let end = start + (!(m >> start)).trailing_zeros() as usize;
+                    runs += 1;
+                    SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
+                    m &= !(u64::MAX >> (MASK_SIDE - end));
+                }
+                sums.add_row_up(&row);
+            }
+            cols |= g;
+            if FIRST {
+                self.taken[k] = g;
+            } else {
+                self.taken[k] |= g;
+                // (Below `ROWS` rows in all: every row of a blob holds a
+                // pixel of the window no other blob holds.)
+                self.rows[(first + k - lo) % ROWS] = g;
+            }
+        }
+        (sums, cols, runs)
+    }
+
     /// The blob being grown (`grown`, rows `lo..=hi`, connected) made
     /// whole: the rows whose neighbours are still to be searched kept as a
     /// mask (a row that gains pixels again is still pending), every row
@@ -510,22 +541,22 @@ impl SeedLabeller {
     fn flood<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        threshold: Threshold,
+        reading: &P::Reading,
         lo: usize,
         hi: usize,
     ) -> (usize, usize) {
         let last = plane.height - 1;
-        let mut todo = (u64::MAX >> (MASK_SIDE - 1 - (hi - lo))) << lo;
+        let mut todo = span(lo, hi);
         let mut held = todo;
         while todo != 0 {
             let k = todo.trailing_zeros() as usize;
             todo &= todo - 1;
             let reach = reach(self.grown[k]);
             if k > 0 {
-                todo |= self.spread(plane, threshold, reach, k - 1);
+                todo |= self.spread(plane, reading, reach, k - 1);
             }
             if k < last {
-                todo |= self.spread(plane, threshold, reach, k + 1);
+                todo |= self.spread(plane, reading, reach, k + 1);
             }
             held |= todo;
         }
@@ -543,12 +574,12 @@ impl SeedLabeller {
     fn spread<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        threshold: Threshold,
+        reading: &P::Reading,
         reach: u64,
         n: usize,
     ) -> u64 {
         let before = self.grown[n];
-        let f = self.fg_row(plane, threshold, n);
+        let f = P::read_row(plane, reading, n).0;
         let add = fill_runs(f, reach & f) & !before;
         if add == 0 {
             return 0;
@@ -610,6 +641,14 @@ impl SeedLabeller {
     }
 }
 
+/// Bits `a..=b` (`a ≤ b < 64`): columns or rows of a window grown on row
+/// masks.
+#[inline(always)]
+fn span(a: usize, b: usize) -> u64 {
+    debug_assert!(a <= b && b < MASK_SIDE);
+    (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a
+}
+
 /// The pixels of a row touching those of `g` (of the row above or below,
 /// 8-connectivity): `g` and its left and right neighbours.
 #[inline(always)]
@@ -668,8 +707,15 @@ mod tests {
     }
 
     /// Every blob the labeller finds in a window, grown from each of its
-    /// pixels, is the labeller's blob, bit for bit.
+    /// pixels, is the labeller's blob, bit for bit; in 8-bit and 16-bit
+    /// frames.
     fn check(data: &[u8], width: usize, area: (usize, usize, usize, usize)) {
+        check_pixels(data, width, area);
+        let wide: Vec<u16> = data.iter().map(|&v| v as u16).collect();
+        check_pixels(&wide, width, area);
+    }
+
+    fn check_pixels<P: ShortRow>(data: &[P], width: usize, area: (usize, usize, usize, usize)) {
         let (c0, r0, w, h) = area;
         let plane = window(data, width, area);
         let t = Threshold::global(100);
@@ -679,7 +725,7 @@ mod tests {
         seeds.start(&plane);
         for row in r0..r0 + h {
             for col in c0..c0 + w {
-                let v = data[row * width + col] as u32;
+                let v = data[row * width + col].value();
                 let got = seeds.grow(&plane, t, 250, col, row).expect("capacity");
                 assert_eq!(got.is_some(), v > 100, "({col}, {row})");
             }
@@ -857,6 +903,57 @@ mod tests {
         assert_eq!(s.grow(&plane, t, 250, 2, 0), Err(SeedOverflow::Blobs));
     }
 
+    /// A dot alone in its rows takes its peak from them: brighter pixels
+    /// just past the window's right edge (in the vectors that read its
+    /// rows: windows of 10, 20, 40 and 64 pixels) are not its own; nor in a
+    /// window at the frame's end (read one pixel at a time).
+    #[test]
+    fn a_dot_alone_in_its_rows_has_its_own_peak() {
+        let (w, h) = (100usize, 7usize);
+        for width in [10, 20, 40, 64] {
+            let mut data = vec![10u8; w * h];
+            for row in 1..4 {
+                data[row * w + 7..row * w + 10].fill(150);
+                data[row * w + 5 + width] = 240;
+                data[row * w + 5 + width + 9] = 245;
+            }
+            data[4 * w + 8] = 170;
+            check(&data, w, (5, 0, width, 6));
+            check(&data, w, (5, 1, width, 3));
+        }
+        let mut data = vec![10u8; w * h];
+        for row in 4..7 {
+            data[row * w + 90..row * w + 94].fill(150);
+            data[row * w + 99] = 240;
+        }
+        check(&data, w, (88, 4, 11, 3));
+        check(&data, w, (88, 3, 12, 4));
+    }
+
+    /// A frame of `w × h` pixels, mostly background, holding a few small
+    /// blocks of one grey each (some saturated) and single pixels just
+    /// below saturation: windows anywhere in it have rows read in one, two
+    /// or four vectors or one pixel at a time (as far as the frame holds
+    /// pixels past the window's last row), blobs alone in their rows (their
+    /// peak read off the rows) beside brighter pixels just past the
+    /// window's edge, and rows shared by blobs.
+    fn sparse_frame(w: usize, h: usize, seed: u64) -> Vec<u8> {
+        const GREY: [u8; 8] = [120, 150, 180, 200, 230, 249, 250, 255];
+        let mut rng = crate::testutil::Rng::new(seed);
+        let mut next = |n: usize| (rng.next_u64() % n as u64) as usize;
+        let mut data = vec![10u8; w * h];
+        for _ in 0..1 + next(4) {
+            let (c, r, bw, bh, v) = (next(w), next(h), 1 + next(4), 1 + next(3), GREY[next(8)]);
+            for row in r..(r + bh).min(h) {
+                data[row * w + c..row * w + (c + bw).min(w)].fill(v);
+            }
+        }
+        for _ in 0..next(8) {
+            data[next(w * h)] = 249;
+        }
+        data
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
         #[test]
@@ -869,6 +966,17 @@ mod tests {
             let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
             let (w, h) = (12 - c0 - dw, 10 - r0 - dh);
             check(&data, 12, (c0, r0, w, h));
+        }
+
+        #[test]
+        fn windows_anywhere_in_a_frame_grow_as_the_labeller_labels_them(
+            w in 17usize..72, h in 2usize..10, seed in any::<u64>(),
+            area in (0usize..72, 0usize..10, 1usize..65, 1usize..10),
+        ) {
+            let data = sparse_frame(w, h, seed);
+            let (c0, r0) = (area.0 % w, area.1 % h);
+            let (cw, ch) = (area.2.min(w - c0), area.3.min(h - r0));
+            check(&data, w, (c0, r0, cw, ch));
         }
 
         #[test]
