@@ -996,19 +996,19 @@ impl ShortRow for u8 {
         let start = r * plane.stride;
         let (t, inside) = (rd.level, &rd.inside);
         // (The loads were chosen for the window's last row: the blocks are
-        // there.)
+        // there. Two vectors first: tracking's windows.)
+        if rd.loads == Loads8::Two {
+            if let Some(b) = block::<32>(plane.data, start) {
+                let (v0, v1) = (lanes16(&b[..16]), lanes16(&b[16..]));
+                let m = above16(v0, t) | above16(v1, t) << 16;
+                return (m as u64 & rd.keep, (v0 & inside[0]).max(v1 & inside[1]));
+            }
+        }
         match rd.loads {
             Loads8::One => {
                 if let Some(b) = block::<16>(plane.data, start) {
                     let v = u8x16::new(*b);
                     return (above16(v, t) as u64 & rd.keep, v & inside[0]);
-                }
-            }
-            Loads8::Two => {
-                if let Some(b) = block::<32>(plane.data, start) {
-                    let (v0, v1) = (lanes16(&b[..16]), lanes16(&b[16..]));
-                    let m = above16(v0, t) | above16(v1, t) << 16;
-                    return (m as u64 & rd.keep, (v0 & inside[0]).max(v1 & inside[1]));
                 }
             }
             Loads8::Four => {
@@ -1020,7 +1020,7 @@ impl ShortRow for u8 {
                     return (mask64(v, t) & rd.keep, p);
                 }
             }
-            Loads8::Plain => {}
+            Loads8::Two | Loads8::Plain => {}
         }
         let (m, p) = plain_row(plane, rd.threshold, r);
         (m, u8x16::splat(p as u8))

@@ -70,8 +70,7 @@ pub struct SeedLabeller {
     valid: u64,
     /// Mask path: the window's height.
     height: usize,
-    /// Mask path: the blob being grown, per window row (valid for the
-    /// window's `height` rows).
+    /// Mask path: the blob being grown, per window row (its rows only).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
     /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]` (the
@@ -386,41 +385,24 @@ impl SeedLabeller {
         // tracking.) Each row is read once, its mask and peak together
         // (no row kept for later: a window's rows are read again only for
         // a second blob or a branch turning back).
-        // (`grown` is all 0 between grows: no test which rows the blob
-        // holds yet per step.)
-        debug_assert!(self.grown.iter().all(|&g| g == 0));
+        // (`grown` holds the blob's rows `lo..=hi` as they are found.)
         let seed = run_holding(f, bit);
         self.grown[r] = seed;
         // The rows' peak, and `others`: the foreground pixels of other
         // blobs in the rows (then the peak is not the blob's).
-        let (mut peak, mut others) = (p, f ^ seed);
-        let mut missed = 0u64;
-        let (mut lo, mut hi) = (r, r);
-        for step in [1, usize::MAX] {
-            let (mut k, mut g, mut fk) = (r, seed, f);
-            loop {
-                // (Past either end of the window: at least `height`.)
-                let n = k.wrapping_add(step);
-                if n >= plane.height {
-                    break;
-                }
-                let (f, p) = P::read_row(plane, reading, n);
-                let add = fill_runs(f, reach(g) & f);
-                if add == 0 {
-                    break;
-                }
-                peak = P::fold(peak, p);
-                others |= f ^ add;
-                missed |= reach(add) & fk & !g;
-                self.grown[n] = add;
-                (k, g, fk) = (n, add, f);
-            }
-            if step == 1 {
-                hi = k;
-            } else {
-                lo = k;
-            }
-        }
+        let mut pass = Pass {
+            peak: p,
+            others: f ^ seed,
+            missed: 0,
+        };
+        let hi = self.pass(plane, reading, (r, seed, f), 1, &mut pass);
+        let lo = self.pass(plane, reading, (r, seed, f), usize::MAX, &mut pass);
+        let Pass {
+            peak,
+            mut others,
+            missed,
+        } = pass;
+        let (mut lo, mut hi) = (lo, hi);
         if missed != 0 {
             (lo, hi) = self.flood(plane, reading, lo, hi);
             // (The rows' peak is not the blob's when it grew.)
@@ -432,7 +414,7 @@ impl SeedLabeller {
         // are read over its pixels.
         let (max, saturated) = match P::peak(peak) {
             max if others == 0 && max < saturation => (max, 0),
-            _ => P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation),
+            _ => masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation),
         };
         // The moments summed exactly a row at a time (`SmallMoments`: the
         // values `Blob::add_run` gives, bit for bit).
@@ -484,7 +466,41 @@ impl SeedLabeller {
         Ok(Some(self.blobs.len() - 1))
     }
 
-    /// The blob being grown (`grown`, rows `lo..=hi`, cleared here) added
+    /// One pass of [`SeedLabeller::grow_masked`] from window row `r` (the
+    /// blob's pixels `g` there, of the row's foreground `f`) one row at a
+    /// time along `step` (1 down, `usize::MAX` up): each row's runs that
+    /// touch the blob's pixels of the row before, into `grown`, until a row
+    /// adds none. The last row reached.
+    #[inline(always)]
+    fn pass<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        reading: &P::Reading,
+        (r, g, f): (usize, u64, u64),
+        step: usize,
+        pass: &mut Pass<P>,
+    ) -> usize {
+        let (mut k, mut g, mut fk) = (r, g, f);
+        loop {
+            // (Past either end of the window: at least `height`.)
+            let n = k.wrapping_add(step);
+            if n >= plane.height {
+                return k;
+            }
+            let (f, p) = P::read_row(plane, reading, n);
+            let add = fill_runs(f, reach(g) & f);
+            if add == 0 {
+                return k;
+            }
+            pass.peak = P::fold(pass.peak, p);
+            pass.others |= f ^ add;
+            pass.missed |= reach(add) & fk & !g;
+            self.grown[n] = add;
+            (k, g, fk) = (n, add, f);
+        }
+    }
+
+    /// The blob being grown (`grown`, rows `lo..=hi`) added
     /// to `taken` (and its masks to `rows` unless it is the window's first
     /// blob, `FIRST`: `taken` holds it alone): its moments about column
     /// `origin` (from the last row up: `SmallMoments::add_row_up`), the
@@ -499,14 +515,13 @@ impl SeedLabeller {
         let mut sums = SmallMoments::ZERO;
         let (mut cols, mut runs) = (0u64, hi - lo + 1);
         let first = self.n_rows;
-        for k in (lo..=hi).rev() {
-            let g = std::mem::take(&mut self.grown[k]);
-            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
+        let rows = self.grown[lo..=hi].iter().zip(&mut self.taken[lo..=hi]);
+        for (i, (&g, taken)) in rows.enumerate().rev() {
+            // (`past`: the bit after the lowest run, 0 past the last column.)
+            let past = g.wrapping_add(g & g.wrapping_neg());
+            if g & past == 0 {
                 // One run (the rule): its ends straight from the mask.
-                let (start, end) = (
-                    g.trailing_zeros() as i64,
-                    MASK_SIDE as i64 - g.leading_zeros() as i64,
-                );
+                let (start, end) = (g.trailing_zeros() as i64, past.trailing_zeros() as i64);
                 sums.add_row_up(&SmallMoments::run(start - origin, end - origin));
             } else {
                 let mut row: RowSums = [f64x2::ZERO; 3];
@@ -523,12 +538,12 @@ impl SeedLabeller {
             }
             cols |= g;
             if FIRST {
-                self.taken[k] = g;
+                *taken = g;
             } else {
-                self.taken[k] |= g;
+                *taken |= g;
                 // (Below `ROWS` rows in all: every row of a blob holds a
                 // pixel of the window no other blob holds.)
-                self.rows[(first + k - lo) % ROWS] = g;
+                self.rows[(first + i) % ROWS] = g;
             }
         }
         (sums, cols, runs)
@@ -546,6 +561,12 @@ impl SeedLabeller {
         hi: usize,
     ) -> (usize, usize) {
         let last = plane.height - 1;
+        // (`grown` holds the blob's rows alone.)
+        for (k, g) in self.grown[..plane.height].iter_mut().enumerate() {
+            if k < lo || k > hi {
+                *g = 0;
+            }
+        }
         let mut todo = span(lo, hi);
         let mut held = todo;
         while todo != 0 {
@@ -639,6 +660,32 @@ impl SeedLabeller {
         self.stack.push(k);
         Ok(end)
     }
+}
+
+/// [`ShortRow::masked_stats`] out of line: the rare path of
+/// [`SeedLabeller::grow_masked`] (a blob sharing its rows or saturated),
+/// whose set-up would otherwise be done for every blob.
+#[inline(never)]
+fn masked_stats<P: ShortRow>(
+    plane: &Plane<'_, P>,
+    row0: usize,
+    masks: &[u64],
+    saturation: u32,
+) -> (u32, u32) {
+    P::masked_stats(plane, row0, masks, saturation)
+}
+
+/// What the passes of [`SeedLabeller::grow_masked`] gather besides the
+/// blob's rows.
+struct Pass<P: ShortRow> {
+    /// The peak of the rows.
+    peak: P::Peak,
+    /// Foreground pixels of the rows outside the blob (of other blobs:
+    /// then the peak need not be the blob's).
+    others: u64,
+    /// Pixels of a row next to the blob's pixels of the row after it that
+    /// the pass did not take (a branch turning back).
+    missed: u64,
 }
 
 /// Bits `a..=b` (`a ≤ b < 64`): columns or rows of a window grown on row
@@ -869,6 +916,23 @@ mod tests {
             assert_eq!(s.blob_at(2, 0), Some(0));
             assert!(s.covers(0, 0, 0, 2) && s.covers(2, 2, 0, 2));
         }
+        check(&data, w, (0, 0, w, h));
+        // A branch turning back past the rows of the passes (row 0 from
+        // row 1), into a row where the blob grown before had its pixels.
+        let img = [
+            "#...#", //
+            "#.#..", //
+            "#.#..", //
+            "###..", //
+        ];
+        let (data, w, h) = drawn(&img);
+        let plane = Plane::whole(&data, w, h);
+        let mut s = SeedLabeller::new(100, 10, h);
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 4, 0), Ok(Some(0)));
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 2, 1), Ok(Some(0)));
+        assert_eq!(s.blobs()[0].area, 8);
         check(&data, w, (0, 0, w, h));
     }
 
