@@ -876,6 +876,14 @@ fn plain_row<P: Pixel>(plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> 
     (threshold.foreground_mask(row), P::max_of(row))
 }
 
+/// [`plain_row`] out of line: the rare path of an 8-bit window's rows
+/// (its set-up would otherwise be hoisted into every pass over rows).
+#[inline(never)]
+#[cold]
+fn plain_row_aside(plane: &Plane<'_, u8>, threshold: Threshold, r: usize) -> (u64, u32) {
+    plain_row(plane, threshold, r)
+}
+
 /// [`ShortRow::masked_stats`] run by run ([`Pixel::run_stats`] of each).
 #[inline]
 fn masked_run_stats<P: Pixel>(
@@ -949,6 +957,18 @@ enum Loads8 {
     Plain,
 }
 
+/// `0xff` below index 64: sixteen of them from `64 − n` are the lanes
+/// below `n` (see [`Rows8`]).
+const BELOW_64: [u8; 128] = {
+    let mut t = [0u8; 128];
+    let mut i = 0;
+    while i < 64 {
+        t[i] = 0xff;
+        i += 1;
+    }
+    t
+};
+
 /// The `N` pixels of `data` from `start`, if it holds them.
 #[inline(always)]
 fn block<const N: usize>(data: &[u8], start: usize) -> Option<&[u8; N]> {
@@ -967,8 +987,8 @@ impl ShortRow for u8 {
 
     #[inline]
     fn reading(plane: &Plane<'_, Self>, threshold: Threshold) -> Rows8 {
-        let width = plane.width;
-        debug_assert!((1..=64).contains(&width));
+        // (At most 64: the lanes below.)
+        let width = plane.width.clamp(1, 64);
         let room = plane
             .data
             .len()
@@ -979,15 +999,16 @@ impl ShortRow for u8 {
             64.. => Loads8::Four,
             _ => Loads8::Plain,
         };
-        // Lanes `i < n` are `!FROM_32[32 − n + i]` (`n` from 0 to 16).
-        let below = |n: usize| !lanes16(&FROM_32[32 - n.min(16)..][..16]);
+        // Lane `i` of load `k` is `BELOW_64[64 − width + 16 k + i]`, set for
+        // `16 k + i < width`.
+        let lanes = &BELOW_64[64 - width..];
         Rows8 {
             threshold,
             // (No 8-bit value lies above 255.)
             level: u8x16::splat(threshold.level().min(255) as u8),
             loads,
-            keep: u64::MAX >> (64 - width.clamp(1, 64)),
-            inside: [0, 16, 32, 48].map(|k| below(width.saturating_sub(k))),
+            keep: u64::MAX >> (64 - width),
+            inside: [0, 16, 32, 48].map(|k| lanes16(&lanes[k..k + 16])),
         }
     }
 
@@ -1022,7 +1043,7 @@ impl ShortRow for u8 {
             }
             Loads8::Two | Loads8::Plain => {}
         }
-        let (m, p) = plain_row(plane, rd.threshold, r);
+        let (m, p) = plain_row_aside(plane, rd.threshold, r);
         (m, u8x16::splat(p as u8))
     }
 

@@ -238,8 +238,7 @@ impl SeedLabeller {
             return Ok(None);
         }
         if self.masked {
-            let reading = P::reading(plane, threshold);
-            return self.grow_masked(plane, &reading, saturation, col, row);
+            return self.grow_masked(plane, threshold, saturation, col, row);
         }
         if !threshold.is_foreground(plane.row(row)[col - plane.col0].value()) {
             return Ok(None);
@@ -328,7 +327,7 @@ impl SeedLabeller {
             let mut open = P::read_row(plane, &reading, r).0 & cols & !self.taken(r);
             while open != 0 {
                 let col = self.col0 + open.trailing_zeros() as usize;
-                self.grow_masked(plane, &reading, saturation, col, row)?;
+                self.grow_masked(plane, threshold, saturation, col, row)?;
                 open &= !self.taken(r);
             }
             return Ok(());
@@ -353,16 +352,16 @@ impl SeedLabeller {
     }
 
     /// [`SeedLabeller::grow`] on row masks (a window of at most
-    /// [`MASK_SIDE`] pixels each way, position inside it; its rows read as
-    /// `reading`, formed for `plane` at the threshold).
+    /// [`MASK_SIDE`] pixels each way, position inside it).
     fn grow_masked<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        reading: &P::Reading,
+        threshold: Threshold,
         saturation: u32,
         col: usize,
         row: usize,
     ) -> Result<Option<usize>, SeedOverflow> {
+        let reading = &P::reading(plane, threshold);
         let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
         let (f, p) = P::read_row(plane, reading, r);
         if f & bit == 0 {
