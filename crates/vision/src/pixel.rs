@@ -569,17 +569,21 @@ impl<'a, P: Pixel> Plane<'a, P> {
     }
 }
 
-/// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
-/// `≥ lo` (see [`masked16`]).
-const FROM_32: [u8; 64] = {
-    let mut t = [0u8; 64];
-    let mut i = 32;
-    while i < 64 {
+/// `0xff` at the indices `lo..hi` of `N` bytes, 0 elsewhere: a table whose
+/// sixteen bytes from an offset are the lanes of a mask.
+const fn lanes_set<const N: usize>(lo: usize, hi: usize) -> [u8; N] {
+    let mut t = [0u8; N];
+    let mut i = lo;
+    while i < hi {
         t[i] = 0xff;
         i += 1;
     }
     t
-};
+}
+
+/// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
+/// `≥ lo` (see [`masked16`]).
+const FROM_32: [u8; 64] = lanes_set(32, 64);
 
 /// The sixteen pixels `line[p..p + 16]` with the lanes outside `lo..=hi`
 /// (lane `i` is `line[p + i]`; `−16 ≤ lo, hi ≤ 31`) set to 0: a run of a
@@ -959,15 +963,7 @@ enum Loads8 {
 
 /// `0xff` below index 64: sixteen of them from `64 − n` are the lanes
 /// below `n` (see [`Rows8`]).
-const BELOW_64: [u8; 128] = {
-    let mut t = [0u8; 128];
-    let mut i = 0;
-    while i < 64 {
-        t[i] = 0xff;
-        i += 1;
-    }
-    t
-};
+const BELOW_64: [u8; 128] = lanes_set(0, 64);
 
 /// The `N` pixels of `data` from `start`, if it holds them.
 #[inline(always)]
