@@ -487,12 +487,19 @@ impl SeedLabeller {
                 return k;
             }
             let (f, p) = P::read_row(plane, reading, n);
-            let add = fill_runs(f, reach(g) & f);
-            if add == 0 {
+            let touch = reach(g) & f;
+            if touch == 0 {
                 return k;
             }
+            // A row of one run (the rule) is the blob's whole, no filling.
+            let add = if single_run(f) {
+                f
+            } else {
+                let add = fill_runs(f, touch);
+                pass.others |= f ^ add;
+                add
+            };
             pass.peak = P::fold(pass.peak, p);
-            pass.others |= f ^ add;
             pass.missed |= reach(add) & fk & !g;
             self.grown[n] = add;
             (k, g, fk) = (n, add, f);
@@ -516,7 +523,8 @@ impl SeedLabeller {
         let first = self.n_rows;
         let rows = self.grown[lo..=hi].iter().zip(&mut self.taken[lo..=hi]);
         for (i, (&g, taken)) in rows.enumerate().rev() {
-            // (`past`: the bit after the lowest run, 0 past the last column.)
+            // (`past`: the bit after the lowest run, 0 past the last column;
+            // `single_run` without it.)
             let past = g.wrapping_add(g & g.wrapping_neg());
             if g & past == 0 {
                 // One run (the rule): its ends straight from the mask.
@@ -721,6 +729,13 @@ fn run_holding(f: u64, bit: u64) -> u64 {
     up | down
 }
 
+/// Whether the bits of `f` (not 0) are one run: adding its lowest bit
+/// carries through the lowest run and leaves none of its bits.
+#[inline(always)]
+fn single_run(f: u64) -> bool {
+    f & f.wrapping_add(f & f.wrapping_neg()) == 0
+}
+
 /// The runs of `f` (a row's foreground bits) that hold a bit of `seeds`:
 /// the seeds spread one bit either way within `f` until nothing changes.
 #[inline(always)]
@@ -876,7 +891,8 @@ mod tests {
     }
 
     /// The run holding a bit is the seed spread a bit at a time: every
-    /// bit of random rows, dense and sparse, runs through both ends.
+    /// bit of random rows, dense and sparse, runs through both ends; a row
+    /// is one run when the run through any of its bits is the whole row.
     #[test]
     fn the_run_holding_a_bit_is_the_seed_spread() {
         use crate::testutil::Rng;
@@ -890,6 +906,10 @@ mod tests {
             };
             for i in (0..64).filter(|i| f >> i & 1 != 0) {
                 assert_eq!(run_holding(f, 1 << i), fill_runs(f, 1 << i), "{f:#x} {i}");
+                // One run: the run through any of its bits is all of them.
+                let run = fill_runs(f, 1 << i);
+                assert!(single_run(run), "{run:#x}");
+                assert_eq!(single_run(f), run == f, "{f:#x}");
             }
         }
     }
