@@ -943,8 +943,10 @@ pub struct Rows8 {
     loads: Loads8,
     /// The window's columns (bits `0..width`).
     keep: u64,
-    /// Per load of sixteen pixels, its lanes inside the width.
-    inside: [u8x16; 4],
+    /// The lanes inside the width of the row's last two loads of sixteen
+    /// pixels (of four loads the first two lie inside; of one load the
+    /// second entry is not used).
+    inside: [u8x16; 2],
 }
 
 /// The loads of an 8-bit row ([`Rows8`]).
@@ -996,15 +998,16 @@ impl ShortRow for u8 {
             _ => Loads8::Plain,
         };
         // Lane `i` of load `k` is `BELOW_64[64 − width + 16 k + i]`, set for
-        // `16 k + i < width`.
-        let lanes = &BELOW_64[64 - width..];
+        // `16 k + i < width` (four loads: of width 33 to 64).
+        let last_two = if loads == Loads8::Four { 32 } else { 0 };
+        let lanes = &BELOW_64[64 - width + last_two..];
         Rows8 {
             threshold,
             // (No 8-bit value lies above 255.)
             level: u8x16::splat(threshold.level().min(255) as u8),
             loads,
             keep: u64::MAX >> (64 - width),
-            inside: [0, 16, 32, 48].map(|k| lanes16(&lanes[k..k + 16])),
+            inside: [lanes16(&lanes[..16]), lanes16(&lanes[16..32])],
         }
     }
 
@@ -1031,9 +1034,7 @@ impl ShortRow for u8 {
             Loads8::Four => {
                 if let Some(b) = block::<64>(plane.data, start) {
                     let v = [0, 1, 2, 3].map(|k| lanes16(&b[16 * k..16 * k + 16]));
-                    let p = (v[0] & inside[0])
-                        .max(v[1] & inside[1])
-                        .max((v[2] & inside[2]).max(v[3] & inside[3]));
+                    let p = v[0].max(v[1]).max((v[2] & inside[0]).max(v[3] & inside[1]));
                     return (mask64(v, t) & rd.keep, p);
                 }
             }

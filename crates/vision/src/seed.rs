@@ -73,12 +73,12 @@ pub struct SeedLabeller {
     /// Mask path: the blob being grown, per window row (its rows only).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
-    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]` (the
-    /// first blob's masks are `taken` until a second one is grown, and
-    /// copied there then).
+    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]` (a
+    /// window's first blob is `taken` until a second one is grown: then
+    /// its rows are copied there and its span noted).
     spans: Vec<(u32, u32, u32)>,
     rows: Box<[u64; ROWS]>,
-    /// Mask path: rows of `rows` in use.
+    /// Mask path: rows of `rows` in use (from the second blob on).
     n_rows: usize,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
@@ -151,7 +151,7 @@ impl SeedLabeller {
             if r >= self.height || self.taken(r) & bit == 0 {
                 return None;
             }
-            if self.spans.len() == 1 {
+            if self.blobs.len() == 1 {
                 return Some(0);
             }
             return self.spans.iter().position(|&(first, a, b)| {
@@ -370,7 +370,7 @@ impl SeedLabeller {
         if self.taken(r) & bit != 0 {
             return Ok(self.blob_at(col, row));
         }
-        if self.spans.len() >= self.max_blobs {
+        if self.blobs.len() >= self.max_blobs {
             return Err(SeedOverflow::Blobs);
         }
         // The runs of each row that touch the blob's pixels of the row
@@ -418,17 +418,16 @@ impl SeedLabeller {
         // The moments summed exactly a row at a time (`SmallMoments`: the
         // values `Blob::add_run` gives, bit for bit).
         let origin = self.grown[lo].trailing_zeros() as i64;
-        let first = self.n_rows;
-        debug_assert!(first + hi - lo < ROWS);
-        let (sums, cols, runs) = if self.spans.is_empty() {
+        let (sums, cols, runs) = if self.blobs.is_empty() {
             self.take_rows::<true>(lo, hi, origin)
         } else {
-            if self.spans.len() == 1 {
+            if self.blobs.len() == 1 {
                 // The first blob's masks into `rows` (`taken` holds it alone).
-                let (a, _, b) = self.spans[0];
-                let a = a as usize;
-                let n = b as usize;
+                let (a, b) = (self.blobs[0].row0, self.blobs[0].row1);
+                let (a, n) = (a as usize - self.row0, (b - a) as usize + 1);
                 self.rows[..n].copy_from_slice(&self.taken[a..a + n]);
+                self.spans.push((a as u32, 0, n as u32));
+                self.n_rows = n;
             }
             // Rows of `taken` not yet in use cleared.
             let mut fresh = span(lo, hi) & !self.valid;
@@ -436,10 +435,15 @@ impl SeedLabeller {
                 self.taken[fresh.trailing_zeros() as usize] = 0;
                 fresh &= fresh - 1;
             }
-            self.take_rows::<false>(lo, hi, origin)
+            let first = self.n_rows;
+            debug_assert!(first + hi - lo < ROWS);
+            let taken = self.take_rows::<false>(lo, hi, origin);
+            self.n_rows = first + hi - lo + 1;
+            self.spans
+                .push((lo as u32, first as u32, self.n_rows as u32));
+            taken
         };
         self.valid |= span(lo, hi);
-        self.n_rows = first + hi - lo + 1;
         // (The capacity counted per blob: the same error, the window's
         // state after it is not used.)
         if self.n_runs + runs > self.max_runs {
@@ -459,8 +463,6 @@ impl SeedLabeller {
             m4,
             origin_col: (self.col0 as i64 + origin) as u32,
         };
-        self.spans
-            .push((lo as u32, first as u32, self.n_rows as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
     }
@@ -789,6 +791,22 @@ mod tests {
                 let v = data[row * width + col].value();
                 let got = seeds.grow(&plane, t, 250, col, row).expect("capacity");
                 assert_eq!(got.is_some(), v > 100, "({col}, {row})");
+            }
+        }
+        // Each pixel's blob found again (the first blob's rows kept apart
+        // once a second one is grown), its box around the pixel.
+        for row in r0..r0 + h {
+            for col in c0..c0 + w {
+                let at = seeds.blob_at(col, row);
+                assert_eq!(at.is_some(), data[row * width + col].value() > 100);
+                if let Some(b) = at.map(|i| seeds.blobs()[i]) {
+                    let (col, row) = (col as u32, row as u32);
+                    assert!((b.col0..=b.col1).contains(&col) && (b.row0..=b.row1).contains(&row));
+                    assert_eq!(
+                        seeds.grow(&plane, t, 250, col as usize, row as usize),
+                        Ok(at)
+                    );
+                }
             }
         }
         // The same, a row at a time (the span reaching past the window).
