@@ -481,7 +481,9 @@ impl SeedLabeller {
         step: usize,
         pass: &mut Pass<P>,
     ) -> usize {
-        let (mut k, mut g, mut fk) = (r, g, f);
+        // (`rg`: the pixels the blob's pixels of row `k` reach, formed once
+        // for both rows next to it.)
+        let (mut k, mut g, mut fk, mut rg) = (r, g, f, reach(g));
         loop {
             // (Past either end of the window: at least `height`.)
             let n = k.wrapping_add(step);
@@ -489,7 +491,7 @@ impl SeedLabeller {
                 return k;
             }
             let (f, p) = P::read_row(plane, reading, n);
-            let touch = reach(g) & f;
+            let touch = rg & f;
             if touch == 0 {
                 return k;
             }
@@ -502,9 +504,10 @@ impl SeedLabeller {
                 add
             };
             pass.peak = P::fold(pass.peak, p);
-            pass.missed |= reach(add) & fk & !g;
+            let ra = reach(add);
+            pass.missed |= ra & fk & !g;
             self.grown[n] = add;
-            (k, g, fk) = (n, add, f);
+            (k, g, fk, rg) = (n, add, f, ra);
         }
     }
 
