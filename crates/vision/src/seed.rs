@@ -482,8 +482,9 @@ impl SeedLabeller {
         pass: &mut Pass<P>,
     ) -> usize {
         // (`rg`: the pixels the blob's pixels of row `k` reach, formed once
-        // for both rows next to it.)
-        let (mut k, mut g, mut fk, mut rg) = (r, g, f, reach(g));
+        // for both rows next to it; `stray`: the row's foreground pixels
+        // outside the blob.)
+        let (mut k, mut rg, mut stray) = (r, reach(g), f ^ g);
         loop {
             // (Past either end of the window: at least `height`.)
             let n = k.wrapping_add(step);
@@ -496,18 +497,18 @@ impl SeedLabeller {
                 return k;
             }
             // A row of one run (the rule) is the blob's whole, no filling.
-            let add = if single_run(f) {
-                f
+            let (add, others) = if single_run(f) {
+                (f, 0)
             } else {
                 let add = fill_runs(f, touch);
-                pass.others |= f ^ add;
-                add
+                (add, f ^ add)
             };
             pass.peak = P::fold(pass.peak, p);
+            pass.others |= others;
             let ra = reach(add);
-            pass.missed |= ra & fk & !g;
+            pass.missed |= ra & stray;
             self.grown[n] = add;
-            (k, g, fk, rg) = (n, add, f, ra);
+            (k, rg, stray) = (n, ra, others);
         }
     }
 
