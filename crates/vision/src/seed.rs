@@ -385,7 +385,11 @@ impl SeedLabeller {
         // (no row kept for later: a window's rows are read again only for
         // a second blob or a branch turning back).
         // (`grown` holds the blob's rows `lo..=hi` as they are found.)
-        let seed = run_holding(f, bit);
+        let seed = if single_run(f) {
+            f
+        } else {
+            run_holding(f, bit)
+        };
         self.grown[r] = seed;
         // The rows' peak, and `others`: the foreground pixels of other
         // blobs in the rows (then the peak is not the blob's).
