@@ -138,10 +138,14 @@ impl WindowMeasurer {
     /// for a few targets ahead of the one being measured, the fetches
     /// overlap the measurements instead of stalling them. Changes no result.
     pub fn prefetch(&self, image: &ImageView<'_>, e: &Expected) {
-        if !(e.col.is_finite() && e.row.is_finite() && e.gate_px >= 0.0) {
+        let half = e.core_half();
+        // (Nothing for a position or a square past ±2³⁰, NaN or infinite
+        // ones included, nor for a negative gate: no window is measured
+        // there.)
+        let inside = e.col.abs() <= LIMIT && e.row.abs() <= LIMIT && half <= LIMIT;
+        if !(inside && e.gate_px >= 0.0) {
             return;
         }
-        let half = e.core_half();
         match image.pixels() {
             ViewPixels::Mono8(data) => prefetch(image, data, e, half),
             ViewPixels::Mono16(data) => prefetch(image, data, e, half),
@@ -328,7 +332,8 @@ fn found_target(m: &measure::Measurement, blob: &Blob, code: Option<CodeStatus>)
 
 /// [`Plane::prefetch`] of the square of half-width `half` around `e`.
 fn prefetch<P: Pixel>(image: &ImageView<'_>, data: &[P], e: &Expected, half: f64) {
-    let Some(plane) = clipped(image, data, square(e.col, e.row, half)) else {
+    let square = square_near(f64x2::new([e.col, e.row]), half);
+    let Some(plane) = clipped(image, data, square) else {
         return;
     };
     let ask = |p: &P| crate::prefetch::line(std::slice::from_ref(p));
@@ -363,22 +368,17 @@ fn row_ends<P: Pixel>(plane: &Plane<'_, P>, mut f: impl FnMut(&P, &P)) -> bool {
     true
 }
 
-/// The square of half-width `half` px around `(col, row)`:
+/// Positions and half-widths whose bounds two at a time are exact: within
+/// ±2³⁰ (see [`Bounds::of`]).
+const LIMIT: f64 = (1u64 << 30) as f64;
+
+/// The square of half-width `half` px around `at` (column, row):
 /// `[floor(col − half), floor(row − half), ceil(col + half), ceil(row +
-/// half)]`, two at a time where every value lies within ±2³⁰ (see
-/// [`Bounds::of`]).
+/// half)]`, two at a time; `at` and `half` within ±2³⁰ ([`LIMIT`], checked
+/// by the callers).
 #[inline(always)]
-fn square(col: f64, row: f64, half: f64) -> [i64; 4] {
-    const LIMIT: f64 = (1u64 << 30) as f64;
-    if !(col.abs() <= LIMIT && row.abs() <= LIMIT && half <= LIMIT) {
-        return [
-            floor_i64(col - half),
-            floor_i64(row - half),
-            ceil_i64(col + half),
-            ceil_i64(row + half),
-        ];
-    }
-    let (at, half) = (f64x2::new([col, row]), f64x2::splat(half));
+fn square_near(at: f64x2, half: f64) -> [i64; 4] {
+    let half = f64x2::splat(half);
     let lo = low_i32x2(near_f64x2(floor2(at - half)));
     let hi = low_i32x2(near_f64x2(ceil2(at + half)));
     [lo[0], lo[1], hi[0], hi[1]].map(i64::from)
@@ -438,17 +438,19 @@ impl Bounds {
     /// compare), one at a time elsewhere.
     #[inline(always)]
     fn of(col: f64, row: f64, outer: f64, core: f64, reach: f64) -> Self {
-        const LIMIT: f64 = (1u64 << 30) as f64;
         if !(col.abs() <= LIMIT && row.abs() <= LIMIT && outer <= LIMIT && core <= outer) {
             return Self::plain(col, row, outer, core, reach);
         }
+        // (One check for all: `core` and `reach` lie between 0 and `outer`
+        // in a window's measurement.)
+        debug_assert!(core >= 0.0 && (0.0..=outer).contains(&reach));
         let at = f64x2::new([col, row]);
         let k = f64x2::splat;
         let ints = |x: f64x2| low_i32x2(near_f64x2(x)).map(i64::from);
         let (lo, hi) = (ints(ceil2(at - k(reach))), ints(floor2(at + k(reach))));
         Bounds {
-            outer: square(col, row, outer),
-            core: square(col, row, core),
+            outer: square_near(at, outer),
+            core: square_near(at, core),
             gate: [lo[0], lo[1], hi[0], hi[1]],
             nearest: ints(floor2(at + k(0.5))),
         }
@@ -691,7 +693,8 @@ mod tests {
     /// The rows' ends the prefetch asks for are each row's first and last
     /// pixel, top to bottom, in 8- and 16-bit windows anywhere in a frame;
     /// windows wider than 64 bytes or on the frame's last rows are left to
-    /// `Plane::prefetch`.
+    /// `Plane::prefetch`. Expected positions anywhere, finite or not, ask
+    /// for nothing outside the frame.
     #[test]
     fn the_prefetch_asks_for_the_ends_of_every_row() {
         fn ends<P: Pixel>(plane: &Plane<'_, P>) -> Option<Vec<(*const P, *const P)>> {
@@ -740,6 +743,28 @@ mod tests {
             check(&words, 90, 12, &mut rng),
         ] {
             assert!(paths[0] > 50 && paths[1] > 50, "{paths:?}");
+        }
+        // Positions anywhere (at the corners, outside, past ±2³⁰, not
+        // finite), gates of any size: asked for or left, never a panic.
+        let w = WindowMeasurer::new(DetectorOptions::default());
+        let views = [
+            ImageView::mono8(&bytes, 90, 12, 90).unwrap(),
+            ImageView::mono16(&words, 90, 12, 90, 4095).unwrap(),
+        ];
+        for view in &views {
+            for col in [0.0, 89.4, -3.0, 95.0, 2e9, -2e9, f64::NAN, f64::INFINITY] {
+                for gate_px in [0.0, 3.0, 1e12, -1.0, f64::NAN] {
+                    let e = Expected {
+                        col,
+                        row: col / 10.0,
+                        gate_px,
+                        radius_px: 4.0,
+                        coded: false,
+                        read_code: false,
+                    };
+                    w.prefetch(view, &e);
+                }
+            }
         }
     }
 
