@@ -188,8 +188,7 @@ impl SeedLabeller {
         if self.valid & rows != rows {
             return false;
         }
-        let all = self.taken[r0..=r1].iter().fold(u64::MAX, |all, &t| all & t);
-        all & cols == cols
+        self.taken[r0..=r1].iter().all(|&t| t & cols == cols)
     }
 
     /// Mask path: the pixels of window row `r` (below the window's
