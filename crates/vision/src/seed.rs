@@ -14,10 +14,11 @@
 //! on bit masks, one 64-bit word per row: a row's foreground pixels are
 //! found sixteen at a time ([`ShortRow`]), each row read once per blob
 //! (again only for a branch turning back) with the largest of its pixels
-//! (the blob's peak when the blob is alone in its rows), a blob spreads from row to row by shifts and ands, its
-//! runs are read off its rows' words and its moments summed a row at a
-//! time in exact sums of integers (`label::SmallMoments`). Wider windows
-//! are grown run by run, with a list of the runs found per row.
+//! (the blob's peak when the blob is alone in its rows), a blob spreads
+//! from row to row by shifts and ands, its runs are read off its rows'
+//! words and its moments summed a row at a time in exact sums of integers
+//! (`label::SmallMoments`). Wider windows are grown run by run, with a
+//! list of the runs found per row.
 
 use crate::label::{Blob, RowSums, Run, SmallMoments, SMALL_SIDE};
 use crate::pixel::{Pixel, Plane, ShortRow};
