@@ -433,9 +433,10 @@ impl Bounds {
     /// Why: fourteen roundings per window one at a time (each a
     /// saturating conversion and a compare, ~12 instructions) cost
     /// 1.84 M instructions in tracking (two at a time: 0.67 M less in
-    /// all); here column and row two at a time, exact where every value lies within ±2³⁰ (then the nearest
-    /// integer by adding and subtracting 1.5 · 2⁵², corrected by one
-    /// compare), one at a time elsewhere.
+    /// all); here column and row two at a time, exact where every value
+    /// lies within ±2³⁰ (then the nearest integer by adding and
+    /// subtracting 1.5 · 2⁵², corrected by one compare), one at a time
+    /// elsewhere.
     #[inline(always)]
     fn of(col: f64, row: f64, outer: f64, core: f64, reach: f64) -> Self {
         if !(col.abs() <= LIMIT && row.abs() <= LIMIT && outer <= LIMIT && core <= outer) {
