@@ -375,6 +375,12 @@ impl SmallMoments {
         self.c4 += self.c3;
     }
 
+    /// The pixels summed: [`Blob::area`] (an exact integer).
+    #[inline(always)]
+    pub(crate) fn area(&self) -> u32 {
+        self.c0[0].to_array()[0] as u32
+    }
+
     /// The moments as [`Blob::m`] and [`Blob::m4`].
     #[inline]
     pub(crate) fn to_blob_moments(self) -> ([f64; 5], [f64; 9]) {
@@ -475,15 +481,16 @@ const fn sum_pow4_below(k: f64) -> f64 {
 const POW_HALF: usize = 128;
 const _: () = assert!(2 * POW_HALF == 256);
 
-/// `[k, Σx, Σx², Σx³, Σx⁴, 0]` for `x` from 0 below `k` (for negative `k`
+/// `[k, Σx, Σx², Σx³, Σx⁴, 0, 0, 0]` for `x` from 0 below `k` (for negative `k`
 /// the negated sums of `k..0`, which the polynomials give: the difference
 /// of the entries at a run's ends is the run's sums) near a blob's origin,
 /// entry `k + POW_HALF`: exact integers, evaluated at compile time (IEEE
 /// arithmetic, the same operations: the same values bit for bit), so that
 /// a run costs two look-ups instead of the polynomials. Read in pairs by
-/// [`SmallMoments`] (the last entry pads the third pair).
-static POW_SUMS: [[f64; 6]; 2 * POW_HALF] = {
-    let mut t = [[0.0; 6]; 2 * POW_HALF];
+/// [`SmallMoments`] (a zero pads the third pair; an entry is 64 bytes, so
+/// that its index is a shift).
+static POW_SUMS: [[f64; 8]; 2 * POW_HALF] = {
+    let mut t = [[0.0; 8]; 2 * POW_HALF];
     let mut i = 0;
     while i < 2 * POW_HALF {
         let k = i as f64 - POW_HALF as f64;
@@ -493,6 +500,8 @@ static POW_SUMS: [[f64; 6]; 2 * POW_HALF] = {
             sum_sq_below(k),
             sum_pow3_below(k),
             sum_pow4_below(k),
+            0.0,
+            0.0,
             0.0,
         ];
         i += 1;

@@ -601,17 +601,21 @@ impl<'a, P: Pixel> Plane<'a, P> {
     }
 }
 
-/// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
-/// `≥ lo` (see [`lanes_from16`]).
-const FROM_32: [u8; 80] = {
-    let mut t = [0u8; 80];
-    let mut i = 32;
-    while i < 80 {
+/// `0xff` at the indices `lo..hi` of `N` bytes, 0 elsewhere: a table whose
+/// sixteen bytes from an offset are the lanes of a mask.
+const fn lanes_set<const N: usize>(lo: usize, hi: usize) -> [u8; N] {
+    let mut t = [0u8; N];
+    let mut i = lo;
+    while i < hi {
         t[i] = 0xff;
         i += 1;
     }
     t
-};
+}
+
+/// `0xff` from index 32 on: sixteen of them from `32 − lo` are the lanes
+/// `≥ lo` (see [`lanes_from16`]).
+const FROM_32: [u8; 80] = lanes_set(32, 80);
 
 /// Calls `f` with the pixels `line[start..end]` (a run; `line` holds at
 /// least 16) sixteen at a time, as the vectors of the run's next pixels or
@@ -891,17 +895,28 @@ mod tests {
 
 /// The short rows of a tracking window (at most 64 pixels, grown on row
 /// masks by [`SeedLabeller`](crate::seed::SeedLabeller)): a row's
-/// foreground mask, and the grey-value statistics of a blob given by its
-/// rows' masks. The plain forms go through [`Pixel`]; 8-bit rows sixteen
-/// pixels at a time.
+/// foreground mask with the largest value of its pixels, read the way
+/// [`ShortRow::reading`] chose once for the window, and the grey-value
+/// statistics of a blob given by its rows' masks. The plain forms go
+/// through [`Pixel`]; 8-bit rows sixteen pixels at a time.
 pub trait ShortRow: Pixel {
-    /// Bit `i` set where `row[i]` is foreground, for `i < width ≤ 64`;
-    /// `row` may hold pixels past `width` (the frame's), read but masked
-    /// off.
-    #[inline]
-    fn short_mask(row: &[Self], width: usize, threshold: Threshold) -> u64 {
-        threshold.foreground_mask(&row[..width])
-    }
+    /// How the rows of a window are read (the level, and which loads a
+    /// row takes), decided once per window.
+    type Reading: Copy;
+    /// The largest value of rows' pixels, folded row by row
+    /// ([`ShortRow::fold`]) and read once ([`ShortRow::peak`]).
+    type Peak: Copy;
+    /// The reading of the rows of `plane` (1 to 64 pixels wide) at
+    /// `threshold`.
+    fn reading(plane: &Plane<'_, Self>, threshold: Threshold) -> Self::Reading;
+    /// Row `r` of `plane` (read as `reading`, formed for this plane): bit
+    /// `i` set where its pixel `i` is foreground, and the largest value of
+    /// its `width` pixels.
+    fn read_row(plane: &Plane<'_, Self>, reading: &Self::Reading, r: usize) -> (u64, Self::Peak);
+    /// The larger of two peaks.
+    fn fold(a: Self::Peak, b: Self::Peak) -> Self::Peak;
+    /// A peak's value.
+    fn peak(p: Self::Peak) -> u32;
     /// The largest value of the pixels of a blob given by its row masks
     /// (bit `i` of `masks[k]`: column `plane.col0 + i` of row `row0 + k`;
     /// 0 if none) and how many of them are at or above `saturation`:
@@ -915,6 +930,22 @@ pub trait ShortRow: Pixel {
     ) -> (u32, u32) {
         masked_run_stats(plane, row0, masks, saturation)
     }
+}
+
+/// [`ShortRow::read_row`] one pixel at a time: window row `r`'s
+/// foreground mask and the largest value of its pixels.
+#[inline]
+fn plain_row<P: Pixel>(plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> (u64, u32) {
+    let row = &plane.data[r * plane.stride..][..plane.width];
+    (threshold.foreground_mask(row), P::max_of(row))
+}
+
+/// [`plain_row`] out of line: the rare path of an 8-bit window's rows
+/// (its set-up would otherwise be hoisted into every pass over rows).
+#[inline(never)]
+#[cold]
+fn plain_row_aside(plane: &Plane<'_, u8>, threshold: Threshold, r: usize) -> (u64, u32) {
+    plain_row(plane, threshold, r)
 }
 
 /// [`ShortRow::masked_stats`] run by run ([`Pixel::run_stats`] of each).
@@ -940,37 +971,150 @@ fn masked_run_stats<P: Pixel>(
     (max, sat)
 }
 
-impl ShortRow for u16 {}
+impl ShortRow for u16 {
+    type Reading = Threshold;
+    type Peak = u32;
+    #[inline]
+    fn reading(_: &Plane<'_, Self>, threshold: Threshold) -> Threshold {
+        threshold
+    }
+    #[inline]
+    fn read_row(plane: &Plane<'_, Self>, threshold: &Threshold, r: usize) -> (u64, u32) {
+        plain_row(plane, *threshold, r)
+    }
+    #[inline(always)]
+    fn fold(a: u32, b: u32) -> u32 {
+        a.max(b)
+    }
+    #[inline(always)]
+    fn peak(p: u32) -> u32 {
+        p
+    }
+}
+
+/// How the 8-bit rows of a window are read ([`ShortRow::reading`]): the
+/// level as lanes, the loads every row of the window has room for (the
+/// window's last row has the least room), and the lanes of those loads
+/// that lie inside the window's width.
+#[derive(Debug, Clone, Copy)]
+pub struct Rows8 {
+    threshold: Threshold,
+    level: u8x16,
+    loads: Loads8,
+    /// The window's columns (bits `0..width`).
+    keep: u64,
+    /// The lanes inside the width of the row's last two loads of sixteen
+    /// pixels (of four loads the first two lie inside; of one load the
+    /// second entry is not used).
+    inside: [u8x16; 2],
+}
+
+/// The loads of an 8-bit row ([`Rows8`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Loads8 {
+    /// One vector (a row of at most 16 pixels).
+    One,
+    /// Two vectors (at most 32 pixels).
+    Two,
+    /// Four vectors (at most 64 pixels).
+    Four,
+    /// One pixel at a time (the frame holds too few pixels past the
+    /// window's last row).
+    Plain,
+}
+
+/// `0xff` below index 64: sixteen of them from `64 − n` are the lanes
+/// below `n` (see [`Rows8`]).
+const BELOW_64: [u8; 128] = lanes_set(0, 64);
+
+/// The `N` pixels of `data` from `start`, if it holds them.
+#[inline(always)]
+fn block<const N: usize>(data: &[u8], start: usize) -> Option<&[u8; N]> {
+    data.get(start..start.checked_add(N)?)?.try_into().ok()
+}
 
 /// Why: tracking grows about ten rows per window, each row's mask and
-/// statistics in a few vector operations instead of a general block mask
-/// and one [`Pixel::run_stats`] per run (with the level checked once per
-/// grow: tracking 162.7 M → 155.8 M instructions; the statistics over a
-/// whole blob with one reduction: a further 2.9 M).
+/// peak in a few vector operations instead of a general block mask and
+/// one [`Pixel::run_stats`] per run (with the level checked once per grow:
+/// tracking 162.7 M → 155.8 M instructions; the statistics over a whole
+/// blob with one reduction: a further 2.9 M; a row read once, its mask
+/// with its peak, the loads chosen once per window: `SeedLabeller::grow`
+/// 23.8 M → 19.7 M).
 impl ShortRow for u8 {
-    /// Two vectors for a row of at most 32 pixels (one of at most 16
-    /// where `row` holds no 32), where `row` holds them.
+    type Reading = Rows8;
+    type Peak = u8x16;
+
     #[inline]
-    fn short_mask(row: &[Self], width: usize, threshold: Threshold) -> u64 {
-        debug_assert!(width <= 64 && width <= row.len());
-        let Some(t) = level16(threshold) else {
-            return 0;
+    fn reading(plane: &Plane<'_, Self>, threshold: Threshold) -> Rows8 {
+        // (At most 64: the lanes below.)
+        let width = plane.width.clamp(1, 64);
+        let room = plane
+            .data
+            .len()
+            .saturating_sub((plane.height.max(1) - 1) * plane.stride);
+        let loads = match room {
+            16.. if width <= 16 => Loads8::One,
+            32.. if width <= 32 => Loads8::Two,
+            64.. => Loads8::Four,
+            _ => Loads8::Plain,
         };
-        let keep = u64::MAX >> (64 - width);
-        if let Some(b) = row.get(..32).filter(|_| width <= 32) {
-            let m = above16(lanes16(&b[..16]), t) | above16(lanes16(&b[16..]), t) << 16;
-            return m as u64 & keep;
+        // Lane `i` of load `k` is `BELOW_64[64 − width + 16 k + i]`, set for
+        // `16 k + i < width` (four loads: of width 33 to 64).
+        let last_two = if loads == Loads8::Four { 32 } else { 0 };
+        let lanes = &BELOW_64[64 - width + last_two..];
+        Rows8 {
+            threshold,
+            // (No 8-bit value lies above 255.)
+            level: u8x16::splat(threshold.level().min(255) as u8),
+            loads,
+            keep: u64::MAX >> (64 - width),
+            inside: [lanes16(&lanes[..16]), lanes16(&lanes[16..32])],
         }
-        if width <= 16 && row.len() >= 16 {
-            return above16(lanes16(&row[..16]), t) as u64 & keep;
+    }
+
+    #[inline(always)]
+    fn read_row(plane: &Plane<'_, Self>, rd: &Rows8, r: usize) -> (u64, u8x16) {
+        let start = r * plane.stride;
+        let (t, inside) = (rd.level, &rd.inside);
+        // (The loads were chosen for the window's last row: the blocks are
+        // there. Two vectors first: tracking's windows.)
+        if rd.loads == Loads8::Two {
+            if let Some(b) = block::<32>(plane.data, start) {
+                let (v0, v1) = (lanes16(&b[..16]), lanes16(&b[16..]));
+                let m = above16(v0, t) | above16(v1, t) << 16;
+                return (m as u64 & rd.keep, (v0 & inside[0]).max(v1 & inside[1]));
+            }
         }
-        if let Some(block) = row.get(..64) {
-            let Ok(block) = <&[u8; 64]>::try_from(block) else {
-                unreachable!("64 pixels")
-            };
-            return Self::lit_mask(block, threshold) & keep;
+        match rd.loads {
+            Loads8::One => {
+                if let Some(b) = block::<16>(plane.data, start) {
+                    let v = u8x16::new(*b);
+                    return (above16(v, t) as u64 & rd.keep, v & inside[0]);
+                }
+            }
+            Loads8::Four => {
+                if let Some(b) = block::<64>(plane.data, start) {
+                    let v = [0, 1, 2, 3].map(|k| lanes16(&b[16 * k..16 * k + 16]));
+                    let p = v[0].max(v[1]).max((v[2] & inside[0]).max(v[3] & inside[1]));
+                    return (mask64(v, t) & rd.keep, p);
+                }
+            }
+            Loads8::Two | Loads8::Plain => {}
         }
-        threshold.foreground_mask(&row[..width])
+        let (m, p) = plain_row_aside(plane, rd.threshold, r);
+        (m, u8x16::splat(p as u8))
+    }
+
+    #[inline(always)]
+    fn fold(a: u8x16, b: u8x16) -> u8x16 {
+        a.max(b)
+    }
+
+    #[inline(always)]
+    fn peak(p: u8x16) -> u32 {
+        i16x8::from_u8x16_low(p)
+            .max(i16x8::from_u8x16_high(p))
+            .reduce_max() as u32
     }
 
     /// Sixteen pixels at a time (from the mask's next pixel, or the row's
@@ -1018,10 +1162,7 @@ impl ShortRow for u8 {
         if saturation > u8::MAX as u32 {
             sat = 0;
         }
-        let max = i16x8::from_u8x16_low(max)
-            .max(i16x8::from_u8x16_high(max))
-            .reduce_max();
-        (max as u32, sat)
+        (Self::peak(max), sat)
     }
 }
 
@@ -1030,21 +1171,57 @@ mod short_row_tests {
     use super::*;
     use crate::testutil::Rng;
 
-    /// The 8-bit short rows' masks and masked statistics equal the plain
-    /// ones (one pixel at a time): rows of 1 to 64 pixels with and without
-    /// pixels past them, random masks, saturation levels at and past 255.
+    /// The 8-bit short rows' masks, peaks and masked statistics equal the
+    /// plain ones (one pixel at a time): windows of 1 to 64 pixels and 1 to
+    /// 3 rows whose last row has no pixels past it, or 16, 32, 64 or more
+    /// (every kind of load), levels from 0 to 255 (none above), random
+    /// masks, saturation levels at and past 255.
     #[test]
     fn u8_short_rows_equal_the_plain_ones() {
         let mut rng = Rng::new(11);
+        let mut loads = Vec::new();
         for round in 0..3000 {
             let data: Vec<u8> = (0..240).map(|_| (rng.next_u64() % 256) as u8).collect();
             let width = 1 + round % 64;
-            let room = [width, 16.max(width), 32.max(width), 64.max(width), 80][round % 5];
-            let row = &data[..room.min(80)];
-            let level = (rng.next_u64() % 256) as u32;
+            let height = 1 + round % 3;
+            let room = [width, 16.max(width), 32.max(width), 64.max(width), 80][round / 3 % 5];
+            let level = match round % 7 {
+                0 => 255,
+                1 => 254,
+                2 => 0,
+                _ => (rng.next_u64() % 256) as u32,
+            };
             let t = Threshold::global(level);
-            let plain = (0..width).fold(0u64, |m, i| m | ((data[i] as u32 > level) as u64) << i);
-            assert_eq!(u8::short_mask(row, width, t), plain, "{width} {room}");
+            let plane = Plane {
+                data: &data[..(height - 1) * 80 + room],
+                width,
+                height,
+                stride: 80,
+                col0: 7,
+                row0: 5,
+            };
+            let reading = u8::reading(&plane, t);
+            if !loads.contains(&reading.loads) {
+                loads.push(reading.loads);
+            }
+            for r in 0..height {
+                let px = &data[r * 80..r * 80 + width];
+                let mask = (0..width).fold(0u64, |m, i| m | ((px[i] as u32 > level) as u64) << i);
+                let max = px.iter().fold(0, |m, &v| m.max(v as u32));
+                let (m, p) = u8::read_row(&plane, &reading, r);
+                assert_eq!((m, u8::peak(p)), (mask, max), "{width} {room} {level} {r}");
+                let wide: Vec<u16> = plane.data.iter().map(|&v| v as u16).collect();
+                let wide = Plane {
+                    data: &wide[..],
+                    width,
+                    height,
+                    stride: 80,
+                    col0: 7,
+                    row0: 5,
+                };
+                let reading = u16::reading(&wide, t);
+                assert_eq!(u16::read_row(&wide, &reading, r), (mask, max));
+            }
             // A blob of three rows of the frame `data` (stride 80).
             let masks = [0, 1, 2].map(|_| rng.next_u64() & (u64::MAX >> (64 - width)));
             let sat = [200, 250, 255, 256][round % 4];
@@ -1075,5 +1252,6 @@ mod short_row_tests {
             };
             assert_eq!(u16::masked_stats(&plane, 5, &masks, sat), want);
         }
+        assert_eq!(loads.len(), 4, "{loads:?}");
     }
 }

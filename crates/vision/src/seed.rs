@@ -12,9 +12,11 @@
 //!
 //! A window at most 64 pixels wide and high (tracking's windows) is grown
 //! on bit masks, one 64-bit word per row: a row's foreground pixels are
-//! found sixteen at a time ([`ShortRow`]), a blob spreads from row to row
-//! by shifts and ands, its runs are read off its rows' words and its
-//! moments summed a row at a time in exact sums of integers
+//! found sixteen at a time ([`ShortRow`]), each row read once per blob
+//! (again only for a branch turning back) with the largest of its pixels
+//! (the blob's peak when the blob is alone in its rows), a blob spreads
+//! from row to row by shifts and ands, its runs are read off its rows'
+//! words and its moments summed a row at a time in exact sums of integers
 //! (`label::SmallMoments`). Wider windows are grown run by run, with a
 //! list of the runs found per row.
 
@@ -63,24 +65,22 @@ pub struct SeedLabeller {
     col0: usize,
     /// The window is grown on row masks ([`MASK_SIDE`]).
     masked: bool,
-    /// Mask path: per window row, its foreground pixels (bit `i`: column
-    /// `col0 + i`), valid for the rows set in `known`, at `level`.
-    fg: [u64; MASK_SIDE],
-    known: u64,
-    level: Option<Threshold>,
-    /// Mask path: per window row, the pixels of the blobs grown so far
-    /// (valid for the window's `height` rows).
+    /// Mask path: per window row, the pixels of the blobs grown so far,
+    /// for the rows set in `valid` (the others hold none: a window of one
+    /// blob clears no rows).
     taken: [u64; MASK_SIDE],
-    /// Mask path: the window's height (rows of `taken` in use).
+    valid: u64,
+    /// Mask path: the window's height.
     height: usize,
-    /// Mask path: the blob being grown, per window row (valid for the
-    /// window's `height` rows).
+    /// Mask path: the blob being grown, per window row (its rows only).
     grown: [u64; MASK_SIDE],
     /// Mask path: the grown blobs' rows: blob `k` holds window rows
-    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]`.
+    /// `spans[k].0 ..` with masks `rows[spans[k].1 .. spans[k].2]` (a
+    /// window's first blob is `taken` until a second one is grown: then
+    /// its rows are copied there and its span noted).
     spans: Vec<(u32, u32, u32)>,
     rows: Box<[u64; ROWS]>,
-    /// Mask path: rows of `rows` in use.
+    /// Mask path: rows of `rows` in use (from the second blob on).
     n_rows: usize,
     /// Mask path: runs counted against the capacity.
     n_runs: usize,
@@ -102,10 +102,8 @@ impl SeedLabeller {
             row0: 0,
             col0: 0,
             masked: false,
-            fg: [0; MASK_SIDE],
-            known: 0,
-            level: None,
             taken: [0; MASK_SIDE],
+            valid: 0,
             height: 0,
             grown: [0; MASK_SIDE],
             spans: Vec::with_capacity(max_blobs),
@@ -130,9 +128,7 @@ impl SeedLabeller {
         self.masked =
             (1..=MASK_SIDE).contains(&plane.width) && (1..=MASK_SIDE).contains(&plane.height);
         if self.masked {
-            self.known = 0;
-            self.level = None;
-            self.taken[..plane.height].fill(0);
+            self.valid = 0;
             self.height = plane.height;
             self.spans.clear();
             self.n_rows = 0;
@@ -154,8 +150,11 @@ impl SeedLabeller {
         if self.masked {
             let r = row.checked_sub(self.row0)?;
             let bit = 1u64 << col.checked_sub(self.col0).filter(|&c| c < MASK_SIDE)?;
-            if r >= MASK_SIDE || self.taken[r] & bit == 0 {
+            if r >= self.height || self.taken(r) & bit == 0 {
                 return None;
+            }
+            if self.blobs.len() == 1 {
+                return Some(0);
             }
             return self.spans.iter().position(|&(first, a, b)| {
                 let k = r.wrapping_sub(first as usize);
@@ -185,9 +184,23 @@ impl SeedLabeller {
         if b >= MASK_SIDE || r1 >= self.height {
             return false;
         }
-        let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
-        let all = self.taken[r0..=r1].iter().fold(u64::MAX, |all, &t| all & t);
-        all & cols == cols
+        let cols = span(a, b);
+        let rows = span(r0, r1);
+        if self.valid & rows != rows {
+            return false;
+        }
+        self.taken[r0..=r1].iter().all(|&t| t & cols == cols)
+    }
+
+    /// Mask path: the pixels of window row `r` (below the window's
+    /// height) in the blobs grown so far.
+    #[inline(always)]
+    fn taken(&self, r: usize) -> u64 {
+        if self.valid >> r & 1 != 0 {
+            self.taken[r]
+        } else {
+            0
+        }
     }
 
     /// The run found so far that holds full-frame pixel `(col, row)`.
@@ -310,14 +323,13 @@ impl SeedLabeller {
                 return Ok(());
             }
             let r = row - self.row0;
-            let (a, b) = (lo - self.col0, hi - self.col0);
-            let cols = (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a;
-            self.set_level(threshold);
-            let mut open = self.fg_row(plane, threshold, r) & cols & !self.taken[r];
+            let cols = span(lo - self.col0, hi - self.col0);
+            let reading = P::reading(plane, threshold);
+            let mut open = P::read_row(plane, &reading, r).0 & cols & !self.taken(r);
             while open != 0 {
                 let col = self.col0 + open.trailing_zeros() as usize;
                 self.grow_masked(plane, threshold, saturation, col, row)?;
-                open &= !self.taken[r];
+                open &= !self.taken(r);
             }
             return Ok(());
         }
@@ -340,31 +352,6 @@ impl SeedLabeller {
         Ok(())
     }
 
-    /// Makes the row masks found so far those at `threshold` (forgets
-    /// them when it differs from the last one).
-    #[inline(always)]
-    fn set_level(&mut self, threshold: Threshold) {
-        if self.level != Some(threshold) {
-            self.level = Some(threshold);
-            self.known = 0;
-        }
-    }
-
-    /// The foreground mask of window row `r` at the level of
-    /// [`SeedLabeller::set_level`] (found once per window and level).
-    #[inline(always)]
-    fn fg_row<P: ShortRow>(&mut self, plane: &Plane<'_, P>, threshold: Threshold, r: usize) -> u64 {
-        if self.known >> r & 1 == 0 {
-            // The row from its start, with the frame's pixels past the
-            // window's width where it holds them (read in whole vectors).
-            let start = r * plane.stride;
-            let row = &plane.data[start..];
-            self.fg[r] = P::short_mask(row, plane.width, threshold);
-            self.known |= 1 << r;
-        }
-        self.fg[r]
-    }
-
     /// [`SeedLabeller::grow`] on row masks (a window of at most
     /// [`MASK_SIDE`] pixels each way, position inside it).
     fn grow_masked<P: ShortRow>(
@@ -375,15 +362,16 @@ impl SeedLabeller {
         col: usize,
         row: usize,
     ) -> Result<Option<usize>, SeedOverflow> {
+        let reading = &P::reading(plane, threshold);
         let (r, bit) = (row - self.row0, 1u64 << (col - self.col0));
-        self.set_level(threshold);
-        if self.fg_row(plane, threshold, r) & bit == 0 {
+        let (f, p) = P::read_row(plane, reading, r);
+        if f & bit == 0 {
             return Ok(None);
         }
-        if self.taken[r] & bit != 0 {
+        if self.taken(r) & bit != 0 {
             return Ok(self.blob_at(col, row));
         }
-        if self.spans.len() >= self.max_blobs {
+        if self.blobs.len() >= self.max_blobs {
             return Err(SeedOverflow::Blobs);
         }
         // The runs of each row that touch the blob's pixels of the row
@@ -394,90 +382,73 @@ impl SeedLabeller {
         // (a branch turning back) are noted, and only then are the rows
         // searched again until none gains a pixel (`flood`). (No list of
         // pending rows per step: SeedLabeller::grow 26.03 M -> 23.67 M in
-        // tracking.)
-        // (`grown` is all 0 between grows: no test which rows the blob
-        // holds yet per step.)
-        debug_assert!(self.grown.iter().all(|&g| g == 0));
-        let seed = run_holding(self.fg[r], bit);
+        // tracking.) Each row is read once, its mask and peak together
+        // (no row kept for later: a window's rows are read again only for
+        // a second blob or a branch turning back).
+        // (`grown` holds the blob's rows `lo..=hi` as they are found.)
+        let seed = if single_run(f) {
+            f
+        } else {
+            run_holding(f, bit)
+        };
         self.grown[r] = seed;
-        let mut missed = 0u64;
-        let (mut lo, mut hi) = (r, r);
-        for step in [1, usize::MAX] {
-            let (mut k, mut g) = (r, seed);
-            loop {
-                // (Past either end of the window: at least `height`.)
-                let n = k.wrapping_add(step);
-                if n >= plane.height {
-                    break;
-                }
-                let f = self.fg_row(plane, threshold, n);
-                let add = fill_runs(f, reach(g) & f);
-                if add == 0 {
-                    break;
-                }
-                missed |= reach(add) & self.fg[k] & !g;
-                self.grown[n] = add;
-                (k, g) = (n, add);
-            }
-            if step == 1 {
-                hi = k;
-            } else {
-                lo = k;
-            }
-        }
+        // The rows' peak, and `others`: the foreground pixels of other
+        // blobs in the rows (then the peak is not the blob's).
+        let mut pass = Pass {
+            peak: p,
+            others: f ^ seed,
+            missed: 0,
+        };
+        let hi = self.pass(plane, reading, (r, seed, f), 1, &mut pass);
+        let lo = self.pass(plane, reading, (r, seed, f), usize::MAX, &mut pass);
+        let Pass {
+            peak,
+            mut others,
+            missed,
+        } = pass;
+        let (mut lo, mut hi) = (lo, hi);
         if missed != 0 {
-            (lo, hi) = self.flood(plane, threshold, lo, hi);
+            (lo, hi) = self.flood(plane, reading, lo, hi);
+            // (The rows' peak is not the blob's when it grew.)
+            others = u64::MAX;
         }
-        // The statistics: the moments summed exactly a row at a time
-        // (`SmallMoments`: the values `Blob::add_run` gives, bit for bit),
-        // the grey-value statistics over all the rows at once.
+        // The grey-value statistics: a blob alone in its rows has their
+        // peak (its other pixels are background, below every pixel of the
+        // blob), and no saturated pixel unless the peak is one; else they
+        // are read over its pixels.
+        let (max, saturated) = match P::peak(peak) {
+            max if others == 0 && max < saturation => (max, 0),
+            _ => masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation),
+        };
+        // The moments summed exactly a row at a time (`SmallMoments`: the
+        // values `Blob::add_run` gives, bit for bit).
         let origin = self.grown[lo].trailing_zeros() as i64;
-        let mut sums = SmallMoments::ZERO;
-        let (mut area, mut cols, mut runs) = (0u32, 0u64, 0usize);
-        let first = self.n_rows;
-        debug_assert!(first + hi - lo < ROWS);
-        // (A run's statistics are at most 64 pixels': no clamping.)
-        let (max, saturated) =
-            P::masked_stats(plane, self.row0 + lo, &self.grown[lo..=hi], saturation);
-        // (From the last row up: `SmallMoments::add_row_up`.)
-        for k in (lo..=hi).rev() {
-            let g = std::mem::take(&mut self.grown[k]);
-            if g & g.wrapping_add(g & g.wrapping_neg()) == 0 {
-                // One run (the rule): its ends straight from the mask.
-                let (start, end) = (
-                    g.trailing_zeros() as usize,
-                    MASK_SIDE - g.leading_zeros() as usize,
-                );
-                runs += 1;
-                area += (end - start) as u32;
-                sums.add_row_up(&SmallMoments::run(
-                    start as i64 - origin,
-                    end as i64 - origin,
-                ));
-                cols |= g;
-                self.taken[k] |= g;
-                // (Below `ROWS` rows in all: every row of a blob holds a
-                // pixel of the window no other blob holds.)
-                self.rows[(first + k - lo) % ROWS] = g;
-                continue;
+        let (sums, cols, runs) = if self.blobs.is_empty() {
+            self.take_rows::<true>(lo, hi, origin)
+        } else {
+            if self.blobs.len() == 1 {
+                // The first blob's masks into `rows` (`taken` holds it alone).
+                let (a, b) = (self.blobs[0].row0, self.blobs[0].row1);
+                let (a, n) = (a as usize - self.row0, (b - a) as usize + 1);
+                self.rows[..n].copy_from_slice(&self.taken[a..a + n]);
+                self.spans.push((a as u32, 0, n as u32));
+                self.n_rows = n;
             }
-            let mut row: RowSums = [f64x2::ZERO; 3];
-            let mut m = g;
-            while m != 0 {
-                let start = m.trailing_zeros() as usize;
-                let len = (!(m >> start)).trailing_zeros() as usize;
-                runs += 1;
-                let end = start + len;
-                area += len as u32;
-                SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
-                m &= !(u64::MAX >> (MASK_SIDE - end));
+            // Rows of `taken` not yet in use cleared.
+            let mut fresh = span(lo, hi) & !self.valid;
+            while fresh != 0 {
+                self.taken[fresh.trailing_zeros() as usize] = 0;
+                fresh &= fresh - 1;
             }
-            sums.add_row_up(&row);
-            cols |= g;
-            self.taken[k] |= g;
-            self.rows[(first + k - lo) % ROWS] = g;
-        }
-        self.n_rows = first + hi - lo + 1;
+            let first = self.n_rows;
+            debug_assert!(first + hi - lo < ROWS);
+            let taken = self.take_rows::<false>(lo, hi, origin);
+            self.n_rows = first + hi - lo + 1;
+            self.spans
+                .push((lo as u32, first as u32, self.n_rows as u32));
+            taken
+        };
+        self.valid |= span(lo, hi);
         // (The capacity counted per blob: the same error, the window's
         // state after it is not used.)
         if self.n_runs + runs > self.max_runs {
@@ -486,7 +457,7 @@ impl SeedLabeller {
         self.n_runs += runs;
         let (m, m4) = sums.to_blob_moments();
         let b = Blob {
-            area,
+            area: sums.area(),
             col0: (self.col0 + cols.trailing_zeros() as usize) as u32,
             row0: (self.row0 + lo) as u32,
             col1: (self.col0 + 63 - cols.leading_zeros() as usize) as u32,
@@ -497,10 +468,103 @@ impl SeedLabeller {
             m4,
             origin_col: (self.col0 as i64 + origin) as u32,
         };
-        self.spans
-            .push((lo as u32, first as u32, self.n_rows as u32));
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
+    }
+
+    /// One pass of [`SeedLabeller::grow_masked`] from window row `r` (the
+    /// blob's pixels `g` there, of the row's foreground `f`) one row at a
+    /// time along `step` (1 down, `usize::MAX` up): each row's runs that
+    /// touch the blob's pixels of the row before, into `grown`, until a row
+    /// adds none. The last row reached.
+    #[inline(always)]
+    fn pass<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        reading: &P::Reading,
+        (r, g, f): (usize, u64, u64),
+        step: usize,
+        pass: &mut Pass<P>,
+    ) -> usize {
+        // (`rg`: the pixels the blob's pixels of row `k` reach, formed once
+        // for both rows next to it; `stray`: the row's foreground pixels
+        // outside the blob.)
+        let (mut k, mut rg, mut stray) = (r, reach(g), f ^ g);
+        loop {
+            // (Past either end of the window: at least `height`.)
+            let n = k.wrapping_add(step);
+            if n >= plane.height {
+                return k;
+            }
+            let (f, p) = P::read_row(plane, reading, n);
+            let touch = rg & f;
+            if touch == 0 {
+                return k;
+            }
+            // A row of one run (the rule) is the blob's whole, no filling.
+            let (add, others) = if single_run(f) {
+                (f, 0)
+            } else {
+                let add = fill_runs(f, touch);
+                (add, f ^ add)
+            };
+            pass.peak = P::fold(pass.peak, p);
+            pass.others |= others;
+            let ra = reach(add);
+            pass.missed |= ra & stray;
+            self.grown[n] = add;
+            (k, rg, stray) = (n, ra, others);
+        }
+    }
+
+    /// The blob being grown (`grown`, rows `lo..=hi`) added
+    /// to `taken` (and its masks to `rows` unless it is the window's first
+    /// blob, `FIRST`: `taken` holds it alone): its moments about column
+    /// `origin` (from the last row up: `SmallMoments::add_row_up`), the
+    /// columns it holds, its runs.
+    #[inline(always)]
+    fn take_rows<const FIRST: bool>(
+        &mut self,
+        lo: usize,
+        hi: usize,
+        origin: i64,
+    ) -> (SmallMoments, u64, usize) {
+        let mut sums = SmallMoments::ZERO;
+        let (mut cols, mut runs) = (0u64, hi - lo + 1);
+        let first = self.n_rows;
+        let rows = self.grown[lo..=hi].iter().zip(&mut self.taken[lo..=hi]);
+        for (i, (&g, taken)) in rows.enumerate().rev() {
+            // (`past`: the bit after the lowest run, 0 past the last column;
+            // `single_run` without it.)
+            let past = g.wrapping_add(g & g.wrapping_neg());
+            if g & past == 0 {
+                // One run (the rule): its ends straight from the mask.
+                let (start, end) = (g.trailing_zeros() as i64, past.trailing_zeros() as i64);
+                sums.add_row_up(&SmallMoments::run(start - origin, end - origin));
+            } else {
+                let mut row: RowSums = [f64x2::ZERO; 3];
+                let mut m = g;
+                runs -= 1;
+                while m != 0 {
+                    let start = m.trailing_zeros() as usize;
+                    let end = start + (!(m >> start)).trailing_zeros() as usize;
+                    runs += 1;
+                    SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
+                    m &= !(u64::MAX >> (MASK_SIDE - end));
+                }
+                sums.add_row_up(&row);
+            }
+            cols |= g;
+            if FIRST {
+                *taken = g;
+            } else {
+                *taken |= g;
+                // (Below `ROWS` rows in all: every row of a blob holds a
+                // pixel of the window no other blob holds.)
+                self.rows[(first + i) % ROWS] = g;
+            }
+        }
+        (sums, cols, runs)
     }
 
     /// The blob being grown (`grown`, rows `lo..=hi`, connected) made
@@ -510,22 +574,28 @@ impl SeedLabeller {
     fn flood<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        threshold: Threshold,
+        reading: &P::Reading,
         lo: usize,
         hi: usize,
     ) -> (usize, usize) {
         let last = plane.height - 1;
-        let mut todo = (u64::MAX >> (MASK_SIDE - 1 - (hi - lo))) << lo;
+        // (`grown` holds the blob's rows alone.)
+        for (k, g) in self.grown[..plane.height].iter_mut().enumerate() {
+            if k < lo || k > hi {
+                *g = 0;
+            }
+        }
+        let mut todo = span(lo, hi);
         let mut held = todo;
         while todo != 0 {
             let k = todo.trailing_zeros() as usize;
             todo &= todo - 1;
             let reach = reach(self.grown[k]);
             if k > 0 {
-                todo |= self.spread(plane, threshold, reach, k - 1);
+                todo |= self.spread(plane, reading, reach, k - 1);
             }
             if k < last {
-                todo |= self.spread(plane, threshold, reach, k + 1);
+                todo |= self.spread(plane, reading, reach, k + 1);
             }
             held |= todo;
         }
@@ -543,12 +613,12 @@ impl SeedLabeller {
     fn spread<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
-        threshold: Threshold,
+        reading: &P::Reading,
         reach: u64,
         n: usize,
     ) -> u64 {
         let before = self.grown[n];
-        let f = self.fg_row(plane, threshold, n);
+        let f = P::read_row(plane, reading, n).0;
         let add = fill_runs(f, reach & f) & !before;
         if add == 0 {
             return 0;
@@ -610,6 +680,40 @@ impl SeedLabeller {
     }
 }
 
+/// [`ShortRow::masked_stats`] out of line: the rare path of
+/// [`SeedLabeller::grow_masked`] (a blob sharing its rows or saturated),
+/// whose set-up would otherwise be done for every blob.
+#[inline(never)]
+fn masked_stats<P: ShortRow>(
+    plane: &Plane<'_, P>,
+    row0: usize,
+    masks: &[u64],
+    saturation: u32,
+) -> (u32, u32) {
+    P::masked_stats(plane, row0, masks, saturation)
+}
+
+/// What the passes of [`SeedLabeller::grow_masked`] gather besides the
+/// blob's rows.
+struct Pass<P: ShortRow> {
+    /// The peak of the rows.
+    peak: P::Peak,
+    /// Foreground pixels of the rows outside the blob (of other blobs:
+    /// then the peak need not be the blob's).
+    others: u64,
+    /// Pixels of a row next to the blob's pixels of the row after it that
+    /// the pass did not take (a branch turning back).
+    missed: u64,
+}
+
+/// Bits `a..=b` (`a ≤ b < 64`): columns or rows of a window grown on row
+/// masks.
+#[inline(always)]
+fn span(a: usize, b: usize) -> u64 {
+    debug_assert!(a <= b && b < MASK_SIDE);
+    (u64::MAX >> (MASK_SIDE - 1 - (b - a))) << a
+}
+
 /// The pixels of a row touching those of `g` (of the row above or below,
 /// 8-connectivity): `g` and its left and right neighbours.
 #[inline(always)]
@@ -634,6 +738,13 @@ fn run_holding(f: u64, bit: u64) -> u64 {
         below & (u64::MAX << (64 - gaps.leading_zeros()))
     };
     up | down
+}
+
+/// Whether the bits of `f` (not 0) are one run: adding its lowest bit
+/// carries through the lowest run and leaves none of its bits.
+#[inline(always)]
+fn single_run(f: u64) -> bool {
+    f & f.wrapping_add(f & f.wrapping_neg()) == 0
 }
 
 /// The runs of `f` (a row's foreground bits) that hold a bit of `seeds`:
@@ -668,8 +779,15 @@ mod tests {
     }
 
     /// Every blob the labeller finds in a window, grown from each of its
-    /// pixels, is the labeller's blob, bit for bit.
+    /// pixels, is the labeller's blob, bit for bit; in 8-bit and 16-bit
+    /// frames.
     fn check(data: &[u8], width: usize, area: (usize, usize, usize, usize)) {
+        check_pixels(data, width, area);
+        let wide: Vec<u16> = data.iter().map(|&v| v as u16).collect();
+        check_pixels(&wide, width, area);
+    }
+
+    fn check_pixels<P: ShortRow>(data: &[P], width: usize, area: (usize, usize, usize, usize)) {
         let (c0, r0, w, h) = area;
         let plane = window(data, width, area);
         let t = Threshold::global(100);
@@ -679,9 +797,25 @@ mod tests {
         seeds.start(&plane);
         for row in r0..r0 + h {
             for col in c0..c0 + w {
-                let v = data[row * width + col] as u32;
+                let v = data[row * width + col].value();
                 let got = seeds.grow(&plane, t, 250, col, row).expect("capacity");
                 assert_eq!(got.is_some(), v > 100, "({col}, {row})");
+            }
+        }
+        // Each pixel's blob found again (the first blob's rows kept apart
+        // once a second one is grown), its box around the pixel.
+        for row in r0..r0 + h {
+            for col in c0..c0 + w {
+                let at = seeds.blob_at(col, row);
+                assert_eq!(at.is_some(), data[row * width + col].value() > 100);
+                if let Some(b) = at.map(|i| seeds.blobs()[i]) {
+                    let (col, row) = (col as u32, row as u32);
+                    assert!((b.col0..=b.col1).contains(&col) && (b.row0..=b.row1).contains(&row));
+                    assert_eq!(
+                        seeds.grow(&plane, t, 250, col as usize, row as usize),
+                        Ok(at)
+                    );
+                }
             }
         }
         // The same, a row at a time (the span reaching past the window).
@@ -784,7 +918,8 @@ mod tests {
     }
 
     /// The run holding a bit is the seed spread a bit at a time: every
-    /// bit of random rows, dense and sparse, runs through both ends.
+    /// bit of random rows, dense and sparse, runs through both ends; a row
+    /// is one run when the run through any of its bits is the whole row.
     #[test]
     fn the_run_holding_a_bit_is_the_seed_spread() {
         use crate::testutil::Rng;
@@ -798,6 +933,10 @@ mod tests {
             };
             for i in (0..64).filter(|i| f >> i & 1 != 0) {
                 assert_eq!(run_holding(f, 1 << i), fill_runs(f, 1 << i), "{f:#x} {i}");
+                // One run: the run through any of its bits is all of them.
+                let run = fill_runs(f, 1 << i);
+                assert!(single_run(run), "{run:#x}");
+                assert_eq!(single_run(f), run == f, "{f:#x}");
             }
         }
     }
@@ -823,6 +962,23 @@ mod tests {
             assert_eq!(s.blob_at(2, 0), Some(0));
             assert!(s.covers(0, 0, 0, 2) && s.covers(2, 2, 0, 2));
         }
+        check(&data, w, (0, 0, w, h));
+        // A branch turning back past the rows of the passes (row 0 from
+        // row 1), into a row where the blob grown before had its pixels.
+        let img = [
+            "#...#", //
+            "#.#..", //
+            "#.#..", //
+            "###..", //
+        ];
+        let (data, w, h) = drawn(&img);
+        let plane = Plane::whole(&data, w, h);
+        let mut s = SeedLabeller::new(100, 10, h);
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 4, 0), Ok(Some(0)));
+        s.start(&plane);
+        assert_eq!(s.grow(&plane, t, 250, 2, 1), Ok(Some(0)));
+        assert_eq!(s.blobs()[0].area, 8);
         check(&data, w, (0, 0, w, h));
     }
 
@@ -857,6 +1013,57 @@ mod tests {
         assert_eq!(s.grow(&plane, t, 250, 2, 0), Err(SeedOverflow::Blobs));
     }
 
+    /// A dot alone in its rows takes its peak from them: brighter pixels
+    /// just past the window's right edge (in the vectors that read its
+    /// rows: windows of 10, 20, 40 and 64 pixels) are not its own; nor in a
+    /// window at the frame's end (read one pixel at a time).
+    #[test]
+    fn a_dot_alone_in_its_rows_has_its_own_peak() {
+        let (w, h) = (100usize, 7usize);
+        for width in [10, 20, 40, 64] {
+            let mut data = vec![10u8; w * h];
+            for row in 1..4 {
+                data[row * w + 7..row * w + 10].fill(150);
+                data[row * w + 5 + width] = 240;
+                data[row * w + 5 + width + 9] = 245;
+            }
+            data[4 * w + 8] = 170;
+            check(&data, w, (5, 0, width, 6));
+            check(&data, w, (5, 1, width, 3));
+        }
+        let mut data = vec![10u8; w * h];
+        for row in 4..7 {
+            data[row * w + 90..row * w + 94].fill(150);
+            data[row * w + 99] = 240;
+        }
+        check(&data, w, (88, 4, 11, 3));
+        check(&data, w, (88, 3, 12, 4));
+    }
+
+    /// A frame of `w × h` pixels, mostly background, holding a few small
+    /// blocks of one grey each (some saturated) and single pixels just
+    /// below saturation: windows anywhere in it have rows read in one, two
+    /// or four vectors or one pixel at a time (as far as the frame holds
+    /// pixels past the window's last row), blobs alone in their rows (their
+    /// peak read off the rows) beside brighter pixels just past the
+    /// window's edge, and rows shared by blobs.
+    fn sparse_frame(w: usize, h: usize, seed: u64) -> Vec<u8> {
+        const GREY: [u8; 8] = [120, 150, 180, 200, 230, 249, 250, 255];
+        let mut rng = crate::testutil::Rng::new(seed);
+        let mut next = |n: usize| (rng.next_u64() % n as u64) as usize;
+        let mut data = vec![10u8; w * h];
+        for _ in 0..1 + next(4) {
+            let (c, r, bw, bh, v) = (next(w), next(h), 1 + next(4), 1 + next(3), GREY[next(8)]);
+            for row in r..(r + bh).min(h) {
+                data[row * w + c..row * w + (c + bw).min(w)].fill(v);
+            }
+        }
+        for _ in 0..next(8) {
+            data[next(w * h)] = 249;
+        }
+        data
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
         #[test]
@@ -869,6 +1076,17 @@ mod tests {
             let data: Vec<u8> = bits.iter().map(|&b| [10, 200, 255][b as usize]).collect();
             let (w, h) = (12 - c0 - dw, 10 - r0 - dh);
             check(&data, 12, (c0, r0, w, h));
+        }
+
+        #[test]
+        fn windows_anywhere_in_a_frame_grow_as_the_labeller_labels_them(
+            w in 17usize..72, h in 2usize..10, seed in any::<u64>(),
+            area in (0usize..72, 0usize..10, 1usize..65, 1usize..10),
+        ) {
+            let data = sparse_frame(w, h, seed);
+            let (c0, r0) = (area.0 % w, area.1 % h);
+            let (cw, ch) = (area.2.min(w - c0), area.3.min(h - r0));
+            check(&data, w, (c0, r0, cw, ch));
         }
 
         #[test]
