@@ -512,34 +512,47 @@ impl<'a, P: Pixel> Plane<'a, P> {
     /// `col` and `row` is a position): each lane does exactly the scalar's
     /// floating-point operations in the same order, so the two values are
     /// those of two scalar calls bit for bit. Only the index of the cell is
-    /// formed otherwise, in floating point: `ri · stride + ci` (an integer
-    /// below 2⁵¹, so exact) is offset by 1.5 · 2⁵² once and taken from the
-    /// low mantissa bits of both lanes.
+    /// formed otherwise, exactly in floating point, and taken from the low
+    /// mantissa bits of both lanes.
     #[inline(always)]
     pub fn bilinear_inside_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
+        self.bilinear_x2::<true>(col, row)
+    }
+
+    /// Two positions at once, the cell clamped to the window's cells
+    /// (`CLAMP`) or not. The index of the cell, `(ri − row0) · stride +
+    /// (ci − col0)`, is formed in floating point as `ri · stride + (ci +
+    /// K)` with `K = 1.5 · 2⁵² − (row0 · stride + col0)`: every term an
+    /// integer below 2⁵³ (exact), the sum `1.5 · 2⁵²` plus the index
+    /// (below 2⁵¹), whose low mantissa bits are the index (three
+    /// operations on the cell's corner, which the fractions need anyway).
+    #[inline(always)]
+    fn bilinear_x2<const CLAMP: bool>(&self, col: f64x2, row: f64x2) -> f64x2 {
         const ROUND: f64 = 6_755_399_441_055_744.0;
         const LOW_51: u64 = (1 << 51) - 1;
         let (w, h) = (self.width, self.height);
         let (c0, r0) = (self.col0 as u32 as f64, self.row0 as u32 as f64);
-        let (c_lo, r_lo) = (ROUND + c0, ROUND + r0);
-        let c_hi = ROUND + c0 + w.saturating_sub(2) as u32 as f64;
-        let r_hi = ROUND + r0 + h.saturating_sub(2) as u32 as f64;
+        let s = self.stride;
         let round = f64x2::splat(ROUND);
         let half = f64x2::splat(0.5);
-        // `fast_max`/`fast_min` are SSE2's `maxpd`/`minpd`: `v > lo ? v :
-        // lo` and `v < hi ? v : hi`, the scalar's clamp (also for NaN; on
-        // targets without SSE2 the same except for NaN).
-        let cc = ((col - half) + round)
-            .fast_max(f64x2::splat(c_lo))
-            .fast_min(f64x2::splat(c_hi));
-        let rc = ((row - half) + round)
-            .fast_max(f64x2::splat(r_lo))
-            .fast_min(f64x2::splat(r_hi));
-        let fx = col - (cc - round);
-        let fy = row - (rc - round);
-        let s = self.stride;
-        let i =
-            (rc - f64x2::splat(r_lo)) * f64x2::splat(s as f64) + (cc - f64x2::splat(c_lo)) + round;
+        let mut cc = (col - half) + round;
+        let mut rc = (row - half) + round;
+        if CLAMP {
+            // `fast_max`/`fast_min` are SSE2's `maxpd`/`minpd`: `v > lo ?
+            // v : lo` and `v < hi ? v : hi`, the scalar's clamp (also for
+            // NaN; on targets without SSE2 the same except for NaN).
+            let (c_lo, r_lo) = (ROUND + c0, ROUND + r0);
+            let c_hi = ROUND + c0 + w.saturating_sub(2) as u32 as f64;
+            let r_hi = ROUND + r0 + h.saturating_sub(2) as u32 as f64;
+            cc = cc.fast_max(f64x2::splat(c_lo)).fast_min(f64x2::splat(c_hi));
+            rc = rc.fast_max(f64x2::splat(r_lo)).fast_min(f64x2::splat(r_hi));
+        }
+        // The cell's corner in full-frame coordinates (exact).
+        let (ci, ri) = (cc - round, rc - round);
+        let fx = col - ci;
+        let fy = row - ri;
+        let origin = (self.row0 as u32 as u64 * s as u64 + self.col0 as u32 as u64) as f64;
+        let i = ri * f64x2::splat(s as f64) + (ci + f64x2::splat(ROUND - origin));
         let [ia, ib] = i.to_array().map(|v| (v.to_bits() & LOW_51) as usize);
         // Two range checks per cell (its start, then its length; the
         // length not wrapping is checked once, out of the loops).
