@@ -5,7 +5,7 @@
 //! position a [`Plane`] takes is in full-frame pixel coordinates.
 
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, u8x16, CmpGt};
+use wide::{f64x2, i16x8, i32x4, i32x8, u16x8, u8x16, CmpGt};
 
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
@@ -55,6 +55,14 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
         scalar_moment_sums(&line[a..a + n], k0, |p| p.value() as i64)
     }
+    /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
+    /// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the
+    /// first two pixels of a slice, `p10`, `p11` the two from `s` (the row
+    /// stride; both slices hold at least `s + 2` pixels).
+    #[inline(always)]
+    fn corners_x2(a: &[Self], b: &[Self], s: usize) -> [f64x2; 4] {
+        corners_x2(a, b, s)
+    }
     /// The pixels as bytes if they are 8-bit (for the paths that take an
     /// 8-bit row sixteen pixels at a time).
     #[inline(always)]
@@ -89,10 +97,7 @@ pub(crate) fn scalar_moment_sums<P: Pixel>(px: &[P], k0: i64, w: impl Fn(P) -> i
     [t0, t1, t2]
 }
 
-/// The corners `[p00, p01, p10, p11]` of two cells of bilinear
-/// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the first
-/// two pixels of a slice, `p10`, `p11` the two from `s` (the row stride;
-/// both slices hold at least `s + 2` pixels).
+/// [`Pixel::corners_x2`] one pixel at a time.
 #[inline(always)]
 fn corners_x2<P: Pixel>(a: &[P], b: &[P], s: usize) -> [f64x2; 4] {
     let v = |p: P| p.value() as f64;
@@ -150,6 +155,23 @@ impl Pixel for u8 {
     #[inline(always)]
     fn max_of(chunk: &[Self]) -> u32 {
         chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
+    }
+    /// Two pixels at a time (a 16-bit load), the eight bytes interleaved
+    /// and widened to 32 bits in vectors, converted two at a time: the
+    /// same values.
+    #[inline(always)]
+    fn corners_x2(a: &[Self], b: &[Self], s: usize) -> [f64x2; 4] {
+        // `[p00, p01, p10, p11]` of a cell as the low bytes of a vector.
+        #[inline(always)]
+        fn cell(c: &[u8], s: usize) -> u8x16 {
+            let pair = |i: usize| u16::from_le_bytes([c[i], c[i + 1]]) as u32;
+            let [x0, x1, x2, x3] = (pair(0) | pair(s) << 16).to_le_bytes();
+            u8x16::new([x0, x1, x2, x3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+        }
+        let v = u8x16::unpack_low(cell(a, s), cell(b, s));
+        let d = i32x8::from_u16x8(u16x8::from_u8x16_low(v)).to_array();
+        let f = |i: usize| f64x2::new([d[i] as f64, d[i + 1] as f64]);
+        [f(0), f(2), f(4), f(6)]
     }
     /// Sixteen pixels at a time (SSE2 on x86-64): a pixel is foreground
     /// where it is not `≤ level`, i.e. where `v − level` (saturating) is not 0.
@@ -519,6 +541,18 @@ impl<'a, P: Pixel> Plane<'a, P> {
         self.bilinear_x2::<true>(col, row)
     }
 
+    /// [`Plane::bilinear_inside_x2`] at positions the caller knows to lie
+    /// at least half a pixel inside the hull of the window's pixel centres
+    /// (`col0 + 0.5 ≤ col ≤ col0 + width − 1.5`, likewise for rows): there
+    /// the cell needs no clamping to the window's cells (its corner,
+    /// `col − 0.5` rounded, lies between the first and the last but one
+    /// column), and the values are the same bit for bit. Elsewhere the
+    /// value of some cell, or a panic (a cell outside the pixels).
+    #[inline(always)]
+    pub fn bilinear_clear_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
+        self.bilinear_x2::<false>(col, row)
+    }
+
     /// Two positions at once, the cell clamped to the window's cells
     /// (`CLAMP`) or not. The index of the cell, `(ri − row0) · stride +
     /// (ci − col0)`, is formed in floating point as `ri · stride + (ci +
@@ -559,7 +593,7 @@ impl<'a, P: Pixel> Plane<'a, P> {
         let n = s.checked_add(2).expect("stride");
         let a = &self.data[ia..][..n];
         let b = &self.data[ib..][..n];
-        let [p00, p01, p10, p11] = corners_x2(a, b, s);
+        let [p00, p01, p10, p11] = P::corners_x2(a, b, s);
         let top = p00 + fx * (p01 - p00);
         let bottom = p10 + fx * (p11 - p10);
         top + fy * (bottom - top)
@@ -805,6 +839,81 @@ mod tests {
                 (1e12, -1e12),
             ] {
                 let _ = win16.bilinear_inside_x2(f64x2::new([c, c0]), f64x2::new([r, r0]));
+            }
+        }
+    }
+
+    /// Without clamping the cells, two positions at a time still equal
+    /// one at a time bit for bit wherever they lie half a pixel clear of
+    /// the hull's edges (8 and 16 bits, windows at even and odd origins,
+    /// integer, half-integer and other positions, the clear region's own
+    /// edges).
+    #[test]
+    fn bilinear_clear_x2_equals_bilinear_half_a_pixel_inside() {
+        let (w, h) = (23usize, 17usize);
+        let d16: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 65536) as u16).collect();
+        let d8: Vec<u8> = (0..w * h).map(|i| ((i * 7919) % 256) as u8).collect();
+        let mut x = 11u64;
+        let mut unit = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        fn check<P: Pixel>(win: &Plane<P>, a: (f64, f64), b: (f64, f64)) {
+            let v = win.bilinear_clear_x2(f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
+            let [va, vb] = v.to_array();
+            let want = |(c, r): (f64, f64)| win.bilinear(c, r).unwrap().to_bits();
+            assert_eq!(va.to_bits(), want(a), "{a:?}");
+            assert_eq!(vb.to_bits(), want(b), "{b:?}");
+        }
+        let mut edges = 0;
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (1, 2, 20, 13), (2, 1, 7, 9), (3, 3, 2, 2)] {
+            let (win8, win16) = (
+                window(&d8, w, (c0, r0, ww, hh)),
+                window(&d16, w, (c0, r0, ww, hh)),
+            );
+            // The clear region: half a pixel inside the hull.
+            let (c0, r0) = (c0 as f64 + 0.5, r0 as f64 + 0.5);
+            let (cl, rl) = (win8.last_col() as f64 - 0.5, win8.last_row() as f64 - 0.5);
+            let mut pos = |k: usize| {
+                let (c, r) = (c0 + unit() * (cl - c0), r0 + unit() * (rl - r0));
+                match k % 4 {
+                    0 => ((2.0 * c).round() / 2.0, (2.0 * r).round() / 2.0),
+                    1 => ([c0, cl][k / 4 % 2], r),
+                    2 => (c, [r0, rl][k / 4 % 2]),
+                    _ => (c, r),
+                }
+            };
+            for k in 0..4000 {
+                let (a, b) = (pos(k), pos(k + 1));
+                edges += (a.0 == c0 || a.0 == cl) as usize;
+                check(&win8, a, b);
+                check(&win16, a, b);
+            }
+        }
+        assert!(edges > 1000, "{edges}");
+    }
+
+    /// The 8-bit corners of two cells (two pixels a load, interleaved and
+    /// widened in vectors) are the plain ones, for every byte value in
+    /// every corner and lane.
+    #[test]
+    fn u8_corners_equal_the_plain_ones() {
+        let s = 5;
+        for v in 0..=255u8 {
+            for k in 0..8 {
+                let mut a = [17u8, 200, 0, 3, 9, 255, 1, 128];
+                let mut b = [255u8, 0, 7, 77, 1, 2, 254, 31];
+                let at = [0, 1, s, s + 1][k % 4];
+                if k < 4 {
+                    a[at] = v
+                } else {
+                    b[at] = v
+                }
+                assert_eq!(
+                    u8::corners_x2(&a, &b, s).map(|c| c.to_array()),
+                    corners_x2(&a, &b, s).map(|c| c.to_array()),
+                    "{v} {k}"
+                );
             }
         }
     }
