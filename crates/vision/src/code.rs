@@ -28,7 +28,7 @@
 
 use crate::pixel::{Pixel, Plane};
 use photopose_field::{codes, Field, TargetKind};
-use wide::f64x2;
+use wide::{f64x2, CmpGe, CmpGt, CmpLe, CmpLt};
 
 /// The set of code ids a detector accepts (those of the field's coded targets).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -319,6 +319,15 @@ const HARMONIC: [(f64, f64); 6] = [
 /// Cosines and sines of two sampling angles, one to a lane: `(cos, sin)`.
 type CsPair = (f64x2, f64x2);
 
+/// The plate offsets `(k cos t, −k sin t)` of two sampling angles on the
+/// circle of radius `k`, one to a lane: what [`RingFrame::point_cs`] maps
+/// (the same products).
+type XyPair = (f64x2, f64x2);
+
+/// Half the phase samples: the ring's middle is kept two to a lane pair,
+/// samples `i` and `i + 36` (half a turn on) in element `i`.
+const HALF: usize = PHASE_SAMPLES / 2;
+
 /// The angles of `cs` two to a [`CsPair`], in order.
 fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
     debug_assert_eq!(cs.len(), 2 * N);
@@ -328,8 +337,15 @@ fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
     })
 }
 
+/// The plate offsets of `cs` at radius `k` (see [`XyPair`]).
+#[inline(always)]
+fn offsets(k: f64, (c, s): CsPair) -> XyPair {
+    (f64x2::splat(k) * c, f64x2::splat(-k) * s)
+}
+
 /// Cosines and sines of the fixed sampling angles, computed once; also
-/// two to a lane pair for `circle_inside`.
+/// the plate offsets of the fixed circles, two angles to a lane pair (for
+/// sampling two at a time).
 #[derive(Debug, Clone)]
 pub struct RingTables {
     phase: [(f64, f64); PHASE_SAMPLES],
@@ -337,12 +353,17 @@ pub struct RingTables {
     bright: [(f64, f64); 8],
     /// Sector `k`, sample `i`: angle `15° + 30° k + offset_i` from the boundary.
     sector: [[(f64, f64); SECTOR_OFFSETS.len()]; 12],
-    /// The phase angles `j = 0, 3, 6 …` (the first pass).
-    phase_first: [CsPair; PHASE_SAMPLES / 6],
-    /// The phase angles `3j + 1, 3j + 2` (the second pass).
-    phase_rest: [CsPair; PHASE_SAMPLES / 3],
-    zone_x2: [CsPair; ZONE_SAMPLES / 2],
-    bright_x2: [CsPair; 4],
+    /// The ring's middle at the phase angles `(i, i + 36)` for `i = 3c`
+    /// (the first pass, element `c`).
+    phase_first: [XyPair; HALF / 3],
+    /// The same for `i = 3c + 1, 3c + 2` (the second pass, elements `2c`,
+    /// `2c + 1`).
+    phase_rest: [XyPair; 2 * HALF / 3],
+    /// The phase angles `(i, i + 36)` in degrees.
+    phase_deg: [f64x2; HALF],
+    bright_x2: [XyPair; 4],
+    gap_x2: [XyPair; ZONE_SAMPLES / 2],
+    quiet_x2: [XyPair; ZONE_SAMPLES / 2],
     sector_x2: [[CsPair; SECTOR_OFFSETS.len() / 2]; 12],
 }
 
@@ -358,10 +379,12 @@ impl Default for RingTables {
             zone: [(0.0, 0.0); ZONE_SAMPLES],
             bright: [(0.0, 0.0); 8],
             sector: [[(0.0, 0.0); SECTOR_OFFSETS.len()]; 12],
-            phase_first: [zero; PHASE_SAMPLES / 6],
-            phase_rest: [zero; PHASE_SAMPLES / 3],
-            zone_x2: [zero; ZONE_SAMPLES / 2],
+            phase_first: [zero; HALF / 3],
+            phase_rest: [zero; 2 * HALF / 3],
+            phase_deg: [f64x2::ZERO; HALF],
             bright_x2: [zero; 4],
+            gap_x2: [zero; ZONE_SAMPLES / 2],
+            quiet_x2: [zero; ZONE_SAMPLES / 2],
             sector_x2: [[zero; SECTOR_OFFSETS.len() / 2]; 12],
         };
         for (j, v) in t.phase.iter_mut().enumerate() {
@@ -378,15 +401,23 @@ impl Default for RingTables {
                 *v = cs(15.0 + 30.0 * k as f64 + d);
             }
         }
-        let first: Vec<_> = t.phase.iter().copied().step_by(3).collect();
-        t.phase_first = pairs(&first);
-        let rest: Vec<_> = (0..PHASE_SAMPLES)
-            .filter(|j| j % 3 != 0)
-            .map(|j| t.phase[j])
-            .collect();
-        t.phase_rest = pairs(&rest);
-        t.zone_x2 = pairs(&t.zone);
-        t.bright_x2 = pairs(&t.bright);
+        let [middle, gap, quiet] = [RING_RADII[0], ZONE_RADII[0], ZONE_RADII[1]];
+        let half_turn = |i: usize| {
+            let ((c0, s0), (c1, s1)) = (t.phase[i], t.phase[i + HALF]);
+            offsets(middle, (f64x2::new([c0, c1]), f64x2::new([s0, s1])))
+        };
+        for c in 0..HALF / 3 {
+            t.phase_first[c] = half_turn(3 * c);
+            t.phase_rest[2 * c] = half_turn(3 * c + 1);
+            t.phase_rest[2 * c + 1] = half_turn(3 * c + 2);
+        }
+        for (i, v) in t.phase_deg.iter_mut().enumerate() {
+            let deg = |j: usize| j as f64 * (360.0 / PHASE_SAMPLES as f64);
+            *v = f64x2::new([deg(i), deg(i + HALF)]);
+        }
+        t.bright_x2 = pairs::<4>(&t.bright).map(|cs| offsets(0.3, cs));
+        t.gap_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(gap, cs));
+        t.quiet_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(quiet, cs));
         for (x2, row) in t.sector_x2.iter_mut().zip(&t.sector) {
             *x2 = pairs(row);
         }
@@ -403,36 +434,39 @@ where
     (ca * cb - sa * sb, sa * cb + ca * sb)
 }
 
-/// The values at `f.point_cs(k, cs)` for the angles of `cs`, two at a time
-/// into `out` (lane `l` of `out[i]` from lane `l` of `cs[i]`), for a ring
-/// that lies inside the window ([`Sampler`]'s `inside`). Each lane does the
-/// scalar [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations
-/// in the same order: the values are theirs bit for bit, in fewer
-/// instructions (the arithmetic of two samples in one vector operation).
+/// The values at the plate offsets `xy` (two at a time, lane `l` of
+/// element `i` into lane `l` of `out(i, _)`) for a ring clear of the
+/// window's edges ([`Sampler`]'s `clear`). Each lane does the scalar
+/// [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations in
+/// the same order: the values are theirs bit for bit, in fewer
+/// instructions (the arithmetic of two samples in one vector operation,
+/// no clamping of the cells).
 #[inline(always)]
-fn circle_inside<P: Pixel>(
+fn circle<P: Pixel>(
     plane: &Plane<'_, P>,
     f: &RingFrame,
-    k: f64,
-    cs: &[CsPair],
-    out: &mut [f64x2],
+    xy: impl IntoIterator<Item = XyPair>,
+    mut out: impl FnMut(usize, f64x2),
 ) {
-    let (kc, ks) = (f64x2::splat(k), f64x2::splat(-k));
     let (col, row) = (f64x2::splat(f.col), f64x2::splat(f.row));
     let [e0, e1, e2] = f.e.map(f64x2::splat);
-    for (&(c, s), v) in cs.iter().zip(out) {
-        let (x, y) = (kc * c, ks * s);
-        *v = plane.bilinear_inside_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y);
+    for (i, (x, y)) in xy.into_iter().enumerate() {
+        out(
+            i,
+            plane.bilinear_clear_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y),
+        );
     }
 }
 
 /// Bilinear sampling for one ring: when the whole target (out to its
-/// quiet zone) lies inside the image, every sample skips the range checks
-/// (and whole circles of samples go two at a time, [`circle_inside`]).
-/// `FAST` off: one sample at a time even then (the reference for tests).
+/// quiet zone) lies inside the image, every sample skips the range checks;
+/// when it lies half a pixel clear of the image's edges, whole circles of
+/// samples go two at a time ([`circle`]). `FAST` off: one sample at a time
+/// even then (the reference for tests).
 struct Sampler<'p, 'a, P, const FAST: bool> {
     plane: &'p Plane<'a, P>,
     inside: bool,
+    clear: bool,
 }
 
 impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
@@ -445,19 +479,25 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
         // (Full-frame coordinates: the window's first and last centres.)
         let (c0, r0) = (plane.col0 as f64, plane.row0 as f64);
         let (c1, r1) = (plane.last_col() as f64, plane.last_row() as f64);
-        let inside = plane.width >= 2
-            && plane.height >= 2
-            && f.col - hx >= c0
-            && f.row - hy >= r0
-            && f.col + hx <= c1
-            && f.row + hy <= r1;
-        Sampler { plane, inside }
+        let within = |margin: f64| {
+            plane.width >= 2
+                && plane.height >= 2
+                && f.col - hx >= c0 + margin
+                && f.row - hy >= r0 + margin
+                && f.col + hx <= c1 - margin
+                && f.row + hy <= r1 - margin
+        };
+        Sampler {
+            plane,
+            inside: within(0.0),
+            clear: within(0.5),
+        }
     }
 
-    /// Whether whole circles go through [`circle_inside`].
+    /// Whether whole circles go through [`circle`].
     #[inline(always)]
     fn fast(&self) -> bool {
-        FAST && self.inside
+        FAST && self.clear
     }
 
     #[inline(always)]
@@ -470,8 +510,9 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
     }
 }
 
-/// Samples the ring's middle at phase angle `j` into `ring[j]`; whether it
-/// is bright, `None` outside the image.
+/// Samples the ring's middle at phase angle `j` into its place in `ring`
+/// (lane `j / 36` of element `j % 36`); whether it is bright, `None`
+/// outside the image.
 #[inline(always)]
 fn phase_sample<P: Pixel, const FAST: bool>(
     plane: &Sampler<'_, '_, P, FAST>,
@@ -479,36 +520,38 @@ fn phase_sample<P: Pixel, const FAST: bool>(
     tables: &RingTables,
     thr: f64,
     j: usize,
-    ring: &mut [f64; PHASE_SAMPLES],
+    ring: &mut [f64x2; HALF],
 ) -> Option<bool> {
-    let (x, y) = f.point_cs(2.5, tables.phase[j]);
+    let (x, y) = f.point_cs(RING_RADII[0], tables.phase[j]);
     plane.at(x, y).map(|v| {
-        ring[j] = v;
+        ring[j % HALF].as_array_mut()[j / HALF] = v;
         v > thr
     })
 }
 
+/// The mean and the largest of the samples of a dark zone at radius `k`
+/// (`xy`: its plate offsets for [`circle`]); `None` if one is outside.
 fn zone<P: Pixel, const FAST: bool>(
     plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     k: f64,
+    xy: &[XyPair; ZONE_SAMPLES / 2],
     tables: &RingTables,
 ) -> Option<(f64, f64)> {
     let mut sum = 0.0;
     let mut max = f64::MIN;
     if plane.fast() {
-        let mut v = [f64x2::ZERO; ZONE_SAMPLES / 2];
-        circle_inside(plane.plane, f, k, &tables.zone_x2, &mut v);
-        // In the samples' order, as below.
-        for v in &v {
-            for v in v.to_array() {
-                sum += v;
-                if v > max {
-                    max = v;
-                }
-            }
-        }
-        return Some((sum / ZONE_SAMPLES as f64, max));
+        // The sum in the samples' order, as below; the largest lane by
+        // lane (no sample is NaN or −0: the same value).
+        let mut max2 = f64x2::splat(f64::MIN);
+        circle(plane.plane, f, xy.iter().copied(), |_, v| {
+            let [a, b] = v.to_array();
+            sum += a;
+            sum += b;
+            max2 = v.fast_max(max2);
+        });
+        let [a, b] = max2.to_array();
+        return Some((sum / ZONE_SAMPLES as f64, a.max(b)));
     }
     for &cs in &tables.zone {
         let (x, y) = f.point_cs(k, cs);
@@ -519,6 +562,77 @@ fn zone<P: Pixel, const FAST: bool>(
         }
     }
     Some((sum / ZONE_SAMPLES as f64, max))
+}
+
+/// The 12th harmonic of the transitions' strength around the ring (`ring`
+/// as [`HALF`] lays it out): `(re, im, total)` of `g_j = |ring[j + 1] −
+/// ring[j]|` weighted by `(cos, sin)` of `(j + 0.5) × 60°`, summed in the
+/// order `j = 0 … 71` (the differences two at a time, `re` and `im` in one
+/// lane pair: the same operations as one at a time).
+fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
+    let mut g = [f64x2::ZERO; HALF];
+    for (g, w) in g.iter_mut().zip(ring.windows(2)) {
+        *g = (w[1] - w[0]).abs();
+    }
+    // Samples 35 → 36 and 71 → 0.
+    let [first, opposite] = ring[0].to_array();
+    g[HALF - 1] = (f64x2::new([opposite, first]) - ring[HALF - 1]).abs();
+    // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles (36 is a
+    // multiple of 6, so lane 1 repeats lane 0's).
+    let h = HARMONIC.map(|(c, s)| f64x2::new([c, s]));
+    let (mut re_im, mut total) = (f64x2::ZERO, 0.0);
+    for lane in 0..2 {
+        for g in g.chunks_exact(6) {
+            for (g, &h) in g.iter().zip(&h) {
+                let g = g.as_array_ref()[lane];
+                re_im += f64x2::splat(g) * h;
+                total += g;
+            }
+        }
+    }
+    let [re, im] = re_im.to_array();
+    (re, im, total)
+}
+
+/// Whether every phase sample (`ring` as [`HALF`] lays it out) clear of a
+/// sector boundary agrees with its sector's bit in `raw`, the boundary at
+/// `boundary_deg`. Two samples at a time, each lane with the scalar's
+/// operations: the angle from the boundary `rel = (t − boundary) mod 360`
+/// (the offset lies within (−30°, 390°)), its sector `q = ⌊rel / 30⌋` (the
+/// nearest integer by adding 2⁵², one less if above) and the remainder
+/// `rel − 30 q`, all exact as one at a time.
+fn phase_agrees(
+    ring: &[f64x2; HALF],
+    phase_deg: &[f64x2; HALF],
+    boundary_deg: f64,
+    raw: u16,
+    thr: f64,
+) -> bool {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    let splat = f64x2::splat;
+    let (b, thr) = (splat(boundary_deg), splat(thr));
+    let (full, thirty, one, magic) = (splat(360.0), splat(30.0), splat(1.0), splat(TWO_52));
+    let (lo, hi) = (splat(EDGE_CLEARANCE), splat(30.0 - EDGE_CLEARANCE));
+    // The bit of sector `q % 12` as a lane mask, for `q` up to 12 (and 15).
+    let bits: [f64; 16] = std::array::from_fn(|q| {
+        f64::from_bits(0u64.wrapping_sub(((raw >> (11 - q % 12)) & 1) as u64))
+    });
+    let mut bad = f64x2::ZERO;
+    for (&v, &t) in ring.iter().zip(phase_deg) {
+        let d = t - b;
+        // `d + 360`, `d − 360` or `d + 0` (which is `d`: `d` is never −0).
+        let turn = (d.cmp_lt(f64x2::ZERO) & full) | (d.cmp_ge(full) & -full);
+        let rel = d + turn;
+        let x = rel / thirty;
+        let nearest = (x + magic) - magic;
+        let q = nearest - (nearest.cmp_gt(x) & one);
+        let within = rel - thirty * q;
+        let clear = within.cmp_ge(lo) & within.cmp_le(hi);
+        let [qa, qb] = (q + magic).to_array().map(|v| v.to_bits() as usize & 15);
+        let bit = f64x2::new([bits[qa], bits[qb]]);
+        bad |= clear & (bit ^ v.cmp_gt(thr));
+    }
+    bad.move_mask() == 0
 }
 
 /// Reads the ring around a dot.
@@ -556,13 +670,11 @@ fn read_with<P: Pixel, const FAST: bool>(
         None => return out,
     };
     if plane.fast() {
-        let mut v = [f64x2::ZERO; 4];
-        circle_inside(plane.plane, f, 0.3, &tables.bright_x2, &mut v);
-        for v in &v {
+        circle(plane.plane, f, tables.bright_x2.iter().copied(), |_, v| {
             let [a, b] = v.to_array();
             bright += a;
             bright += b;
-        }
+        });
     } else {
         for &cs in &tables.bright {
             let (x, y) = f.point_cs(0.3, cs);
@@ -573,7 +685,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         }
     }
     bright /= 9.0;
-    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], tables) else {
+    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], &tables.gap_x2, tables) else {
         return out;
     };
     out.bright = bright;
@@ -588,50 +700,57 @@ fn read_with<P: Pixel, const FAST: bool>(
     let thr = dark + 0.5 * contrast;
     // Presence and phase: the ring's middle every 5°, first every 15° (at
     // least one sample in the middle half of every sector).
-    let mut ring = [0.0f64; PHASE_SAMPLES];
-    let mut n_bright = 0;
+    let mut ring = [f64x2::ZERO; HALF];
+    // The count of bright samples as a float (exact), two lanes at a time
+    // on the fast path (1.0 per lane that is).
+    let mut n_bright = 0.0;
     let mut outside = false;
-    let sample =
-        |j: usize, ring: &mut [f64; PHASE_SAMPLES]| phase_sample(plane, f, tables, thr, j, ring);
+    let sample = |j: usize, ring: &mut [f64x2; HALF]| phase_sample(plane, f, tables, thr, j, ring);
+    let (thr2, one) = (f64x2::splat(thr), f64x2::splat(1.0));
+    let count = |n: f64x2| {
+        let [a, b] = n.to_array();
+        a + b
+    };
     if plane.fast() {
-        let mut v = [f64x2::ZERO; PHASE_SAMPLES / 6];
-        circle_inside(plane.plane, f, 2.5, &tables.phase_first, &mut v);
-        for (j, v) in v.iter().enumerate() {
-            let [a, b] = v.to_array();
-            ring[6 * j] = a;
-            ring[6 * j + 3] = b;
-            n_bright += (a > thr) as usize + (b > thr) as usize;
-        }
+        let mut n = f64x2::ZERO;
+        circle(
+            plane.plane,
+            f,
+            tables.phase_first.iter().copied(),
+            |c, v| {
+                ring[3 * c] = v;
+                n += v.cmp_gt(thr2) & one;
+            },
+        );
+        n_bright = count(n);
     } else {
         for j in (0..PHASE_SAMPLES).step_by(3) {
             match sample(j, &mut ring) {
-                Some(b) => n_bright += b as usize,
+                Some(b) => n_bright += b as u8 as f64,
                 None => outside = true,
             }
         }
     }
-    if n_bright > 0 {
+    if n_bright > 0.0 {
         if plane.fast() {
-            let mut v = [f64x2::ZERO; PHASE_SAMPLES / 3];
-            circle_inside(plane.plane, f, 2.5, &tables.phase_rest, &mut v);
-            for (j, v) in v.iter().enumerate() {
-                let [a, b] = v.to_array();
-                ring[3 * j + 1] = a;
-                ring[3 * j + 2] = b;
-                n_bright += (a > thr) as usize + (b > thr) as usize;
-            }
+            let mut n = f64x2::ZERO;
+            circle(plane.plane, f, tables.phase_rest.iter().copied(), |c, v| {
+                ring[3 * (c / 2) + 1 + c % 2] = v;
+                n += v.cmp_gt(thr2) & one;
+            });
+            n_bright += count(n);
         } else {
             for j in 0..PHASE_SAMPLES / 3 {
                 for j in [3 * j + 1, 3 * j + 2] {
                     match sample(j, &mut ring) {
-                        Some(b) => n_bright += b as usize,
+                        Some(b) => n_bright += b as u8 as f64,
                         None => outside = true,
                     }
                 }
             }
         }
     }
-    out.ring_present = n_bright >= 2;
+    out.ring_present = n_bright >= 2.0;
     let dark_limit = dark + params.dark_tolerance * contrast;
     if gap_max > dark_limit {
         out.gap = Gap::NotDark;
@@ -654,7 +773,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
-    match zone(plane, f, ZONE_RADII[1], tables) {
+    match zone(plane, f, ZONE_RADII[1], &tables.quiet_x2, tables) {
         None => return out,
         Some((_, quiet_max)) if quiet_max > dark_limit => {
             out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);
@@ -663,19 +782,11 @@ fn read_with<P: Pixel, const FAST: bool>(
         Some(_) => {}
     }
     // Sector boundaries: 12th harmonic of the transitions' strength.
-    let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
-    for j in 0..PHASE_SAMPLES {
-        let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
-        // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles.
-        let (c, sn) = HARMONIC[j % 6];
-        re += g * c;
-        im += g * sn;
-        total += g;
-    }
+    let (re, im, total) = harmonic(&ring);
     if total < params.min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
         // A full ring (4095) has no transitions; anything else without a
         // 30° pattern is not a code.
-        out.status = if n_bright == PHASE_SAMPLES {
+        out.status = if n_bright == PHASE_SAMPLES as f64 {
             CodeStatus::NotInField { value: codes::MASK }
         } else {
             CodeStatus::Uncertain(Uncertainty::NoPhase)
@@ -706,11 +817,10 @@ fn read_with<P: Pixel, const FAST: bool>(
                         *t = rotate_cs(a, boundary_x2);
                     }
                 }
-                let mut v = [f64x2::ZERO; SECTOR_OFFSETS.len() / 2];
-                circle_inside(plane.plane, f, k, turned_x2, &mut v);
-                for (s, v) in s.chunks_exact_mut(2).zip(&v) {
-                    s.copy_from_slice(v.as_array_ref());
-                }
+                let xy = turned_x2.iter().map(|&cs| offsets(k, cs));
+                circle(plane.plane, f, xy, |i, v| {
+                    s[2 * i..2 * i + 2].copy_from_slice(v.as_array_ref());
+                });
             } else {
                 if ri == 0 {
                     for (t, &a) in turned.iter_mut().zip(&tables.sector[sector]) {
@@ -756,31 +866,10 @@ fn read_with<P: Pixel, const FAST: bool>(
     // Every phase sample clear of a sector boundary must agree with its
     // sector: catches marks (a bar's shadow) that hide a sector's middle
     // but not its edges.
-    let boundary_deg = boundary / DEG;
-    for (j, &v) in ring.iter().enumerate() {
-        let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
-        debug_assert!(!outside);
-        // `(t − boundary) mod 360` and its remainder modulo 30, exactly
-        // (the offset lies within (−30°, 390°); no libm `fmod`).
-        let d = t - boundary_deg;
-        let rel = if d < 0.0 {
-            d + 360.0
-        } else if d >= 360.0 {
-            d - 360.0
-        } else {
-            d
-        };
-        let q = (rel / 30.0) as u32;
-        let within = rel - 30.0 * q as f64;
-        if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
-            continue;
-        }
-        let sector = q % 12;
-        let bit = (raw >> (11 - sector)) & 1 == 1;
-        if bit != (v > thr) {
-            out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
-            return out;
-        }
+    debug_assert!(!outside);
+    if !phase_agrees(&ring, &tables.phase_deg, boundary / DEG, raw, thr) {
+        out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
+        return out;
     }
     out.raw = raw;
     let value = codes::canonical(raw);
@@ -809,13 +898,14 @@ mod tests {
     }
 
     /// Reads the ring in `f` both ways and checks the readings agree bit
-    /// for bit; the reading, and whether whole circles went two at a time.
+    /// for bit; the reading, whether whole circles went two at a time, and
+    /// whether the ring was inside the window but not clear of its edges.
     fn read_both<P: Pixel>(
         plane: &Plane<P>,
         f: &RingFrame,
         params: &CodeParams,
         tables: &RingTables,
-    ) -> (Reading, bool) {
+    ) -> (Reading, bool, bool) {
         let accepted = CodeSet::all();
         let fast = read_with::<P, true>(plane, f, params, &accepted, tables);
         let one = read_with::<P, false>(plane, f, params, &accepted, tables);
@@ -826,14 +916,15 @@ mod tests {
         );
         assert_eq!(fast.bright.to_bits(), one.bright.to_bits(), "{f:?}");
         assert_eq!(fast.dark.to_bits(), one.dark.to_bits(), "{f:?}");
-        (fast, Sampler::<P, true>::new(plane, f).inside)
+        let s = Sampler::<P, true>::new(plane, f);
+        (fast, s.clear, s.inside && !s.clear)
     }
 
     /// Whole circles of samples two at a time read every ring exactly as
     /// one sample at a time: coded targets and dots under tilted views,
     /// frames off their centres and of other sizes, and frames anywhere
-    /// (wholly inside, near and across the window's edges); 8 and 16 bits,
-    /// the whole frame and a window.
+    /// (wholly inside, near and across the window's edges, within half a
+    /// pixel of them); 8 and 16 bits, the whole frame and a window.
     #[test]
     fn circles_two_at_a_time_read_as_one_at_a_time() {
         use crate::testutil::{window, Drawn, Rng, Scene, View};
@@ -907,9 +998,33 @@ mod tests {
             let b = rng.range(-0.9, 0.9) * (a * c).sqrt();
             frames.push(RingFrame::from_moments(col, row, a, c, b).unwrap());
         }
-        let (mut read, mut fast, mut slow) = (0, 0, 0);
+        // Frames whose quiet zone ends just inside (or just outside) the
+        // margin of the fast path, half a pixel from the window's edges.
+        for k in 0..40 {
+            let (cxx, cyy) = (rng.range(2.0, 5.0), rng.range(2.0, 5.0));
+            let cxy = rng.range(-0.5, 0.5) * (cxx * cyy).sqrt();
+            let probe = RingFrame::from_moments(0.0, 0.0, cxx, cyy, cxy).unwrap();
+            let k3 = ZONE_RADII[1];
+            let [a, b, c] = probe.e;
+            let (hx, hy) = (k3 * (a * a + b * b).sqrt(), k3 * (b * b + c * c).sqrt());
+            let d = [0.0, 0.25, 0.5, 0.5 + 1e-9, 0.75][k % 5] + rng.range(-1e-6, 1e-6);
+            let (col, row) = match k / 5 % 4 {
+                0 => (d + hx, rng.range(hy + 1.0, h as f64 - hy - 1.0)),
+                1 => (
+                    w as f64 - 1.0 - d - hx,
+                    rng.range(hy + 1.0, h as f64 - hy - 1.0),
+                ),
+                2 => (rng.range(hx + 1.0, w as f64 - hx - 1.0), d + hy),
+                _ => (
+                    rng.range(hx + 1.0, w as f64 - hx - 1.0),
+                    h as f64 - 1.0 - d - hy,
+                ),
+            };
+            frames.push(RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap());
+        }
+        let (mut read, mut fast, mut slow, mut near) = (0, 0, 0, 0);
         for f in &frames {
-            for (reading, inside) in [
+            for (reading, inside, edge) in [
                 read_both(&Plane::whole(&px8, w, h), f, &params, &tables),
                 read_both(&window(&px8, w, (13, 7, 170, 121)), f, &params, &tables),
                 read_both(&Plane::whole(&px16, w, h), f, &params, &tables),
@@ -918,12 +1033,119 @@ mod tests {
                 read += matches!(reading.status, CodeStatus::Read { .. }) as usize;
                 fast += inside as usize;
                 slow += !inside as usize;
+                near += edge as usize;
             }
         }
         assert!(
-            read > 40 && fast > 200 && slow > 200,
-            "{read} {fast} {slow}"
+            read > 40 && fast > 200 && slow > 200 && near > 30,
+            "{read} {fast} {slow} {near}"
         );
+    }
+
+    /// The ring's middle laid out two to a lane pair ([`HALF`]).
+    fn halves(ring: &[f64; PHASE_SAMPLES]) -> [f64x2; HALF] {
+        std::array::from_fn(|i| f64x2::new([ring[i], ring[i + HALF]]))
+    }
+
+    /// [`harmonic`] one sample at a time (the reference).
+    fn harmonic_plain(ring: &[f64; PHASE_SAMPLES]) -> (f64, f64, f64) {
+        let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
+        for j in 0..PHASE_SAMPLES {
+            let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
+            let (c, sn) = HARMONIC[j % 6];
+            re += g * c;
+            im += g * sn;
+            total += g;
+        }
+        (re, im, total)
+    }
+
+    /// [`phase_agrees`] one sample at a time (the reference).
+    fn phase_agrees_plain(
+        ring: &[f64; PHASE_SAMPLES],
+        boundary_deg: f64,
+        raw: u16,
+        thr: f64,
+    ) -> bool {
+        for (j, &v) in ring.iter().enumerate() {
+            let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
+            let d = t - boundary_deg;
+            let rel = if d < 0.0 {
+                d + 360.0
+            } else if d >= 360.0 {
+                d - 360.0
+            } else {
+                d
+            };
+            let q = (rel / 30.0) as u32;
+            let within = rel - 30.0 * q as f64;
+            if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
+                continue;
+            }
+            let sector = q % 12;
+            let bit = (raw >> (11 - sector)) & 1 == 1;
+            if bit != (v > thr) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The harmonic and the check of the phase samples against their
+    /// sectors two at a time equal one at a time: rings drawn from codes
+    /// with blurred and noisy edges (and some flat or random ones), the
+    /// code read and others, boundaries anywhere in ±15° and on the edges
+    /// of the clearance and of the turn (±0, tiny, whole degrees).
+    #[test]
+    fn harmonic_and_phase_check_two_at_a_time_equal_one_at_a_time() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(17);
+        let tables = RingTables::default();
+        let (mut agree, mut disagree) = (0, 0);
+        for round in 0..3000 {
+            let raw = (rng.range(0.0, 4096.0) as u16).min(codes::MASK);
+            let boundary = match round % 4 {
+                0 => rng.range(-15.0, 15.0),
+                1 => [
+                    0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
+                ][round / 4 % 12],
+                2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
+                _ => rng.range(-1.0, 1.0),
+            };
+            let ring: [f64; PHASE_SAMPLES] = std::array::from_fn(|j| {
+                let t = j as f64 * 5.0 - boundary;
+                let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
+                let lit = (raw >> (11 - sector)) & 1 == 1;
+                match round % 7 {
+                    0 => rng.range(0.0, 255.0),
+                    1 => 40.0,
+                    2 => {
+                        if lit {
+                            200.0
+                        } else {
+                            20.0
+                        }
+                    }
+                    _ => (if lit { 200.0 } else { 20.0 }) + rng.range(-30.0, 30.0),
+                }
+            });
+            let thr = [110.0, rng.range(0.0, 255.0), 40.0, 200.0][round % 4];
+            let h = harmonic(&halves(&ring));
+            let want = harmonic_plain(&ring);
+            assert_eq!(
+                [h.0, h.1, h.2].map(f64::to_bits),
+                [want.0, want.1, want.2].map(f64::to_bits),
+                "{round}"
+            );
+            for raw in [raw, raw ^ 1, raw ^ 0x800, !raw & codes::MASK] {
+                let want = phase_agrees_plain(&ring, boundary, raw, thr);
+                let got = phase_agrees(&halves(&ring), &tables.phase_deg, boundary, raw, thr);
+                assert_eq!(got, want, "{round} {raw} {boundary}");
+                agree += want as usize;
+                disagree += !want as usize;
+            }
+        }
+        assert!(agree > 500 && disagree > 1000, "{agree} {disagree}");
     }
 
     #[test]
