@@ -26,7 +26,7 @@
 //!    of the canonical value; ids that the field does not carry as coded
 //!    targets are not accepted.
 
-use crate::pixel::{Pixel, Plane};
+use crate::pixel::{Cells, Pixel, Plane};
 use photopose_field::{codes, Field, TargetKind};
 use wide::{f64x2, CmpGe, CmpGt, CmpLe, CmpLt};
 
@@ -324,6 +324,9 @@ type CsPair = (f64x2, f64x2);
 /// (the same products).
 type XyPair = (f64x2, f64x2);
 
+/// The classification samples of all sectors, two to a lane pair.
+const SECTOR_PAIRS: usize = 12 * SECTOR_OFFSETS.len() / 2;
+
 /// Half the phase samples: the ring's middle is kept two to a lane pair,
 /// samples `i` and `i + 36` (half a turn on) in element `i`.
 const HALF: usize = PHASE_SAMPLES / 2;
@@ -364,7 +367,9 @@ pub struct RingTables {
     bright_x2: [XyPair; 4],
     gap_x2: [XyPair; ZONE_SAMPLES / 2],
     quiet_x2: [XyPair; ZONE_SAMPLES / 2],
-    sector_x2: [[CsPair; SECTOR_OFFSETS.len() / 2]; 12],
+    /// The sector angles two to a lane pair, sector `k` in elements `3k`
+    /// to `3k + 2`.
+    sector_x2: [CsPair; SECTOR_PAIRS],
 }
 
 impl Default for RingTables {
@@ -385,7 +390,7 @@ impl Default for RingTables {
             bright_x2: [zero; 4],
             gap_x2: [zero; ZONE_SAMPLES / 2],
             quiet_x2: [zero; ZONE_SAMPLES / 2],
-            sector_x2: [[zero; SECTOR_OFFSETS.len() / 2]; 12],
+            sector_x2: [zero; SECTOR_PAIRS],
         };
         for (j, v) in t.phase.iter_mut().enumerate() {
             *v = cs(j as f64 * (360.0 / PHASE_SAMPLES as f64));
@@ -418,9 +423,8 @@ impl Default for RingTables {
         t.bright_x2 = pairs::<4>(&t.bright).map(|cs| offsets(0.3, cs));
         t.gap_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(gap, cs));
         t.quiet_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(quiet, cs));
-        for (x2, row) in t.sector_x2.iter_mut().zip(&t.sector) {
-            *x2 = pairs(row);
-        }
+        let sector: Vec<_> = t.sector.iter().flatten().copied().collect();
+        t.sector_x2 = pairs(&sector);
         t
     }
 }
@@ -436,14 +440,14 @@ where
 
 /// The values at the plate offsets `xy` (two at a time, lane `l` of
 /// element `i` into lane `l` of `out(i, _)`) for a ring clear of the
-/// window's edges ([`Sampler`]'s `clear`). Each lane does the scalar
+/// window's edges ([`Sampler`]'s `cells`). Each lane does the scalar
 /// [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations in
 /// the same order: the values are theirs bit for bit, in fewer
 /// instructions (the arithmetic of two samples in one vector operation,
-/// no clamping of the cells).
+/// no clamping of the cells, no range checks).
 #[inline(always)]
 fn circle<P: Pixel>(
-    plane: &Plane<'_, P>,
+    cells: &Cells<'_, P>,
     f: &RingFrame,
     xy: impl IntoIterator<Item = XyPair>,
     mut out: impl FnMut(usize, f64x2),
@@ -453,7 +457,7 @@ fn circle<P: Pixel>(
     for (i, (x, y)) in xy.into_iter().enumerate() {
         out(
             i,
-            plane.bilinear_clear_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y),
+            cells.bilinear_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y),
         );
     }
 }
@@ -461,12 +465,13 @@ fn circle<P: Pixel>(
 /// Bilinear sampling for one ring: when the whole target (out to its
 /// quiet zone) lies inside the image, every sample skips the range checks;
 /// when it lies half a pixel clear of the image's edges, whole circles of
-/// samples go two at a time ([`circle`]). `FAST` off: one sample at a time
-/// even then (the reference for tests).
+/// samples go two at a time ([`circle`]) from the cells of its box
+/// ([`Plane::cells`]). `FAST` off: one sample at a time even then (the
+/// reference for tests).
 struct Sampler<'p, 'a, P, const FAST: bool> {
     plane: &'p Plane<'a, P>,
     inside: bool,
-    clear: bool,
+    cells: Option<Cells<'a, P>>,
 }
 
 impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
@@ -487,17 +492,27 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
                 && f.col + hx <= c1 - margin
                 && f.row + hy <= r1 - margin
         };
+        // Half a pixel clear of the edges, the cells' corners (`v − 0.5`
+        // rounded: `⌊v⌋ − 1` or `⌊v⌋`) lie in the box from one before
+        // the farthest reach's to its own, inside the window short of its
+        // last column and row.
+        let corner = |v: f64, first: usize| ((v.floor() as usize).saturating_sub(1)).max(first);
+        let cells = (FAST && within(0.5))
+            .then(|| {
+                plane.cells(
+                    (
+                        corner(f.col - hx, plane.col0),
+                        corner(f.row - hy, plane.row0),
+                    ),
+                    ((f.col + hx).floor() as usize, (f.row + hy).floor() as usize),
+                )
+            })
+            .flatten();
         Sampler {
             plane,
             inside: within(0.0),
-            clear: within(0.5),
+            cells,
         }
-    }
-
-    /// Whether whole circles go through [`circle`].
-    #[inline(always)]
-    fn fast(&self) -> bool {
-        FAST && self.clear
     }
 
     #[inline(always)]
@@ -540,11 +555,11 @@ fn zone<P: Pixel, const FAST: bool>(
 ) -> Option<(f64, f64)> {
     let mut sum = 0.0;
     let mut max = f64::MIN;
-    if plane.fast() {
+    if let Some(cells) = &plane.cells {
         // The sum in the samples' order, as below; the largest lane by
         // lane (no sample is NaN or −0: the same value).
         let mut max2 = f64x2::splat(f64::MIN);
-        circle(plane.plane, f, xy.iter().copied(), |_, v| {
+        circle(cells, f, xy.iter().copied(), |_, v| {
             let [a, b] = v.to_array();
             sum += a;
             sum += b;
@@ -635,6 +650,36 @@ fn phase_agrees(
     bad.move_mask() == 0
 }
 
+/// A sector's bit from its six samples (`s`: two to a lane pair, in
+/// order): its mean must be `margins.0` clear of the threshold, each
+/// sample `margins.1` clear of it on the mean's side (the smallest or the
+/// largest sample against one bound, the same comparisons as each sample:
+/// no sample is NaN).
+#[inline(always)]
+fn classify(
+    s: &[f64x2; 3],
+    thr: f64,
+    (margin, sample_margin): (f64, f64),
+) -> Result<bool, Uncertainty> {
+    let (a, b, c) = (s[0].to_array(), s[1].to_array(), s[2].to_array());
+    let mean = (a[0] + a[1] + b[0] + b[1] + c[0] + c[1]) / SECTOR_OFFSETS.len() as f64;
+    if (mean - thr).abs() < margin {
+        return Err(Uncertainty::MarginalSector);
+    }
+    let bit = mean > thr;
+    let off_side = if bit {
+        let [x, y] = s[0].fast_min(s[1]).fast_min(s[2]).to_array();
+        x.min(y) < thr + sample_margin
+    } else {
+        let [x, y] = s[0].fast_max(s[1]).fast_max(s[2]).to_array();
+        x.max(y) > thr - sample_margin
+    };
+    if off_side {
+        return Err(Uncertainty::SectorDisagrees);
+    }
+    Ok(bit)
+}
+
 /// Reads the ring around a dot.
 pub fn read<P: Pixel>(
     plane: &Plane<P>,
@@ -669,8 +714,8 @@ fn read_with<P: Pixel, const FAST: bool>(
         Some(v) => v,
         None => return out,
     };
-    if plane.fast() {
-        circle(plane.plane, f, tables.bright_x2.iter().copied(), |_, v| {
+    if let Some(cells) = &plane.cells {
+        circle(cells, f, tables.bright_x2.iter().copied(), |_, v| {
             let [a, b] = v.to_array();
             bright += a;
             bright += b;
@@ -711,17 +756,12 @@ fn read_with<P: Pixel, const FAST: bool>(
         let [a, b] = n.to_array();
         a + b
     };
-    if plane.fast() {
+    if let Some(cells) = &plane.cells {
         let mut n = f64x2::ZERO;
-        circle(
-            plane.plane,
-            f,
-            tables.phase_first.iter().copied(),
-            |c, v| {
-                ring[3 * c] = v;
-                n += v.cmp_gt(thr2) & one;
-            },
-        );
+        circle(cells, f, tables.phase_first.iter().copied(), |c, v| {
+            ring[3 * c] = v;
+            n += v.cmp_gt(thr2) & one;
+        });
         n_bright = count(n);
     } else {
         for j in (0..PHASE_SAMPLES).step_by(3) {
@@ -732,9 +772,9 @@ fn read_with<P: Pixel, const FAST: bool>(
         }
     }
     if n_bright > 0.0 {
-        if plane.fast() {
+        if let Some(cells) = &plane.cells {
             let mut n = f64x2::ZERO;
-            circle(plane.plane, f, tables.phase_rest.iter().copied(), |c, v| {
+            circle(cells, f, tables.phase_rest.iter().copied(), |c, v| {
                 ring[3 * (c / 2) + 1 + c % 2] = v;
                 n += v.cmp_gt(thr2) & one;
             });
@@ -802,59 +842,47 @@ fn read_with<P: Pixel, const FAST: bool>(
     // The sample angles turned to the ring's phase: at the middle radius,
     // then reused at the inner and outer ones.
     let mut turned = [[(0.0f64, 0.0f64); SECTOR_OFFSETS.len()]; 12];
-    // The same two to a lane pair.
-    let mut turned_x2 = [[(f64x2::ZERO, f64x2::ZERO); SECTOR_OFFSETS.len() / 2]; 12];
-    let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
+    // The same two to a lane pair, all sectors (whole circles two at a
+    // time: every sample of a radius, then its sectors in order).
+    let mut turned_x2 = [(f64x2::ZERO, f64x2::ZERO); SECTOR_PAIRS];
+    if plane.cells.is_some() {
+        let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
+        for (t, &a) in turned_x2.iter_mut().zip(&tables.sector_x2) {
+            *t = rotate_cs(a, boundary_x2);
+        }
+    }
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
-        let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
+        let margins = (base_margin * relax, base_sample_margin * relax);
         let mut word = 0u16;
-        for (sector, (turned, turned_x2)) in turned.iter_mut().zip(&mut turned_x2).enumerate() {
-            let mut s = [0.0f64; SECTOR_OFFSETS.len()];
-            if plane.fast() {
-                if ri == 0 {
-                    for (t, &a) in turned_x2.iter_mut().zip(&tables.sector_x2[sector]) {
-                        *t = rotate_cs(a, boundary_x2);
-                    }
-                }
-                let xy = turned_x2.iter().map(|&cs| offsets(k, cs));
-                circle(plane.plane, f, xy, |i, v| {
-                    s[2 * i..2 * i + 2].copy_from_slice(v.as_array_ref());
-                });
-            } else {
+        let mut s = [f64x2::ZERO; SECTOR_PAIRS];
+        if let Some(cells) = &plane.cells {
+            let xy = turned_x2.iter().map(|&cs| offsets(k, cs));
+            circle(cells, f, xy, |i, v| s[i] = v);
+        }
+        let (sectors, _) = s.as_chunks_mut::<3>();
+        for (sector, (turned, s)) in turned.iter_mut().zip(sectors).enumerate() {
+            if plane.cells.is_none() {
                 if ri == 0 {
                     for (t, &a) in turned.iter_mut().zip(&tables.sector[sector]) {
                         *t = rotate_cs(a, boundary_cs);
                     }
                 }
-                for (v, &cs) in s.iter_mut().zip(turned.iter()) {
+                for (i, &cs) in turned.iter().enumerate() {
                     let (x, y) = f.point_cs(k, cs);
                     match plane.at(x, y) {
-                        Some(g) => *v = g,
+                        Some(g) => s[i / 2].as_array_mut()[i % 2] = g,
                         None => return out,
                     }
                 }
             }
-            let mean = s.iter().sum::<f64>() / s.len() as f64;
-            if (mean - thr).abs() < margin {
-                out.status = CodeStatus::Uncertain(Uncertainty::MarginalSector);
-                return out;
+            match classify(s, thr, margins) {
+                Ok(bit) => word = (word << 1) | bit as u16,
+                Err(u) => {
+                    out.status = CodeStatus::Uncertain(u);
+                    return out;
+                }
             }
-            let bit = mean > thr;
-            // Each sample on its sector's side by the margin (the bound
-            // formed once, the same sum as per sample).
-            let off_side = if bit {
-                let low = thr + sample_margin;
-                s.iter().any(|&v| v < low)
-            } else {
-                let high = thr - sample_margin;
-                s.iter().any(|&v| v > high)
-            };
-            if off_side {
-                out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
-                return out;
-            }
-            word = (word << 1) | bit as u16;
         }
         if ri == 0 {
             raw = word;
@@ -917,7 +945,7 @@ mod tests {
         assert_eq!(fast.bright.to_bits(), one.bright.to_bits(), "{f:?}");
         assert_eq!(fast.dark.to_bits(), one.dark.to_bits(), "{f:?}");
         let s = Sampler::<P, true>::new(plane, f);
-        (fast, s.clear, s.inside && !s.clear)
+        (fast, s.cells.is_some(), s.inside && s.cells.is_none())
     }
 
     /// Whole circles of samples two at a time read every ring exactly as
@@ -928,7 +956,8 @@ mod tests {
     #[test]
     fn circles_two_at_a_time_read_as_one_at_a_time() {
         use crate::testutil::{window, Drawn, Rng, Scene, View};
-        let (w, h) = (210usize, 150usize);
+        // (Large enough for the cells of a ring: more than 2¹⁶ pixels.)
+        let (w, h) = (330usize, 210usize);
         let mut scene = Scene::new(w, h, 15.0);
         let mut rng = Rng::new(5);
         let ids: Vec<u64> = codes::even_ids().step_by(11).collect();
@@ -1026,9 +1055,9 @@ mod tests {
         for f in &frames {
             for (reading, inside, edge) in [
                 read_both(&Plane::whole(&px8, w, h), f, &params, &tables),
-                read_both(&window(&px8, w, (13, 7, 170, 121)), f, &params, &tables),
+                read_both(&window(&px8, w, (13, 7, 300, 190)), f, &params, &tables),
                 read_both(&Plane::whole(&px16, w, h), f, &params, &tables),
-                read_both(&window(&px16, w, (2, 31, 201, 95)), f, &params, &tables),
+                read_both(&window(&px16, w, (2, 3, 320, 200)), f, &params, &tables),
             ] {
                 read += matches!(reading.status, CodeStatus::Read { .. }) as usize;
                 fast += inside as usize;
