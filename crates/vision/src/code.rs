@@ -367,8 +367,8 @@ pub struct RingTables {
     bright_x2: [XyPair; 4],
     gap_x2: [XyPair; ZONE_SAMPLES / 2],
     quiet_x2: [XyPair; ZONE_SAMPLES / 2],
-    /// The sector angles two to a lane pair, sector `k` in elements `3k`
-    /// to `3k + 2`.
+    /// The sector angles two to a lane pair: element `6k + i` holds
+    /// sample `i` of sectors `k` and `k + 6` (see [`classify`]).
     sector_x2: [CsPair; SECTOR_PAIRS],
 }
 
@@ -423,8 +423,12 @@ impl Default for RingTables {
         t.bright_x2 = pairs::<4>(&t.bright).map(|cs| offsets(0.3, cs));
         t.gap_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(gap, cs));
         t.quiet_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(quiet, cs));
-        let sector: Vec<_> = t.sector.iter().flatten().copied().collect();
-        t.sector_x2 = pairs(&sector);
+        for (k, x2) in t.sector_x2.chunks_exact_mut(6).enumerate() {
+            for (i, x2) in x2.iter_mut().enumerate() {
+                let ((c0, s0), (c1, s1)) = (t.sector[k][i], t.sector[k + 6][i]);
+                *x2 = (f64x2::new([c0, c1]), f64x2::new([s0, s1]));
+            }
+        }
         t
     }
 }
@@ -650,34 +654,53 @@ fn phase_agrees(
     bad.move_mask() == 0
 }
 
-/// A sector's bit from its six samples (`s`: two to a lane pair, in
-/// order): its mean must be `margins.0` clear of the threshold, each
-/// sample `margins.1` clear of it on the mean's side (the smallest or the
-/// largest sample against one bound, the same comparisons as each sample:
-/// no sample is NaN).
+/// The bits of the 12 sectors from their samples, two sectors to a lane
+/// pair (element `6k + i` holds sample `i` of sectors `k` and `k + 6`), in
+/// reading order (sector 0 most significant); or the first sector (in
+/// order) that is uncertain, and why. A sector's mean must be `margins.0`
+/// clear of the threshold, each sample `margins.1` clear of it on the
+/// mean's side (its smallest or largest sample against one bound: the same
+/// comparisons as each sample, as no sample is NaN). Each lane does the
+/// operations of one sector at a time (the mean summed in the samples'
+/// order).
 #[inline(always)]
 fn classify(
-    s: &[f64x2; 3],
+    s: &[f64x2; SECTOR_PAIRS],
     thr: f64,
     (margin, sample_margin): (f64, f64),
-) -> Result<bool, Uncertainty> {
-    let (a, b, c) = (s[0].to_array(), s[1].to_array(), s[2].to_array());
-    let mean = (a[0] + a[1] + b[0] + b[1] + c[0] + c[1]) / SECTOR_OFFSETS.len() as f64;
-    if (mean - thr).abs() < margin {
-        return Err(Uncertainty::MarginalSector);
+) -> Result<u16, (usize, Uncertainty)> {
+    let splat = f64x2::splat;
+    let (thr2, margin) = (splat(thr), splat(margin));
+    let (low, high) = (splat(thr + sample_margin), splat(thr - sample_margin));
+    let (mut word, mut marginal, mut uncertain) = (0u16, 0u16, 0u16);
+    for (k, v) in s.as_chunks::<6>().0.iter().enumerate() {
+        let mean = (v[0] + v[1] + v[2] + v[3] + v[4] + v[5]) / splat(v.len() as f64);
+        let close = (mean - thr2).abs().cmp_lt(margin);
+        let bit = mean.cmp_gt(thr2);
+        let least = v[0].fast_min(v[1]).fast_min(v[2]).fast_min(v[3]);
+        let most = v[0].fast_max(v[1]).fast_max(v[2]).fast_max(v[3]);
+        let least = least.fast_min(v[4]).fast_min(v[5]);
+        let most = most.fast_max(v[4]).fast_max(v[5]);
+        let off_side = (bit & least.cmp_lt(low)) | (!bit & most.cmp_gt(high));
+        // Lane 0 is sector `k` (bit 11 − k), lane 1 sector `k + 6`.
+        let place = |m: f64x2| {
+            let m = m.move_mask() as u16;
+            (m & 1) << (11 - k) | (m >> 1) << (5 - k)
+        };
+        word |= place(bit);
+        marginal |= place(close);
+        uncertain |= place(close | off_side);
     }
-    let bit = mean > thr;
-    let off_side = if bit {
-        let [x, y] = s[0].fast_min(s[1]).fast_min(s[2]).to_array();
-        x.min(y) < thr + sample_margin
-    } else {
-        let [x, y] = s[0].fast_max(s[1]).fast_max(s[2]).to_array();
-        x.max(y) > thr - sample_margin
-    };
-    if off_side {
-        return Err(Uncertainty::SectorDisagrees);
+    if uncertain != 0 {
+        let first = uncertain.leading_zeros() as usize - 4;
+        let why = if marginal >> (11 - first) & 1 == 1 {
+            Uncertainty::MarginalSector
+        } else {
+            Uncertainty::SectorDisagrees
+        };
+        return Err((first, why));
     }
-    Ok(bit)
+    Ok(word)
 }
 
 /// Reads the ring around a dot.
@@ -842,8 +865,8 @@ fn read_with<P: Pixel, const FAST: bool>(
     // The sample angles turned to the ring's phase: at the middle radius,
     // then reused at the inner and outer ones.
     let mut turned = [[(0.0f64, 0.0f64); SECTOR_OFFSETS.len()]; 12];
-    // The same two to a lane pair, all sectors (whole circles two at a
-    // time: every sample of a radius, then its sectors in order).
+    // The same two to a lane pair as [`classify`] takes them (whole
+    // circles two at a time: every sample of a radius, then its sectors).
     let mut turned_x2 = [(f64x2::ZERO, f64x2::ZERO); SECTOR_PAIRS];
     if plane.cells.is_some() {
         let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
@@ -854,15 +877,15 @@ fn read_with<P: Pixel, const FAST: bool>(
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
         let margins = (base_margin * relax, base_sample_margin * relax);
-        let mut word = 0u16;
         let mut s = [f64x2::ZERO; SECTOR_PAIRS];
+        // One sample at a time, sector by sector: the first sector with a
+        // sample outside the image (12: none).
+        let mut cut = 12;
         if let Some(cells) = &plane.cells {
             let xy = turned_x2.iter().map(|&cs| offsets(k, cs));
             circle(cells, f, xy, |i, v| s[i] = v);
-        }
-        let (sectors, _) = s.as_chunks_mut::<3>();
-        for (sector, (turned, s)) in turned.iter_mut().zip(sectors).enumerate() {
-            if plane.cells.is_none() {
+        } else {
+            'sectors: for (sector, turned) in turned.iter_mut().enumerate() {
                 if ri == 0 {
                     for (t, &a) in turned.iter_mut().zip(&tables.sector[sector]) {
                         *t = rotate_cs(a, boundary_cs);
@@ -871,19 +894,25 @@ fn read_with<P: Pixel, const FAST: bool>(
                 for (i, &cs) in turned.iter().enumerate() {
                     let (x, y) = f.point_cs(k, cs);
                     match plane.at(x, y) {
-                        Some(g) => s[i / 2].as_array_mut()[i % 2] = g,
-                        None => return out,
+                        Some(g) => s[6 * (sector % 6) + i].as_array_mut()[sector / 6] = g,
+                        None => {
+                            cut = sector;
+                            break 'sectors;
+                        }
                     }
                 }
             }
-            match classify(s, thr, margins) {
-                Ok(bit) => word = (word << 1) | bit as u16,
-                Err(u) => {
-                    out.status = CodeStatus::Uncertain(u);
-                    return out;
-                }
-            }
         }
+        // The sectors before the cut are classified as if read in order.
+        let word = match classify(&s, thr, margins) {
+            Err((sector, why)) if sector < cut => {
+                out.status = CodeStatus::Uncertain(why);
+                return out;
+            }
+            Ok(word) if cut == 12 => word,
+            // A sample outside the image before any uncertain sector.
+            _ => return out,
+        };
         if ri == 0 {
             raw = word;
         } else if word != raw {
@@ -1118,6 +1147,86 @@ mod tests {
             }
         }
         true
+    }
+
+    /// [`classify`] one sector at a time (the reference): sector `k`'s
+    /// samples in `sectors[k]`.
+    fn classify_plain(
+        sectors: &[[f64; 6]; 12],
+        thr: f64,
+        (margin, sample_margin): (f64, f64),
+    ) -> Result<u16, (usize, Uncertainty)> {
+        let mut word = 0u16;
+        for (k, s) in sectors.iter().enumerate() {
+            let mean = s.iter().sum::<f64>() / s.len() as f64;
+            if (mean - thr).abs() < margin {
+                return Err((k, Uncertainty::MarginalSector));
+            }
+            let bit = mean > thr;
+            let off_side = if bit {
+                let low = thr + sample_margin;
+                s.iter().any(|&v| v < low)
+            } else {
+                let high = thr - sample_margin;
+                s.iter().any(|&v| v > high)
+            };
+            if off_side {
+                return Err((k, Uncertainty::SectorDisagrees));
+            }
+            word = (word << 1) | bit as u16;
+        }
+        Ok(word)
+    }
+
+    /// Two sectors at a time classify as one at a time: clear and noisy
+    /// sectors, means and samples on the margins' edges, every sector
+    /// the first uncertain one now and then.
+    #[test]
+    fn sectors_two_at_a_time_classify_as_one_at_a_time() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(23);
+        let (mut read, mut marginal, mut disagree) = (0, 0, 0);
+        for round in 0..20000 {
+            let (thr, margins) = (100.0, (12.0, 4.0));
+            let word = rng.range(0.0, 4096.0) as u16;
+            let mut sectors = [[0.0f64; 6]; 12];
+            for (k, s) in sectors.iter_mut().enumerate() {
+                let lit = word >> (11 - k) & 1 == 1;
+                let level = if lit { 160.0 } else { 40.0 };
+                let noise = [0.0, 5.0, 50.0, 70.0][round % 4];
+                for v in s.iter_mut() {
+                    *v = (level + rng.range(-noise, noise)).max(0.0);
+                }
+                // Now and then a sample on its bound, or a mean on the
+                // sector margin's edge.
+                match (round / 4 + k) % 23 {
+                    0 => s[k % 6] = if lit { 104.0 } else { 96.0 },
+                    1 => *s = [112.0, 112.0, 112.0, 112.0, 112.0, 112.0],
+                    2 => *s = [88.0, 88.0, 88.0, 88.0, 88.0, 88.0],
+                    3 => *s = [111.0, 113.0, 111.0, 113.0, 111.0, 113.0],
+                    4 => *s = [111.9, 100.0, 120.0, 111.0, 113.0, 98.0],
+                    5 => *s = [88.1, 88.1, 88.1, 88.1, 88.1, 88.1],
+                    _ => {}
+                }
+            }
+            let mut x2 = [f64x2::ZERO; SECTOR_PAIRS];
+            for (k, s) in sectors.iter().enumerate() {
+                for (i, &v) in s.iter().enumerate() {
+                    x2[6 * (k % 6) + i].as_array_mut()[k / 6] = v;
+                }
+            }
+            let want = classify_plain(&sectors, thr, margins);
+            assert_eq!(classify(&x2, thr, margins), want, "{round}");
+            match want {
+                Ok(_) => read += 1,
+                Err((_, Uncertainty::MarginalSector)) => marginal += 1,
+                Err(_) => disagree += 1,
+            }
+        }
+        assert!(
+            read > 2000 && marginal > 2000 && disagree > 2000,
+            "{read} {marginal} {disagree}"
+        );
     }
 
     /// The harmonic and the check of the phase samples against their
