@@ -499,16 +499,17 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
         // Half a pixel clear of the edges, the cells' corners (`v − 0.5`
         // rounded: `⌊v⌋ − 1` or `⌊v⌋`) lie in the box from one before
         // the farthest reach's to its own, inside the window short of its
-        // last column and row.
-        let corner = |v: f64, first: usize| ((v.floor() as usize).saturating_sub(1)).max(first);
+        // last column and row (`⌊v⌋` by truncation: `v` is positive, and
+        // below 2³² as every position).
+        let floor = |v: f64| v as u32 as usize;
         let cells = (FAST && within(0.5))
             .then(|| {
                 plane.cells(
                     (
-                        corner(f.col - hx, plane.col0),
-                        corner(f.row - hy, plane.row0),
+                        floor(f.col - hx).saturating_sub(1).max(plane.col0),
+                        floor(f.row - hy).saturating_sub(1).max(plane.row0),
                     ),
-                    ((f.col + hx).floor() as usize, (f.row + hy).floor() as usize),
+                    (floor(f.col + hx), floor(f.row + hy)),
                 )
             })
             .flatten();
@@ -529,23 +530,16 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
     }
 }
 
-/// Samples the ring's middle at phase angle `j` into its place in `ring`
-/// (lane `j / 36` of element `j % 36`); whether it is bright, `None`
-/// outside the image.
+/// The ring's middle at phase angle `j`, `None` outside the image.
 #[inline(always)]
 fn phase_sample<P: Pixel, const FAST: bool>(
     plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     tables: &RingTables,
-    thr: f64,
     j: usize,
-    ring: &mut [f64x2; HALF],
-) -> Option<bool> {
+) -> Option<f64> {
     let (x, y) = f.point_cs(RING_RADII[0], tables.phase[j]);
-    plane.at(x, y).map(|v| {
-        ring[j % HALF].as_array_mut()[j / HALF] = v;
-        v > thr
-    })
+    plane.at(x, y)
 }
 
 /// The mean and the largest of the samples of a dark zone at radius `k`
@@ -767,28 +761,46 @@ fn read_with<P: Pixel, const FAST: bool>(
     let too_dim_to_read = contrast < params.min_contrast;
     let thr = dark + 0.5 * contrast;
     // Presence and phase: the ring's middle every 5°, first every 15° (at
-    // least one sample in the middle half of every sector).
-    let mut ring = [f64x2::ZERO; HALF];
+    // least one sample in the middle half of every sector). Kept as the
+    // passes take them: element `c` of `first` holds samples `3c` and `3c
+    // + 36`, elements `2c` and `2c + 1` of `rest` those from `3c + 1` and
+    // `3c + 2` (see [`HALF`]).
+    let mut first = [f64x2::ZERO; HALF / 3];
+    let mut rest = [f64x2::ZERO; 2 * HALF / 3];
     // The count of bright samples as a float (exact), two lanes at a time
-    // on the fast path (1.0 per lane that is).
+    // on the fast path (1.0 per lane that is), once one is found.
     let mut n_bright = 0.0;
     let mut outside = false;
-    let sample = |j: usize, ring: &mut [f64x2; HALF]| phase_sample(plane, f, tables, thr, j, ring);
-    let (thr2, one) = (f64x2::splat(thr), f64x2::splat(1.0));
-    let count = |n: f64x2| {
+    let thr2 = f64x2::splat(thr);
+    let count = |v: &[f64x2]| {
+        let one = f64x2::splat(1.0);
+        let n = v
+            .iter()
+            .fold(f64x2::ZERO, |n, v| n + (v.cmp_gt(thr2) & one));
         let [a, b] = n.to_array();
         a + b
     };
+    // One at a time: into its lane; whether it is bright (`None`: outside).
+    let sample = |j: usize, into: &mut f64x2| {
+        phase_sample(plane, f, tables, j).map(|v| {
+            into.as_array_mut()[j / HALF] = v;
+            v > thr
+        })
+    };
     if let Some(cells) = &plane.cells {
-        let mut n = f64x2::ZERO;
+        // Only whether one is bright (the largest, exact), then how many.
+        let mut top = f64x2::splat(f64::MIN);
         circle(cells, f, tables.phase_first.iter().copied(), |c, v| {
-            ring[3 * c] = v;
-            n += v.cmp_gt(thr2) & one;
+            first[c] = v;
+            top = v.fast_max(top);
         });
-        n_bright = count(n);
+        let [a, b] = top.to_array();
+        if a > thr || b > thr {
+            n_bright = count(&first);
+        }
     } else {
         for j in (0..PHASE_SAMPLES).step_by(3) {
-            match sample(j, &mut ring) {
+            match sample(j, &mut first[j % HALF / 3]) {
                 Some(b) => n_bright += b as u8 as f64,
                 None => outside = true,
             }
@@ -796,19 +808,16 @@ fn read_with<P: Pixel, const FAST: bool>(
     }
     if n_bright > 0.0 {
         if let Some(cells) = &plane.cells {
-            let mut n = f64x2::ZERO;
             circle(cells, f, tables.phase_rest.iter().copied(), |c, v| {
-                ring[3 * (c / 2) + 1 + c % 2] = v;
-                n += v.cmp_gt(thr2) & one;
+                rest[c] = v
             });
-            n_bright += count(n);
+            n_bright += count(&rest);
         } else {
-            for j in 0..PHASE_SAMPLES / 3 {
-                for j in [3 * j + 1, 3 * j + 2] {
-                    match sample(j, &mut ring) {
-                        Some(b) => n_bright += b as u8 as f64,
-                        None => outside = true,
-                    }
+            for j in (0..PHASE_SAMPLES).filter(|j| j % 3 != 0) {
+                let i = j % HALF;
+                match sample(j, &mut rest[2 * (i / 3) + i % 3 - 1]) {
+                    Some(b) => n_bright += b as u8 as f64,
+                    None => outside = true,
                 }
             }
         }
@@ -843,6 +852,16 @@ fn read_with<P: Pixel, const FAST: bool>(
             return out;
         }
         Some(_) => {}
+    }
+    let mut ring = [f64x2::ZERO; HALF];
+    for ((r, &a), b) in ring
+        .as_chunks_mut::<3>()
+        .0
+        .iter_mut()
+        .zip(&first)
+        .zip(rest.as_chunks::<2>().0)
+    {
+        *r = [a, b[0], b[1]];
     }
     // Sector boundaries: 12th harmonic of the transitions' strength.
     let (re, im, total) = harmonic(&ring);
