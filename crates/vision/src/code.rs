@@ -705,7 +705,21 @@ pub fn read<P: Pixel>(
     accepted: &CodeSet,
     tables: &RingTables,
 ) -> Reading {
-    read_with::<P, true>(plane, f, params, accepted, tables)
+    read_with::<P, true>(plane, f, None, params, accepted, tables)
+}
+
+/// [`read`] with the grey value at the dot's centre given where it is
+/// known (`None`: sampled here; a value outside the image is never
+/// given): the same reading.
+pub(crate) fn read_centred<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    centre: Option<f64>,
+    params: &CodeParams,
+    accepted: &CodeSet,
+    tables: &RingTables,
+) -> Reading {
+    read_with::<P, true>(plane, f, centre, params, accepted, tables)
 }
 
 /// [`read`], with whole circles of samples two at a time (`FAST`) or one
@@ -713,6 +727,7 @@ pub fn read<P: Pixel>(
 fn read_with<P: Pixel, const FAST: bool>(
     plane: &Plane<P>,
     f: &RingFrame,
+    centre: Option<f64>,
     params: &CodeParams,
     accepted: &CodeSet,
     tables: &RingTables,
@@ -727,9 +742,8 @@ fn read_with<P: Pixel, const FAST: bool>(
     };
     // Bright level: the dot's centre and eight points at 0.3 r.
     let plane = &Sampler::<P, FAST>::new(plane, f);
-    let mut bright = match plane.at(f.col, f.row) {
-        Some(v) => v,
-        None => return out,
+    let Some(mut bright) = centre.or_else(|| plane.at(f.col, f.row)) else {
+        return out;
     };
     if let Some(cells) = &plane.cells {
         circle(cells, f, tables.bright_x2.iter().copied(), |_, v| {
@@ -766,7 +780,6 @@ fn read_with<P: Pixel, const FAST: bool>(
     // + 36`, elements `2c` and `2c + 1` of `rest` those from `3c + 1` and
     // `3c + 2` (see [`HALF`]).
     let mut first = [f64x2::ZERO; HALF / 3];
-    let mut rest = [f64x2::ZERO; 2 * HALF / 3];
     // The count of bright samples as a float (exact), two lanes at a time
     // on the fast path (1.0 per lane that is), once one is found.
     let mut n_bright = 0.0;
@@ -806,7 +819,10 @@ fn read_with<P: Pixel, const FAST: bool>(
             }
         }
     }
+    // The whole ring (as [`HALF`] lays it out) once one sample is bright.
+    let mut ring = None;
     if n_bright > 0.0 {
+        let mut rest = [f64x2::ZERO; 2 * HALF / 3];
         if let Some(cells) = &plane.cells {
             circle(cells, f, tables.phase_rest.iter().copied(), |c, v| {
                 rest[c] = v
@@ -821,6 +837,18 @@ fn read_with<P: Pixel, const FAST: bool>(
                 }
             }
         }
+        let mut whole = [f64x2::ZERO; HALF];
+        let (rest, _) = rest.as_chunks::<2>();
+        for ((w, &a), b) in whole
+            .as_chunks_mut::<3>()
+            .0
+            .iter_mut()
+            .zip(&first)
+            .zip(rest)
+        {
+            *w = [a, b[0], b[1]];
+        }
+        ring = Some(whole);
     }
     out.ring_present = n_bright >= 2.0;
     let dark_limit = dark + params.dark_tolerance * contrast;
@@ -830,14 +858,18 @@ fn read_with<P: Pixel, const FAST: bool>(
         return out;
     }
     out.gap = Gap::Dark;
-    if !out.ring_present {
-        out.status = if outside {
-            CodeStatus::Uncertain(Uncertainty::OutsideImage)
-        } else {
-            CodeStatus::NoRing
-        };
-        return out;
-    }
+    // (A ring is present only where one sample was bright.)
+    let ring = match ring {
+        Some(ring) if out.ring_present => ring,
+        _ => {
+            out.status = if outside {
+                CodeStatus::Uncertain(Uncertainty::OutsideImage)
+            } else {
+                CodeStatus::NoRing
+            };
+            return out;
+        }
+    };
     if outside {
         return out;
     }
@@ -852,16 +884,6 @@ fn read_with<P: Pixel, const FAST: bool>(
             return out;
         }
         Some(_) => {}
-    }
-    let mut ring = [f64x2::ZERO; HALF];
-    for ((r, &a), b) in ring
-        .as_chunks_mut::<3>()
-        .0
-        .iter_mut()
-        .zip(&first)
-        .zip(rest.as_chunks::<2>().0)
-    {
-        *r = [a, b[0], b[1]];
     }
     // Sector boundaries: 12th harmonic of the transitions' strength.
     let (re, im, total) = harmonic(&ring);
@@ -983,8 +1005,12 @@ mod tests {
         tables: &RingTables,
     ) -> (Reading, bool, bool) {
         let accepted = CodeSet::all();
-        let fast = read_with::<P, true>(plane, f, params, &accepted, tables);
-        let one = read_with::<P, false>(plane, f, params, &accepted, tables);
+        let fast = read_with::<P, true>(plane, f, None, params, &accepted, tables);
+        let one = read_with::<P, false>(plane, f, None, params, &accepted, tables);
+        // The centre's value given (as the detector gives it): the same.
+        let centre = plane.bilinear(f.col, f.row);
+        let given = read_with::<P, true>(plane, f, centre, params, &accepted, tables);
+        assert_eq!(given, fast, "{f:?}");
         assert_eq!(fast.status, one.status, "{f:?}");
         assert_eq!(
             (fast.gap, fast.ring_present, fast.raw),

@@ -942,12 +942,14 @@ pub(crate) fn read_ring<P: Pixel>(
         && m.row + 0.5 <= plane.last_row() as f64;
     let at = |col: f64, row: f64| {
         if inside {
-            plane.bilinear_inside(col, row)
+            Some(plane.bilinear_inside(col, row))
         } else {
-            plane.bilinear(col, row).unwrap_or(0.0)
+            plane.bilinear(col, row)
         }
     };
-    let mut amplitude = at(m.col, m.row);
+    // (The reader's bright level starts from the same value.)
+    let centre = at(m.col, m.row);
+    let mut amplitude = centre.unwrap_or(0.0);
     if inside {
         // The four neighbours two at a time (the same values, in the same
         // order of the sum).
@@ -960,14 +962,14 @@ pub(crate) fn read_ring<P: Pixel>(
         }
     } else {
         for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-            amplitude += at(m.col + dx, m.row + dy);
+            amplitude += at(m.col + dx, m.row + dy).unwrap_or(0.0);
         }
     }
     amplitude = amplitude / 5.0 - m.background;
     let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
     let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
     let reading = match &frame {
-        Some(f) => code::read(plane, f, params, &o.codes, tables),
+        Some(f) => code::read_centred(plane, f, centre, params, &o.codes, tables),
         None => Reading {
             gap: Gap::NotDark,
             status: CodeStatus::Uncertain(Uncertainty::LowContrast),
