@@ -456,14 +456,32 @@ fn circle<P: Pixel>(
     xy: impl IntoIterator<Item = XyPair>,
     mut out: impl FnMut(usize, f64x2),
 ) {
+    for (i, (col, row)) in positions(f, xy).enumerate() {
+        out(i, cells.bilinear_x2(col, row));
+    }
+}
+
+/// Whether a bound of the pixels of the cells of the plate offsets `xy`
+/// lies below `limit` (and so every value there at most `limit`, see
+/// [`Cells::corners_bound`]): four pairs of offsets at a time, done at the
+/// first whose bound is not (a coded target's ring).
+#[inline(always)]
+fn below<P: Pixel>(cells: &Cells<'_, P>, f: &RingFrame, xy: &[XyPair], limit: f64) -> bool {
+    xy.chunks(4)
+        .all(|xy| (cells.corners_bound(positions(f, xy.iter().copied())) as f64) < limit)
+}
+
+/// The pixel positions of the plate offsets `xy` (two at a time, as
+/// [`RingFrame::point_cs`] forms them).
+#[inline(always)]
+fn positions(
+    f: &RingFrame,
+    xy: impl IntoIterator<Item = XyPair>,
+) -> impl Iterator<Item = (f64x2, f64x2)> {
     let (col, row) = (f64x2::splat(f.col), f64x2::splat(f.row));
     let [e0, e1, e2] = f.e.map(f64x2::splat);
-    for (i, (x, y)) in xy.into_iter().enumerate() {
-        out(
-            i,
-            cells.bilinear_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y),
-        );
-    }
+    xy.into_iter()
+        .map(move |(x, y)| (col + e0 * x + e1 * y, row + e1 * x + e2 * y))
 }
 
 /// Bilinear sampling for one ring: when the whole target (out to its
@@ -800,7 +818,11 @@ fn read_with<P: Pixel, const FAST: bool>(
             v > thr
         })
     };
-    if let Some(cells) = &plane.cells {
+    // No sample is bright where no pixel of its cell reaches the
+    // threshold ([`Cells::corners_bound`]): an uncoded target's, found
+    // without interpolating.
+    let none_bright = |cells: &Cells<'_, P>| below(cells, f, &tables.phase_first, thr);
+    if let Some(cells) = plane.cells.as_ref().filter(|&c| !none_bright(c)) {
         // Only whether one is bright (the largest, exact), then how many.
         let mut top = f64x2::splat(f64::MIN);
         circle(cells, f, tables.phase_first.iter().copied(), |c, v| {
@@ -811,7 +833,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         if a > thr || b > thr {
             n_bright = count(&first);
         }
-    } else {
+    } else if plane.cells.is_none() {
         for j in (0..PHASE_SAMPLES).step_by(3) {
             match sample(j, &mut first[j % HALF / 3]) {
                 Some(b) => n_bright += b as u8 as f64,
@@ -877,7 +899,13 @@ fn read_with<P: Pixel, const FAST: bool>(
         out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
-    match zone(plane, f, ZONE_RADII[1], &tables.quiet_x2, tables) {
+    // Dark where no pixel of its cells reaches the limit (see
+    // [`Cells::corners_bound`]); else each sample against it.
+    let quiet = |cells: &Cells<'_, P>| below(cells, f, &tables.quiet_x2, dark_limit);
+    match plane.cells.as_ref().filter(|&c| quiet(c)).map_or_else(
+        || zone(plane, f, ZONE_RADII[1], &tables.quiet_x2, tables),
+        |_| Some((0.0, f64::MIN)),
+    ) {
         None => return out,
         Some((_, quiet_max)) if quiet_max > dark_limit => {
             out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);

@@ -63,6 +63,19 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn corners_x2(a: [&[Self]; 2], b: [&[Self]; 2]) -> [f64x2; 4] {
         corners_x2(a, b)
     }
+    /// A bound of the pixels of pairs of cells (each pair as
+    /// [`Pixel::corners_x2`] takes it): their bitwise or (at least the
+    /// largest, one operation a pixel), 0 for none.
+    #[inline(always)]
+    fn cells_bound<'p>(cells: impl Iterator<Item = [[&'p [Self]; 2]; 2]>) -> u32
+    where
+        Self: 'p,
+    {
+        cells.fold(0, |m, [[a0, a1], [b0, b1]]| {
+            let [a0, a1, b0, b1] = [a0, a1, b0, b1].map(|p| p[0].value() | p[1].value());
+            m | a0 | a1 | b0 | b1
+        })
+    }
     /// The pixels as bytes if they are 8-bit (for the paths that take an
     /// 8-bit row sixteen pixels at a time).
     #[inline(always)]
@@ -142,6 +155,16 @@ fn mask64(v: [u8x16; 4], t: u8x16) -> u64 {
     m
 }
 
+/// `[p00, p01, p10, p11]` of an 8-bit cell (its top pair and its bottom
+/// pair, [`Pixel::corners_x2`]) as the low bytes of a vector, two pixels a
+/// load.
+#[inline(always)]
+fn cell_bytes([top, bottom]: [&[u8]; 2]) -> u8x16 {
+    let pair = |c: &[u8]| u16::from_le_bytes([c[0], c[1]]) as u32;
+    let [x0, x1, x2, x3] = (pair(top) | pair(bottom) << 16).to_le_bytes();
+    u8x16::new([x0, x1, x2, x3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+}
+
 impl Pixel for u8 {
     const MAX: u32 = u8::MAX as u32;
     #[inline(always)]
@@ -156,19 +179,21 @@ impl Pixel for u8 {
     fn max_of(chunk: &[Self]) -> u32 {
         chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
     }
+    /// Two pixels a load (a 16-bit or), the halves or-ed at the end.
+    #[inline(always)]
+    fn cells_bound<'p>(cells: impl Iterator<Item = [[&'p [Self]; 2]; 2]>) -> u32 {
+        let pair = |p: &[u8]| u16::from_le_bytes([p[0], p[1]]);
+        let w = cells.fold(0u16, |m, [[a0, a1], [b0, b1]]| {
+            m | pair(a0) | pair(a1) | pair(b0) | pair(b1)
+        });
+        ((w | w >> 8) & 0xff) as u32
+    }
     /// Two pixels at a time (a 16-bit load), the eight bytes interleaved
     /// and widened to 32 bits in vectors, converted two at a time: the
     /// same values.
     #[inline(always)]
     fn corners_x2(a: [&[Self]; 2], b: [&[Self]; 2]) -> [f64x2; 4] {
-        // `[p00, p01, p10, p11]` of a cell as the low bytes of a vector.
-        #[inline(always)]
-        fn cell([top, bottom]: [&[u8]; 2]) -> u8x16 {
-            let pair = |c: &[u8]| u16::from_le_bytes([c[0], c[1]]) as u32;
-            let [x0, x1, x2, x3] = (pair(top) | pair(bottom) << 16).to_le_bytes();
-            u8x16::new([x0, x1, x2, x3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
-        }
-        let v = u8x16::unpack_low(cell(a), cell(b));
+        let v = u8x16::unpack_low(cell_bytes(a), cell_bytes(b));
         let d = i32x8::from_u16x8(u16x8::from_u8x16_low(v)).to_array();
         let f = |i: usize| f64x2::new([d[i] as f64, d[i + 1] as f64]);
         [f(0), f(2), f(4), f(6)]
@@ -627,7 +652,7 @@ pub struct Cells<'a, P> {
     stride: f64,
 }
 
-impl<P: Pixel> Cells<'_, P> {
+impl<'a, P: Pixel> Cells<'a, P> {
     /// [`Plane::bilinear_inside_x2`] at positions whose cells lie in the
     /// box the blocks were made for and half a pixel clear of the window's
     /// edges (`col0 + 0.5 ≤ col ≤ col0 + width − 1.5`, likewise for rows):
@@ -637,11 +662,36 @@ impl<P: Pixel> Cells<'_, P> {
     /// some cell of the blocks (never a panic).
     #[inline(always)]
     pub fn bilinear_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
+        let ([a, b], fx, fy) = self.cells_x2(col, row);
+        interpolate(P::corners_x2(a, b), fx, fy)
+    }
+
+    /// A bound `m` of the pixels of the cells of `positions` (two at a
+    /// time, as [`Cells::bilinear_x2`] takes them; [`Pixel::cells_bound`]),
+    /// and so of the values there: an interpolated value is at most the
+    /// float after its cell's largest pixel (the fractions lie in `[0,
+    /// 1]`, rounding is monotonic, and only the last step's difference
+    /// may round up, by half an ulp of at most that pixel), below any
+    /// limit above `m`.
+    #[inline(always)]
+    pub fn corners_bound(&self, positions: impl IntoIterator<Item = (f64x2, f64x2)>) -> u32 {
+        P::cells_bound(
+            positions
+                .into_iter()
+                .map(|(col, row)| self.cells_x2(col, row).0),
+        )
+    }
+
+    /// The cells of two positions (their top and bottom pairs of pixels)
+    /// and the positions' fractions in them.
+    #[inline(always)]
+    fn cells_x2(&self, col: f64x2, row: f64x2) -> ([[&'a [P]; 2]; 2], f64x2, f64x2) {
         let (cc, rc) = rounded_x2(col, row);
         let (i, fx, fy) = cell_x2(col, row, cc, rc, self.stride, self.k);
         let [ia, ib] = i.to_array().map(|v| v.to_bits() as usize & (CELLS - 1));
-        let cell = |i: usize| [&self.top[i..i + 2], &self.bottom[i..i + 2]];
-        interpolate(P::corners_x2(cell(ia), cell(ib)), fx, fy)
+        let (top, bottom): (&'a [P; CELLS + 1], &'a [P; CELLS + 1]) = (self.top, self.bottom);
+        let cell = |i: usize| [&top[i..i + 2], &bottom[i..i + 2]];
+        ([cell(ia), cell(ib)], fx, fy)
     }
 }
 
@@ -1019,6 +1069,72 @@ mod tests {
             .cells((0, h - 90), (5, h - 80))
             .is_none());
         assert!(win.cells((3, 4), (w - 1, 5)).is_none() && win.cells((3, 4), (w - 2, 5)).is_some());
+    }
+
+    /// A bound of the pixels of cells is at least their largest, and no
+    /// value interpolated in them exceeds the float after it (8 and 16
+    /// bits, flat and steep cells, positions on the cells' edges and just
+    /// inside them): below a limit above the bound, every value is too.
+    #[test]
+    fn cells_bound_their_values() {
+        let (w, h) = (300usize, 240usize);
+        let mut x = 5u64;
+        let mut next = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            x >> 11
+        };
+        let d8: Vec<u8> = (0..w * h)
+            .map(|_| match next() % 4 {
+                0 => 255,
+                1 => (next() % 8) as u8,
+                _ => (next() % 256) as u8,
+            })
+            .collect();
+        let d16: Vec<u16> = d8
+            .iter()
+            .map(|&v| v as u16 * 257 - (next() % 200) as u16 * (v > 0) as u16)
+            .collect();
+        fn check<P: Pixel>(win: &Plane<P>, cells: &Cells<P>, a: (f64, f64), b: (f64, f64)) {
+            let (col, row) = (f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
+            let bound = cells.corners_bound([(col, row)]);
+            for (c, r) in [a, b] {
+                let (ci, ri) = (
+                    (c - 0.5).round_ties_even() as usize,
+                    (r - 0.5).round_ties_even() as usize,
+                );
+                for (dc, dr) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    assert!(win.at(ci + dc, ri + dr) <= bound as f64, "{c} {r}");
+                }
+            }
+            let v = cells.bilinear_x2(col, row).to_array();
+            let limit = (bound as f64).next_up();
+            assert!(v.iter().all(|&v| v <= limit), "{a:?} {b:?} {v:?} {bound}");
+        }
+        let (win8, win16) = (
+            window(&d8, w, (1, 1, w - 2, h - 2)),
+            window(&d16, w, (1, 1, w - 2, h - 2)),
+        );
+        // (A box of fewer than CELLS pixels.)
+        let (lo, hi) = ((1, 1), (w - 3, 200));
+        let (cells8, cells16) = (win8.cells(lo, hi).unwrap(), win16.cells(lo, hi).unwrap());
+        let unit = |v: u64| (v % 1_000_003) as f64 / 1_000_003.0;
+        for k in 0..200_000 {
+            let mut pos = || {
+                let (c, r) = (
+                    1.5 + unit(next()) * (w as f64 - 4.0),
+                    1.5 + unit(next()) * 198.0,
+                );
+                match k % 4 {
+                    0 => (c.floor() + 0.5, r.floor() + 0.5),
+                    1 => (c.floor() + 1.0 - 1e-12, r.floor() + 1.0 - 1e-12),
+                    2 => (c.floor() + 1e-9, r),
+                    _ => (c, r),
+                }
+            };
+            let (a, b) = (pos(), pos());
+            check(&win8, &cells8, a, b);
+            check(&win16, &cells16, a, b);
+        }
     }
 
     /// The 8-bit corners of two cells (two pixels a load, interleaved and
