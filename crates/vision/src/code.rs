@@ -601,6 +601,17 @@ fn zone<P: Pixel, const FAST: bool>(
 /// order `j = 0 … 71` (the differences two at a time, `re` and `im` in one
 /// lane pair: the same operations as one at a time).
 fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
+    // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles (36 is a
+    // multiple of 6, so lane 1 repeats lane 0's).
+    const H: [f64x2; 6] = {
+        let mut h = [f64x2::ZERO; 6];
+        let mut k = 0;
+        while k < 6 {
+            h[k] = f64x2::new([HARMONIC[k].0, HARMONIC[k].1]);
+            k += 1;
+        }
+        h
+    };
     let mut g = [f64x2::ZERO; HALF];
     for (g, w) in g.iter_mut().zip(ring.windows(2)) {
         *g = (w[1] - w[0]).abs();
@@ -608,13 +619,10 @@ fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
     // Samples 35 → 36 and 71 → 0.
     let [first, opposite] = ring[0].to_array();
     g[HALF - 1] = (f64x2::new([opposite, first]) - ring[HALF - 1]).abs();
-    // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles (36 is a
-    // multiple of 6, so lane 1 repeats lane 0's).
-    let h = HARMONIC.map(|(c, s)| f64x2::new([c, s]));
     let (mut re_im, mut total) = (f64x2::ZERO, 0.0);
     for lane in 0..2 {
-        for g in g.chunks_exact(6) {
-            for (g, &h) in g.iter().zip(&h) {
+        for g in g.as_chunks::<6>().0 {
+            for (g, &h) in g.iter().zip(&H) {
                 let g = g.as_array_ref()[lane];
                 re_im += f64x2::splat(g) * h;
                 total += g;
@@ -627,11 +635,14 @@ fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
 
 /// Whether every phase sample (`ring` as [`HALF`] lays it out) clear of a
 /// sector boundary agrees with its sector's bit in `raw`, the boundary at
-/// `boundary_deg`. Two samples at a time, each lane with the scalar's
-/// operations: the angle from the boundary `rel = (t − boundary) mod 360`
-/// (the offset lies within (−30°, 390°)), its sector `q = ⌊rel / 30⌋` (the
-/// nearest integer by adding 2⁵², one less if above) and the remainder
-/// `rel − 30 q`, all exact as one at a time.
+/// `boundary_deg` (within ±15°). Two samples at a time, each lane with the
+/// scalar's operations: the angle from the boundary `rel = (t − boundary)
+/// mod 360` (the offset lies within (−30°, 390°); the samples 20° and more
+/// from 0° need no turn), its sector `q = ⌊rel / 30⌋` and the remainder
+/// `rel − 30 q`, all exact as one at a time. `q` is `rel / 30 − 1/2`
+/// rounded (by adding 1.5 · 2⁵²): `⌊rel / 30⌋` but at an integer `n`,
+/// where it may be `n − 1`, the remainder 30 instead of 0: a sample on a
+/// boundary, not checked either way.
 fn phase_agrees(
     ring: &[f64x2; HALF],
     phase_deg: &[f64x2; HALF],
@@ -639,29 +650,38 @@ fn phase_agrees(
     raw: u16,
     thr: f64,
 ) -> bool {
-    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    const ROUND: f64 = 6_755_399_441_055_744.0;
     let splat = f64x2::splat;
     let (b, thr) = (splat(boundary_deg), splat(thr));
-    let (full, thirty, one, magic) = (splat(360.0), splat(30.0), splat(1.0), splat(TWO_52));
+    let (full, thirty, half, round) = (splat(360.0), splat(30.0), splat(0.5), splat(ROUND));
     let (lo, hi) = (splat(EDGE_CLEARANCE), splat(30.0 - EDGE_CLEARANCE));
     // The bit of sector `q % 12` as a lane mask, for `q` up to 12 (and 15).
     let bits: [f64; 16] = std::array::from_fn(|q| {
         f64::from_bits(0u64.wrapping_sub(((raw >> (11 - q % 12)) & 1) as u64))
     });
-    let mut bad = f64x2::ZERO;
-    for (&v, &t) in ring.iter().zip(phase_deg) {
-        let d = t - b;
-        // `d + 360`, `d − 360` or `d + 0` (which is `d`: `d` is never −0).
-        let turn = (d.cmp_lt(f64x2::ZERO) & full) | (d.cmp_ge(full) & -full);
-        let rel = d + turn;
-        let x = rel / thirty;
-        let nearest = (x + magic) - magic;
-        let q = nearest - (nearest.cmp_gt(x) & one);
-        let within = rel - thirty * q;
+    // Whether the samples of element `i` disagree (lane masks).
+    let disagree = |i: usize, may_turn: bool| {
+        let d = phase_deg[i] - b;
+        let rel = if may_turn {
+            // `d + 360`, `d − 360` or `d + 0` (which is `d`: never −0).
+            d + ((d.cmp_lt(f64x2::ZERO) & full) | (d.cmp_ge(full) & -full))
+        } else {
+            d
+        };
+        let r = (rel / thirty - half) + round;
+        let within = rel - thirty * (r - round);
         let clear = within.cmp_ge(lo) & within.cmp_le(hi);
-        let [qa, qb] = (q + magic).to_array().map(|v| v.to_bits() as usize & 15);
+        let [qa, qb] = r.to_array().map(|v| v.to_bits() as usize & 15);
         let bit = f64x2::new([bits[qa], bits[qb]]);
-        bad |= clear & (bit ^ v.cmp_gt(thr));
+        clear & (bit ^ ring[i].cmp_gt(thr))
+    };
+    // Elements 4 to 31: samples 4 … 31 and 40 … 67, 20° and more from 0°.
+    let mut bad = f64x2::ZERO;
+    for i in (0..4).chain(32..HALF) {
+        bad |= disagree(i, true);
+    }
+    for i in 4..32 {
+        bad |= disagree(i, false);
     }
     bad.move_mask() == 0
 }
