@@ -704,8 +704,10 @@ fn classify(
     let splat = f64x2::splat;
     let (thr2, margin) = (splat(thr), splat(margin));
     let (low, high) = (splat(thr + sample_margin), splat(thr - sample_margin));
+    // Lane 0 (sectors 0 to 5) and lane 1 (6 to 11) gathered apart, first
+    // sector most significant, as `[lane 0, lane 1]` of the masks' bits.
     let (mut word, mut marginal, mut uncertain) = (0u16, 0u16, 0u16);
-    for (k, v) in s.as_chunks::<6>().0.iter().enumerate() {
+    for v in s.as_chunks::<6>().0 {
         let mean = (v[0] + v[1] + v[2] + v[3] + v[4] + v[5]) / splat(v.len() as f64);
         let close = (mean - thr2).abs().cmp_lt(margin);
         let bit = mean.cmp_gt(thr2);
@@ -714,15 +716,18 @@ fn classify(
         let least = least.fast_min(v[4]).fast_min(v[5]);
         let most = most.fast_max(v[4]).fast_max(v[5]);
         let off_side = (bit & least.cmp_lt(low)) | (!bit & most.cmp_gt(high));
-        // Lane 0 is sector `k` (bit 11 − k), lane 1 sector `k + 6`.
-        let place = |m: f64x2| {
+        // Lane 0 into bit 0, lane 1 into bit 8, shifted on a pair later.
+        let place = |m: f64x2, into: u16| {
             let m = m.move_mask() as u16;
-            (m & 1) << (11 - k) | (m >> 1) << (5 - k)
+            into << 1 | (m & 1) | (m & 2) << 7
         };
-        word |= place(bit);
-        marginal |= place(close);
-        uncertain |= place(close | off_side);
+        word = place(bit, word);
+        marginal = place(close, marginal);
+        uncertain = place(close | off_side, uncertain);
     }
+    // Sectors 0 to 5 from bits 5 to 0, 6 to 11 from bits 13 to 8.
+    let [word, marginal, uncertain] =
+        [word, marginal, uncertain].map(|m| (m & 0x3f) << 6 | (m >> 8) & 0x3f);
     if uncertain != 0 {
         let first = uncertain.leading_zeros() as usize - 4;
         let why = if marginal >> (11 - first) & 1 == 1 {
