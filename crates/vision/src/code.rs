@@ -595,12 +595,27 @@ fn zone<P: Pixel, const FAST: bool>(
     Some((sum / ZONE_SAMPLES as f64, max))
 }
 
-/// The 12th harmonic of the transitions' strength around the ring (`ring`
-/// as [`HALF`] lays it out): `(re, im, total)` of `g_j = |ring[j + 1] −
+/// The ring's middle as the two passes sample it: element `c` of `first`
+/// holds samples `3c` and `3c + 36` (see [`HALF`]), elements `2c` and `2c
+/// + 1` of `rest` those from `3c + 1` and `3c + 2`.
+struct Middle<'r> {
+    first: &'r [f64x2; HALF / 3],
+    rest: &'r [f64x2; 2 * HALF / 3],
+}
+
+impl Middle<'_> {
+    /// Elements `3c` to `3c + 2` of the layout of [`HALF`].
+    #[inline(always)]
+    fn chunk(&self, c: usize) -> [f64x2; 3] {
+        [self.first[c], self.rest[2 * c], self.rest[2 * c + 1]]
+    }
+}
+
+/// The 12th harmonic of the transitions' strength around the ring: `(re, im, total)` of `g_j = |ring[j + 1] −
 /// ring[j]|` weighted by `(cos, sin)` of `(j + 0.5) × 60°`, summed in the
 /// order `j = 0 … 71` (the differences two at a time, `re` and `im` in one
 /// lane pair: the same operations as one at a time).
-fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
+fn harmonic(ring: &Middle) -> (f64, f64, f64) {
     // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles (36 is a
     // multiple of 6, so lane 1 repeats lane 0's).
     const H: [f64x2; 6] = {
@@ -613,12 +628,18 @@ fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
         h
     };
     let mut g = [f64x2::ZERO; HALF];
-    for (g, w) in g.iter_mut().zip(ring.windows(2)) {
-        *g = (w[1] - w[0]).abs();
+    for (c, g) in g.as_chunks_mut::<3>().0.iter_mut().enumerate() {
+        let [a, b, d] = ring.chunk(c);
+        // After sample 35 comes 36, after 71 comes 0: lanes crossed.
+        let next = match ring.first.get(c + 1) {
+            Some(&next) => next,
+            None => {
+                let [first, opposite] = ring.first[0].to_array();
+                f64x2::new([opposite, first])
+            }
+        };
+        *g = [(b - a).abs(), (d - b).abs(), (next - d).abs()];
     }
-    // Samples 35 → 36 and 71 → 0.
-    let [first, opposite] = ring[0].to_array();
-    g[HALF - 1] = (f64x2::new([opposite, first]) - ring[HALF - 1]).abs();
     let (mut re_im, mut total) = (f64x2::ZERO, 0.0);
     for lane in 0..2 {
         for g in g.as_chunks::<6>().0 {
@@ -633,18 +654,18 @@ fn harmonic(ring: &[f64x2; HALF]) -> (f64, f64, f64) {
     (re, im, total)
 }
 
-/// Whether every phase sample (`ring` as [`HALF`] lays it out) clear of a
+/// Whether every phase sample of `ring` clear of a
 /// sector boundary agrees with its sector's bit in `raw`, the boundary at
 /// `boundary_deg` (within ±15°). Two samples at a time, each lane with the
 /// scalar's operations: the angle from the boundary `rel = (t − boundary)
-/// mod 360` (the offset lies within (−30°, 390°); the samples 20° and more
+/// mod 360` (the offset lies within (−30°, 390°); the samples 30° and more
 /// from 0° need no turn), its sector `q = ⌊rel / 30⌋` and the remainder
 /// `rel − 30 q`, all exact as one at a time. `q` is `rel / 30 − 1/2`
 /// rounded (by adding 1.5 · 2⁵²): `⌊rel / 30⌋` but at an integer `n`,
 /// where it may be `n − 1`, the remainder 30 instead of 0: a sample on a
 /// boundary, not checked either way.
 fn phase_agrees(
-    ring: &[f64x2; HALF],
+    ring: &Middle,
     phase_deg: &[f64x2; HALF],
     boundary_deg: f64,
     raw: u16,
@@ -659,8 +680,8 @@ fn phase_agrees(
     let bits: [f64; 16] = std::array::from_fn(|q| {
         f64::from_bits(0u64.wrapping_sub(((raw >> (11 - q % 12)) & 1) as u64))
     });
-    // Whether the samples of element `i` disagree (lane masks).
-    let disagree = |i: usize, may_turn: bool| {
+    // Whether the samples of element `i` (`v`) disagree (lane masks).
+    let disagree = |i: usize, v: f64x2, may_turn: bool| {
         let d = phase_deg[i] - b;
         let rel = if may_turn {
             // `d + 360`, `d − 360` or `d + 0` (which is `d`: never −0).
@@ -673,15 +694,20 @@ fn phase_agrees(
         let clear = within.cmp_ge(lo) & within.cmp_le(hi);
         let [qa, qb] = r.to_array().map(|v| v.to_bits() as usize & 15);
         let bit = f64x2::new([bits[qa], bits[qb]]);
-        clear & (bit ^ ring[i].cmp_gt(thr))
+        clear & (bit ^ v.cmp_gt(thr))
     };
-    // Elements 4 to 31: samples 4 … 31 and 40 … 67, 20° and more from 0°.
     let mut bad = f64x2::ZERO;
-    for i in (0..4).chain(32..HALF) {
-        bad |= disagree(i, true);
+    let mut chunk = |c: usize, may_turn: bool| {
+        for (k, v) in ring.chunk(c).into_iter().enumerate() {
+            bad |= disagree(3 * c + k, v, may_turn);
+        }
+    };
+    // Elements 6 to 29: samples 6 … 29 and 42 … 65, 30° and more from 0°.
+    for c in (0..2).chain(10..12) {
+        chunk(c, true);
     }
-    for i in 4..32 {
-        bad |= disagree(i, false);
+    for c in 2..10 {
+        chunk(c, false);
     }
     bad.move_mask() == 0
 }
@@ -866,15 +892,15 @@ fn read_with<P: Pixel, const FAST: bool>(
             }
         }
     }
-    // The whole ring (as [`HALF`] lays it out) once one sample is bright.
-    let mut ring = None;
+    // The second pass once one sample is bright.
+    let mut second = None;
     if n_bright > 0.0 {
-        let mut rest = [f64x2::ZERO; 2 * HALF / 3];
+        let rest = second.insert([f64x2::ZERO; 2 * HALF / 3]);
         if let Some(cells) = &plane.cells {
             circle(cells, f, tables.phase_rest.iter().copied(), |c, v| {
                 rest[c] = v
             });
-            n_bright += count(&rest);
+            n_bright += count(rest);
         } else {
             for j in (0..PHASE_SAMPLES).filter(|j| j % 3 != 0) {
                 let i = j % HALF;
@@ -884,18 +910,6 @@ fn read_with<P: Pixel, const FAST: bool>(
                 }
             }
         }
-        let mut whole = [f64x2::ZERO; HALF];
-        let (rest, _) = rest.as_chunks::<2>();
-        for ((w, &a), b) in whole
-            .as_chunks_mut::<3>()
-            .0
-            .iter_mut()
-            .zip(&first)
-            .zip(rest)
-        {
-            *w = [a, b[0], b[1]];
-        }
-        ring = Some(whole);
     }
     out.ring_present = n_bright >= 2.0;
     let dark_limit = dark + params.dark_tolerance * contrast;
@@ -906,8 +920,11 @@ fn read_with<P: Pixel, const FAST: bool>(
     }
     out.gap = Gap::Dark;
     // (A ring is present only where one sample was bright.)
-    let ring = match ring {
-        Some(ring) if out.ring_present => ring,
+    let ring = match &second {
+        Some(rest) if out.ring_present => Middle {
+            first: &first,
+            rest,
+        },
         _ => {
             out.status = if outside {
                 CodeStatus::Uncertain(Uncertainty::OutsideImage)
@@ -1198,9 +1215,13 @@ mod tests {
         );
     }
 
-    /// The ring's middle laid out two to a lane pair ([`HALF`]).
-    fn halves(ring: &[f64; PHASE_SAMPLES]) -> [f64x2; HALF] {
-        std::array::from_fn(|i| f64x2::new([ring[i], ring[i + HALF]]))
+    /// The ring's middle as the passes take it ([`Middle`]): its first
+    /// pass and its second.
+    fn passes(ring: &[f64; PHASE_SAMPLES]) -> ([f64x2; HALF / 3], [f64x2; 2 * HALF / 3]) {
+        let half = |i: usize| f64x2::new([ring[i], ring[i + HALF]]);
+        let first = std::array::from_fn(|c| half(3 * c));
+        let rest = std::array::from_fn(|e| half(3 * (e / 2) + 1 + e % 2));
+        (first, rest)
     }
 
     /// [`harmonic`] one sample at a time (the reference).
@@ -1366,7 +1387,12 @@ mod tests {
                 }
             });
             let thr = [110.0, rng.range(0.0, 255.0), 40.0, 200.0][round % 4];
-            let h = harmonic(&halves(&ring));
+            let (first, rest) = passes(&ring);
+            let middle = Middle {
+                first: &first,
+                rest: &rest,
+            };
+            let h = harmonic(&middle);
             let want = harmonic_plain(&ring);
             assert_eq!(
                 [h.0, h.1, h.2].map(f64::to_bits),
@@ -1375,7 +1401,7 @@ mod tests {
             );
             for raw in [raw, raw ^ 1, raw ^ 0x800, !raw & codes::MASK] {
                 let want = phase_agrees_plain(&ring, boundary, raw, thr);
-                let got = phase_agrees(&halves(&ring), &tables.phase_deg, boundary, raw, thr);
+                let got = phase_agrees(&middle, &tables.phase_deg, boundary, raw, thr);
                 assert_eq!(got, want, "{round} {raw} {boundary}");
                 agree += want as usize;
                 disagree += !want as usize;
