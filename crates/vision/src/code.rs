@@ -484,6 +484,22 @@ fn positions(
         .map(move |(x, y)| (col + e0 * x + e1 * y, row + e1 * x + e2 * y))
 }
 
+/// The sector samples at radius `k` (the angles `turned`, two to a lane
+/// pair) into `s`, a whole circle two at a time ([`circle`]). Not inlined:
+/// the loop keeps its registers to itself.
+#[inline(never)]
+fn sectors_at<P: Pixel>(
+    cells: &Cells<'_, P>,
+    f: &RingFrame,
+    k: f64,
+    turned: &[CsPair; SECTOR_PAIRS],
+    s: &mut [f64x2; SECTOR_PAIRS],
+) {
+    circle(cells, f, turned.iter().map(|&cs| offsets(k, cs)), |i, v| {
+        s[i] = v
+    });
+}
+
 /// Bilinear sampling for one ring: when the whole target (out to its
 /// quiet zone) lies inside the image, every sample skips the range checks;
 /// when it lies half a pixel clear of the image's edges, whole circles of
@@ -730,10 +746,11 @@ fn classify(
     let splat = f64x2::splat;
     let (thr2, margin) = (splat(thr), splat(margin));
     let (low, high) = (splat(thr + sample_margin), splat(thr - sample_margin));
-    // Lane 0 (sectors 0 to 5) and lane 1 (6 to 11) gathered apart, first
-    // sector most significant, as `[lane 0, lane 1]` of the masks' bits.
-    let (mut word, mut marginal, mut uncertain) = (0u16, 0u16, 0u16);
-    for v in s.as_chunks::<6>().0 {
+    // The bits of lane 0 (sectors 0 to 5) and of lane 1 (6 to 11) apart,
+    // first sector most significant; the first uncertain sector of lane
+    // 1 (any of lane 0 comes before it, and is returned as found).
+    let (mut bits, mut later) = ([0u16; 2], None);
+    for (k, v) in s.as_chunks::<6>().0.iter().enumerate() {
         let mean = (v[0] + v[1] + v[2] + v[3] + v[4] + v[5]) / splat(v.len() as f64);
         let close = (mean - thr2).abs().cmp_lt(margin);
         let bit = mean.cmp_gt(thr2);
@@ -742,28 +759,24 @@ fn classify(
         let least = least.fast_min(v[4]).fast_min(v[5]);
         let most = most.fast_max(v[4]).fast_max(v[5]);
         let off_side = (bit & least.cmp_lt(low)) | (!bit & most.cmp_gt(high));
-        // Lane 0 into bit 0, lane 1 into bit 8, shifted on a pair later.
-        let place = |m: f64x2, into: u16| {
-            let m = m.move_mask() as u16;
-            into << 1 | (m & 1) | (m & 2) << 7
-        };
-        word = place(bit, word);
-        marginal = place(close, marginal);
-        uncertain = place(close | off_side, uncertain);
+        let uncertain = (close | off_side).move_mask();
+        if uncertain != 0 {
+            let why = |lane: i32| match close.move_mask() >> lane & 1 {
+                1 => Uncertainty::MarginalSector,
+                _ => Uncertainty::SectorDisagrees,
+            };
+            if uncertain & 1 == 1 {
+                return Err((k, why(0)));
+            }
+            later = later.or(Some((k + 6, why(1))));
+        }
+        let bit = bit.move_mask() as u16;
+        bits = [bits[0] << 1 | (bit & 1), bits[1] << 1 | bit >> 1];
     }
-    // Sectors 0 to 5 from bits 5 to 0, 6 to 11 from bits 13 to 8.
-    let [word, marginal, uncertain] =
-        [word, marginal, uncertain].map(|m| (m & 0x3f) << 6 | (m >> 8) & 0x3f);
-    if uncertain != 0 {
-        let first = uncertain.leading_zeros() as usize - 4;
-        let why = if marginal >> (11 - first) & 1 == 1 {
-            Uncertainty::MarginalSector
-        } else {
-            Uncertainty::SectorDisagrees
-        };
-        return Err((first, why));
+    match later {
+        Some(first) => Err(first),
+        None => Ok(bits[0] << 6 | bits[1]),
     }
-    Ok(word)
 }
 
 /// Reads the ring around a dot.
@@ -993,8 +1006,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         // sample outside the image (12: none).
         let mut cut = 12;
         if let Some(cells) = &plane.cells {
-            let xy = turned_x2.iter().map(|&cs| offsets(k, cs));
-            circle(cells, f, xy, |i, v| s[i] = v);
+            sectors_at(cells, f, k, &turned_x2, &mut s);
         } else {
             'sectors: for (sector, turned) in turned.iter_mut().enumerate() {
                 if ri == 0 {
