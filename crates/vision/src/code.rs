@@ -485,19 +485,29 @@ fn positions(
 }
 
 /// The sector samples at radius `k` (the angles `turned`, two to a lane
-/// pair) into `s`, a whole circle two at a time ([`circle`]). Not inlined:
-/// the loop keeps its registers to itself.
+/// pair) into `s`, a whole circle two at a time ([`circle`]); at the first
+/// radius the angles are turned here (`turn`: the table's angles and the
+/// ring's phase). Not inlined: the loop keeps its registers to itself.
 #[inline(never)]
 fn sectors_at<P: Pixel>(
     cells: &Cells<'_, P>,
     f: &RingFrame,
     k: f64,
-    turned: &[CsPair; SECTOR_PAIRS],
+    turn: Option<(&[CsPair; SECTOR_PAIRS], CsPair)>,
+    turned: &mut [CsPair; SECTOR_PAIRS],
     s: &mut [f64x2; SECTOR_PAIRS],
 ) {
-    circle(cells, f, turned.iter().map(|&cs| offsets(k, cs)), |i, v| {
-        s[i] = v
-    });
+    let into = |i: usize, v: f64x2| s[i] = v;
+    match turn {
+        Some((table, phase)) => {
+            let xy = turned.iter_mut().zip(table).map(|(t, &a)| {
+                *t = rotate_cs(a, phase);
+                offsets(k, *t)
+            });
+            circle(cells, f, xy, into);
+        }
+        None => circle(cells, f, turned.iter().map(|&cs| offsets(k, cs)), into),
+    }
 }
 
 /// Bilinear sampling for one ring: when the whole target (out to its
@@ -992,12 +1002,7 @@ fn read_with<P: Pixel, const FAST: bool>(
     // The same two to a lane pair as [`classify`] takes them (whole
     // circles two at a time: every sample of a radius, then its sectors).
     let mut turned_x2 = [(f64x2::ZERO, f64x2::ZERO); SECTOR_PAIRS];
-    if plane.cells.is_some() {
-        let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
-        for (t, &a) in turned_x2.iter_mut().zip(&tables.sector_x2) {
-            *t = rotate_cs(a, boundary_x2);
-        }
-    }
+    let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
         let margins = (base_margin * relax, base_sample_margin * relax);
@@ -1006,7 +1011,8 @@ fn read_with<P: Pixel, const FAST: bool>(
         // sample outside the image (12: none).
         let mut cut = 12;
         if let Some(cells) = &plane.cells {
-            sectors_at(cells, f, k, &turned_x2, &mut s);
+            let turn = (ri == 0).then_some((&tables.sector_x2, boundary_x2));
+            sectors_at(cells, f, k, turn, &mut turned_x2, &mut s);
         } else {
             'sectors: for (sector, turned) in turned.iter_mut().enumerate() {
                 if ri == 0 {
