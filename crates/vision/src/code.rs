@@ -484,6 +484,18 @@ fn positions(
         .map(move |(x, y)| (col + e0 * x + e1 * y, row + e1 * x + e2 * y))
 }
 
+/// The values at the plate offsets `xy` into `out` (whole circles two at a
+/// time, [`circle`]). Not inlined: the loop keeps its registers to itself.
+#[inline(never)]
+fn samples_at<P: Pixel, const N: usize>(
+    cells: &Cells<'_, P>,
+    f: &RingFrame,
+    xy: &[XyPair; N],
+    out: &mut [f64x2; N],
+) {
+    circle(cells, f, xy.iter().copied(), |i, v| out[i] = v);
+}
+
 /// The sector samples at radius `k` (the angles `turned`, two to a lane
 /// pair) into `s`, a whole circle two at a time ([`circle`]); at the first
 /// radius the angles are turned here (`turn`: the table's angles and the
@@ -899,10 +911,10 @@ fn read_with<P: Pixel, const FAST: bool>(
     if let Some(cells) = plane.cells.as_ref().filter(|&c| !none_bright(c)) {
         // Only whether one is bright (the largest, exact), then how many.
         let mut top = f64x2::splat(f64::MIN);
-        circle(cells, f, tables.phase_first.iter().copied(), |c, v| {
-            first[c] = v;
+        samples_at(cells, f, &tables.phase_first, &mut first);
+        for &v in &first {
             top = v.fast_max(top);
-        });
+        }
         let [a, b] = top.to_array();
         if a > thr || b > thr {
             n_bright = count(&first);
@@ -920,9 +932,7 @@ fn read_with<P: Pixel, const FAST: bool>(
     if n_bright > 0.0 {
         let rest = second.insert([f64x2::ZERO; 2 * HALF / 3]);
         if let Some(cells) = &plane.cells {
-            circle(cells, f, tables.phase_rest.iter().copied(), |c, v| {
-                rest[c] = v
-            });
+            samples_at(cells, f, &tables.phase_rest, rest);
             n_bright += count(rest);
         } else {
             for j in (0..PHASE_SAMPLES).filter(|j| j % 3 != 0) {
