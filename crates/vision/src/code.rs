@@ -571,7 +571,8 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
             .flatten();
         Sampler {
             plane,
-            inside: within(0.0),
+            // (Cells lie half a pixel inside.)
+            inside: cells.is_some() || within(0.0),
             cells,
         }
     }
