@@ -697,7 +697,7 @@ fn harmonic(ring: &Middle) -> (f64, f64, f64) {
 /// sector boundary agrees with its sector's bit in `raw`, the boundary at
 /// `boundary_deg` (within ±15°). Two samples at a time, each lane with the
 /// scalar's operations: the angle from the boundary `rel = (t − boundary)
-/// mod 360` (the offset lies within (−30°, 390°); the samples 30° and more
+/// mod 360` (the offset lies within (−30°, 390°); the samples 20° and more
 /// from 0° need no turn), its sector `q = ⌊rel / 30⌋` and the remainder
 /// `rel − 30 q`, all exact as one at a time. `q` is `rel / 30 − 1/2`
 /// rounded (by adding 1.5 · 2⁵²): `⌊rel / 30⌋` but at an integer `n`,
@@ -741,11 +741,11 @@ fn phase_agrees(
             bad |= disagree(3 * c + k, v, may_turn);
         }
     };
-    // Elements 6 to 29: samples 6 … 29 and 42 … 65, 30° and more from 0°.
-    for c in (0..2).chain(10..12) {
+    // Elements 6 to 32: samples 6 … 32 and 42 … 68, 20° and more from 0°.
+    for c in [0, 1, 11] {
         chunk(c, true);
     }
-    for c in 2..10 {
+    for c in 2..11 {
         chunk(c, false);
     }
     bad.move_mask() == 0
