@@ -886,7 +886,7 @@ fn read_with<P: Pixel, const FAST: bool>(
     // `3c + 2` (see [`HALF`]).
     let mut first = [f64x2::ZERO; HALF / 3];
     // The count of bright samples as a float (exact), two lanes at a time
-    // on the fast path (1.0 per lane that is), once one is found.
+    // on the fast path (1.0 per lane that is).
     let mut n_bright = 0.0;
     let mut outside = false;
     let thr2 = f64x2::splat(thr);
@@ -910,16 +910,8 @@ fn read_with<P: Pixel, const FAST: bool>(
     // without interpolating.
     let none_bright = |cells: &Cells<'_, P>| below(cells, f, &tables.phase_first, thr);
     if let Some(cells) = plane.cells.as_ref().filter(|&c| !none_bright(c)) {
-        // Only whether one is bright (the largest, exact), then how many.
-        let mut top = f64x2::splat(f64::MIN);
         samples_at(cells, f, &tables.phase_first, &mut first);
-        for &v in &first {
-            top = v.fast_max(top);
-        }
-        let [a, b] = top.to_array();
-        if a > thr || b > thr {
-            n_bright = count(&first);
-        }
+        n_bright = count(&first);
     } else if plane.cells.is_none() {
         for j in (0..PHASE_SAMPLES).step_by(3) {
             match sample(j, &mut first[j % HALF / 3]) {
