@@ -26,9 +26,9 @@
 //!    of the canonical value; ids that the field does not carry as coded
 //!    targets are not accepted.
 
-use crate::pixel::{Pixel, Plane};
+use crate::pixel::{Cells, Pixel, Plane};
 use photopose_field::{codes, Field, TargetKind};
-use wide::f64x2;
+use wide::{f64x2, CmpGe, CmpGt, CmpLe, CmpLt};
 
 /// The set of code ids a detector accepts (those of the field's coded targets).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -319,6 +319,18 @@ const HARMONIC: [(f64, f64); 6] = [
 /// Cosines and sines of two sampling angles, one to a lane: `(cos, sin)`.
 type CsPair = (f64x2, f64x2);
 
+/// The plate offsets `(k cos t, −k sin t)` of two sampling angles on the
+/// circle of radius `k`, one to a lane: what [`RingFrame::point_cs`] maps
+/// (the same products).
+type XyPair = (f64x2, f64x2);
+
+/// The classification samples of all sectors, two to a lane pair.
+const SECTOR_PAIRS: usize = 12 * SECTOR_OFFSETS.len() / 2;
+
+/// Half the phase samples: the ring's middle is kept two to a lane pair,
+/// samples `i` and `i + 36` (half a turn on) in element `i`.
+const HALF: usize = PHASE_SAMPLES / 2;
+
 /// The angles of `cs` two to a [`CsPair`], in order.
 fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
     debug_assert_eq!(cs.len(), 2 * N);
@@ -328,8 +340,15 @@ fn pairs<const N: usize>(cs: &[(f64, f64)]) -> [CsPair; N] {
     })
 }
 
+/// The plate offsets of `cs` at radius `k` (see [`XyPair`]).
+#[inline(always)]
+fn offsets(k: f64, (c, s): CsPair) -> XyPair {
+    (f64x2::splat(k) * c, f64x2::splat(-k) * s)
+}
+
 /// Cosines and sines of the fixed sampling angles, computed once; also
-/// two to a lane pair for `circle_inside`.
+/// the plate offsets of the fixed circles, two angles to a lane pair (for
+/// sampling two at a time).
 #[derive(Debug, Clone)]
 pub struct RingTables {
     phase: [(f64, f64); PHASE_SAMPLES],
@@ -337,13 +356,20 @@ pub struct RingTables {
     bright: [(f64, f64); 8],
     /// Sector `k`, sample `i`: angle `15° + 30° k + offset_i` from the boundary.
     sector: [[(f64, f64); SECTOR_OFFSETS.len()]; 12],
-    /// The phase angles `j = 0, 3, 6 …` (the first pass).
-    phase_first: [CsPair; PHASE_SAMPLES / 6],
-    /// The phase angles `3j + 1, 3j + 2` (the second pass).
-    phase_rest: [CsPair; PHASE_SAMPLES / 3],
-    zone_x2: [CsPair; ZONE_SAMPLES / 2],
-    bright_x2: [CsPair; 4],
-    sector_x2: [[CsPair; SECTOR_OFFSETS.len() / 2]; 12],
+    /// The ring's middle at the phase angles `(i, i + 36)` for `i = 3c`
+    /// (the first pass, element `c`).
+    phase_first: [XyPair; HALF / 3],
+    /// The same for `i = 3c + 1, 3c + 2` (the second pass, elements `2c`,
+    /// `2c + 1`).
+    phase_rest: [XyPair; 2 * HALF / 3],
+    /// The phase angles `(i, i + 36)` in degrees.
+    phase_deg: [f64x2; HALF],
+    bright_x2: [XyPair; 4],
+    gap_x2: [XyPair; ZONE_SAMPLES / 2],
+    quiet_x2: [XyPair; ZONE_SAMPLES / 2],
+    /// The sector angles two to a lane pair: element `6k + i` holds
+    /// sample `i` of sectors `k` and `k + 6` (see [`classify`]).
+    sector_x2: [CsPair; SECTOR_PAIRS],
 }
 
 impl Default for RingTables {
@@ -358,11 +384,13 @@ impl Default for RingTables {
             zone: [(0.0, 0.0); ZONE_SAMPLES],
             bright: [(0.0, 0.0); 8],
             sector: [[(0.0, 0.0); SECTOR_OFFSETS.len()]; 12],
-            phase_first: [zero; PHASE_SAMPLES / 6],
-            phase_rest: [zero; PHASE_SAMPLES / 3],
-            zone_x2: [zero; ZONE_SAMPLES / 2],
+            phase_first: [zero; HALF / 3],
+            phase_rest: [zero; 2 * HALF / 3],
+            phase_deg: [f64x2::ZERO; HALF],
             bright_x2: [zero; 4],
-            sector_x2: [[zero; SECTOR_OFFSETS.len() / 2]; 12],
+            gap_x2: [zero; ZONE_SAMPLES / 2],
+            quiet_x2: [zero; ZONE_SAMPLES / 2],
+            sector_x2: [zero; SECTOR_PAIRS],
         };
         for (j, v) in t.phase.iter_mut().enumerate() {
             *v = cs(j as f64 * (360.0 / PHASE_SAMPLES as f64));
@@ -378,17 +406,28 @@ impl Default for RingTables {
                 *v = cs(15.0 + 30.0 * k as f64 + d);
             }
         }
-        let first: Vec<_> = t.phase.iter().copied().step_by(3).collect();
-        t.phase_first = pairs(&first);
-        let rest: Vec<_> = (0..PHASE_SAMPLES)
-            .filter(|j| j % 3 != 0)
-            .map(|j| t.phase[j])
-            .collect();
-        t.phase_rest = pairs(&rest);
-        t.zone_x2 = pairs(&t.zone);
-        t.bright_x2 = pairs(&t.bright);
-        for (x2, row) in t.sector_x2.iter_mut().zip(&t.sector) {
-            *x2 = pairs(row);
+        let [middle, gap, quiet] = [RING_RADII[0], ZONE_RADII[0], ZONE_RADII[1]];
+        let half_turn = |i: usize| {
+            let ((c0, s0), (c1, s1)) = (t.phase[i], t.phase[i + HALF]);
+            offsets(middle, (f64x2::new([c0, c1]), f64x2::new([s0, s1])))
+        };
+        for c in 0..HALF / 3 {
+            t.phase_first[c] = half_turn(3 * c);
+            t.phase_rest[2 * c] = half_turn(3 * c + 1);
+            t.phase_rest[2 * c + 1] = half_turn(3 * c + 2);
+        }
+        for (i, v) in t.phase_deg.iter_mut().enumerate() {
+            let deg = |j: usize| j as f64 * (360.0 / PHASE_SAMPLES as f64);
+            *v = f64x2::new([deg(i), deg(i + HALF)]);
+        }
+        t.bright_x2 = pairs::<4>(&t.bright).map(|cs| offsets(0.3, cs));
+        t.gap_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(gap, cs));
+        t.quiet_x2 = pairs::<{ ZONE_SAMPLES / 2 }>(&t.zone).map(|cs| offsets(quiet, cs));
+        for (k, x2) in t.sector_x2.chunks_exact_mut(6).enumerate() {
+            for (i, x2) in x2.iter_mut().enumerate() {
+                let ((c0, s0), (c1, s1)) = (t.sector[k][i], t.sector[k + 6][i]);
+                *x2 = (f64x2::new([c0, c1]), f64x2::new([s0, s1]));
+            }
         }
         t
     }
@@ -403,36 +442,96 @@ where
     (ca * cb - sa * sb, sa * cb + ca * sb)
 }
 
-/// The values at `f.point_cs(k, cs)` for the angles of `cs`, two at a time
-/// into `out` (lane `l` of `out[i]` from lane `l` of `cs[i]`), for a ring
-/// that lies inside the window ([`Sampler`]'s `inside`). Each lane does the
-/// scalar [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations
-/// in the same order: the values are theirs bit for bit, in fewer
-/// instructions (the arithmetic of two samples in one vector operation).
+/// The values at the plate offsets `xy` (two at a time, lane `l` of
+/// element `i` into lane `l` of `out(i, _)`) for a ring clear of the
+/// window's edges ([`Sampler`]'s `cells`). Each lane does the scalar
+/// [`RingFrame::point_cs`] and [`Plane::bilinear_inside`] operations in
+/// the same order: the values are theirs bit for bit, in fewer
+/// instructions (the arithmetic of two samples in one vector operation,
+/// no clamping of the cells, no range checks).
 #[inline(always)]
-fn circle_inside<P: Pixel>(
-    plane: &Plane<'_, P>,
+fn circle<P: Pixel>(
+    cells: &Cells<'_, P>,
     f: &RingFrame,
-    k: f64,
-    cs: &[CsPair],
-    out: &mut [f64x2],
+    xy: impl IntoIterator<Item = XyPair>,
+    mut out: impl FnMut(usize, f64x2),
 ) {
-    let (kc, ks) = (f64x2::splat(k), f64x2::splat(-k));
+    for (i, (col, row)) in positions(f, xy).enumerate() {
+        out(i, cells.bilinear_x2(col, row));
+    }
+}
+
+/// Whether a bound of the pixels of the cells of the plate offsets `xy`
+/// lies below `limit` (and so every value there at most `limit`, see
+/// [`Cells::corners_bound`]): four pairs of offsets at a time, done at the
+/// first whose bound is not (a coded target's ring).
+#[inline(always)]
+fn below<P: Pixel>(cells: &Cells<'_, P>, f: &RingFrame, xy: &[XyPair], limit: f64) -> bool {
+    xy.chunks(4)
+        .all(|xy| (cells.corners_bound(positions(f, xy.iter().copied())) as f64) < limit)
+}
+
+/// The pixel positions of the plate offsets `xy` (two at a time, as
+/// [`RingFrame::point_cs`] forms them).
+#[inline(always)]
+fn positions(
+    f: &RingFrame,
+    xy: impl IntoIterator<Item = XyPair>,
+) -> impl Iterator<Item = (f64x2, f64x2)> {
     let (col, row) = (f64x2::splat(f.col), f64x2::splat(f.row));
     let [e0, e1, e2] = f.e.map(f64x2::splat);
-    for (&(c, s), v) in cs.iter().zip(out) {
-        let (x, y) = (kc * c, ks * s);
-        *v = plane.bilinear_inside_x2(col + e0 * x + e1 * y, row + e1 * x + e2 * y);
+    xy.into_iter()
+        .map(move |(x, y)| (col + e0 * x + e1 * y, row + e1 * x + e2 * y))
+}
+
+/// The values at the plate offsets `xy` into `out` (whole circles two at a
+/// time, [`circle`]). Not inlined: the loop keeps its registers to itself.
+#[inline(never)]
+fn samples_at<P: Pixel, const N: usize>(
+    cells: &Cells<'_, P>,
+    f: &RingFrame,
+    xy: &[XyPair; N],
+    out: &mut [f64x2; N],
+) {
+    circle(cells, f, xy.iter().copied(), |i, v| out[i] = v);
+}
+
+/// The sector samples at radius `k` (the angles `turned`, two to a lane
+/// pair) into `s`, a whole circle two at a time ([`circle`]); at the first
+/// radius the angles are turned here (`turn`: the table's angles and the
+/// ring's phase). Not inlined: the loop keeps its registers to itself.
+#[inline(never)]
+fn sectors_at<P: Pixel>(
+    cells: &Cells<'_, P>,
+    f: &RingFrame,
+    k: f64,
+    turn: Option<(&[CsPair; SECTOR_PAIRS], CsPair)>,
+    turned: &mut [CsPair; SECTOR_PAIRS],
+    s: &mut [f64x2; SECTOR_PAIRS],
+) {
+    let into = |i: usize, v: f64x2| s[i] = v;
+    match turn {
+        Some((table, phase)) => {
+            let xy = turned.iter_mut().zip(table).map(|(t, &a)| {
+                *t = rotate_cs(a, phase);
+                offsets(k, *t)
+            });
+            circle(cells, f, xy, into);
+        }
+        None => circle(cells, f, turned.iter().map(|&cs| offsets(k, cs)), into),
     }
 }
 
 /// Bilinear sampling for one ring: when the whole target (out to its
-/// quiet zone) lies inside the image, every sample skips the range checks
-/// (and whole circles of samples go two at a time, [`circle_inside`]).
-/// `FAST` off: one sample at a time even then (the reference for tests).
+/// quiet zone) lies inside the image, every sample skips the range checks;
+/// when it lies half a pixel clear of the image's edges, whole circles of
+/// samples go two at a time ([`circle`]) from the cells of its box
+/// ([`Plane::cells`]). `FAST` off: one sample at a time even then (the
+/// reference for tests).
 struct Sampler<'p, 'a, P, const FAST: bool> {
     plane: &'p Plane<'a, P>,
     inside: bool,
+    cells: Option<Cells<'a, P>>,
 }
 
 impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
@@ -445,19 +544,37 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
         // (Full-frame coordinates: the window's first and last centres.)
         let (c0, r0) = (plane.col0 as f64, plane.row0 as f64);
         let (c1, r1) = (plane.last_col() as f64, plane.last_row() as f64);
-        let inside = plane.width >= 2
-            && plane.height >= 2
-            && f.col - hx >= c0
-            && f.row - hy >= r0
-            && f.col + hx <= c1
-            && f.row + hy <= r1;
-        Sampler { plane, inside }
-    }
-
-    /// Whether whole circles go through [`circle_inside`].
-    #[inline(always)]
-    fn fast(&self) -> bool {
-        FAST && self.inside
+        let within = |margin: f64| {
+            plane.width >= 2
+                && plane.height >= 2
+                && f.col - hx >= c0 + margin
+                && f.row - hy >= r0 + margin
+                && f.col + hx <= c1 - margin
+                && f.row + hy <= r1 - margin
+        };
+        // Half a pixel clear of the edges, the cells' corners (`v − 0.5`
+        // rounded: `⌊v⌋ − 1` or `⌊v⌋`) lie in the box from one before
+        // the farthest reach's to its own, inside the window short of its
+        // last column and row (`⌊v⌋` by truncation: `v` is positive, and
+        // below 2³² as every position).
+        let floor = |v: f64| v as u32 as usize;
+        let cells = (FAST && within(0.5))
+            .then(|| {
+                plane.cells(
+                    (
+                        floor(f.col - hx).saturating_sub(1).max(plane.col0),
+                        floor(f.row - hy).saturating_sub(1).max(plane.row0),
+                    ),
+                    (floor(f.col + hx), floor(f.row + hy)),
+                )
+            })
+            .flatten();
+        Sampler {
+            plane,
+            // (Cells lie half a pixel inside.)
+            inside: cells.is_some() || within(0.0),
+            cells,
+        }
     }
 
     #[inline(always)]
@@ -470,45 +587,41 @@ impl<'p, 'a, P: Pixel, const FAST: bool> Sampler<'p, 'a, P, FAST> {
     }
 }
 
-/// Samples the ring's middle at phase angle `j` into `ring[j]`; whether it
-/// is bright, `None` outside the image.
+/// The ring's middle at phase angle `j`, `None` outside the image.
 #[inline(always)]
 fn phase_sample<P: Pixel, const FAST: bool>(
     plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     tables: &RingTables,
-    thr: f64,
     j: usize,
-    ring: &mut [f64; PHASE_SAMPLES],
-) -> Option<bool> {
-    let (x, y) = f.point_cs(2.5, tables.phase[j]);
-    plane.at(x, y).map(|v| {
-        ring[j] = v;
-        v > thr
-    })
+) -> Option<f64> {
+    let (x, y) = f.point_cs(RING_RADII[0], tables.phase[j]);
+    plane.at(x, y)
 }
 
+/// The mean and the largest of the samples of a dark zone at radius `k`
+/// (`xy`: its plate offsets for [`circle`]); `None` if one is outside.
 fn zone<P: Pixel, const FAST: bool>(
     plane: &Sampler<'_, '_, P, FAST>,
     f: &RingFrame,
     k: f64,
+    xy: &[XyPair; ZONE_SAMPLES / 2],
     tables: &RingTables,
 ) -> Option<(f64, f64)> {
     let mut sum = 0.0;
     let mut max = f64::MIN;
-    if plane.fast() {
-        let mut v = [f64x2::ZERO; ZONE_SAMPLES / 2];
-        circle_inside(plane.plane, f, k, &tables.zone_x2, &mut v);
-        // In the samples' order, as below.
-        for v in &v {
-            for v in v.to_array() {
-                sum += v;
-                if v > max {
-                    max = v;
-                }
-            }
-        }
-        return Some((sum / ZONE_SAMPLES as f64, max));
+    if let Some(cells) = &plane.cells {
+        // The sum in the samples' order, as below; the largest lane by
+        // lane (no sample is NaN or −0: the same value).
+        let mut max2 = f64x2::splat(f64::MIN);
+        circle(cells, f, xy.iter().copied(), |_, v| {
+            let [a, b] = v.to_array();
+            sum += a;
+            sum += b;
+            max2 = v.fast_max(max2);
+        });
+        let [a, b] = max2.to_array();
+        return Some((sum / ZONE_SAMPLES as f64, a.max(b)));
     }
     for &cs in &tables.zone {
         let (x, y) = f.point_cs(k, cs);
@@ -521,6 +634,174 @@ fn zone<P: Pixel, const FAST: bool>(
     Some((sum / ZONE_SAMPLES as f64, max))
 }
 
+/// The ring's middle as the two passes sample it: element `c` of `first`
+/// holds samples `3c` and `3c + 36` (see [`HALF`]), elements `2c` and `2c
+/// + 1` of `rest` those from `3c + 1` and `3c + 2`.
+struct Middle<'r> {
+    first: &'r [f64x2; HALF / 3],
+    rest: &'r [f64x2; 2 * HALF / 3],
+}
+
+impl Middle<'_> {
+    /// Elements `3c` to `3c + 2` of the layout of [`HALF`].
+    #[inline(always)]
+    fn chunk(&self, c: usize) -> [f64x2; 3] {
+        [self.first[c], self.rest[2 * c], self.rest[2 * c + 1]]
+    }
+}
+
+/// The 12th harmonic of the transitions' strength around the ring: `(re, im, total)` of `g_j = |ring[j + 1] −
+/// ring[j]|` weighted by `(cos, sin)` of `(j + 0.5) × 60°`, summed in the
+/// order `j = 0 … 71` (the differences two at a time, `re` and `im` in one
+/// lane pair: the same operations as one at a time).
+fn harmonic(ring: &Middle) -> (f64, f64, f64) {
+    // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles (36 is a
+    // multiple of 6, so lane 1 repeats lane 0's).
+    const H: [f64x2; 6] = {
+        let mut h = [f64x2::ZERO; 6];
+        let mut k = 0;
+        while k < 6 {
+            h[k] = f64x2::new([HARMONIC[k].0, HARMONIC[k].1]);
+            k += 1;
+        }
+        h
+    };
+    let mut g = [f64x2::ZERO; HALF];
+    for (c, g) in g.as_chunks_mut::<3>().0.iter_mut().enumerate() {
+        let [a, b, d] = ring.chunk(c);
+        // After sample 35 comes 36, after 71 comes 0: lanes crossed.
+        let next = match ring.first.get(c + 1) {
+            Some(&next) => next,
+            None => {
+                let [first, opposite] = ring.first[0].to_array();
+                f64x2::new([opposite, first])
+            }
+        };
+        *g = [(b - a).abs(), (d - b).abs(), (next - d).abs()];
+    }
+    let (mut re_im, mut total) = (f64x2::ZERO, 0.0);
+    for lane in 0..2 {
+        for g in g.as_chunks::<6>().0 {
+            for (g, &h) in g.iter().zip(&H) {
+                let g = g.as_array_ref()[lane];
+                re_im += f64x2::splat(g) * h;
+                total += g;
+            }
+        }
+    }
+    let [re, im] = re_im.to_array();
+    (re, im, total)
+}
+
+/// Whether every phase sample of `ring` clear of a
+/// sector boundary agrees with its sector's bit in `raw`, the boundary at
+/// `boundary_deg` (within ±15°). Two samples at a time, each lane with the
+/// scalar's operations: the angle from the boundary `rel = (t − boundary)
+/// mod 360` (the offset lies within (−30°, 390°); the samples 20° and more
+/// from 0° need no turn), its sector `q = ⌊rel / 30⌋` and the remainder
+/// `rel − 30 q`, all exact as one at a time. `q` is `rel / 30 − 1/2`
+/// rounded (by adding 1.5 · 2⁵²): `⌊rel / 30⌋` but at an integer `n`,
+/// where it may be `n − 1`, the remainder 30 instead of 0: a sample on a
+/// boundary, not checked either way.
+fn phase_agrees(
+    ring: &Middle,
+    phase_deg: &[f64x2; HALF],
+    boundary_deg: f64,
+    raw: u16,
+    thr: f64,
+) -> bool {
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    let splat = f64x2::splat;
+    let (b, thr) = (splat(boundary_deg), splat(thr));
+    let (full, thirty, half, round) = (splat(360.0), splat(30.0), splat(0.5), splat(ROUND));
+    let (lo, hi) = (splat(EDGE_CLEARANCE), splat(30.0 - EDGE_CLEARANCE));
+    // The bit of sector `q % 12` as a lane mask, for `q` up to 12 (and 15).
+    let bits: [f64; 16] = std::array::from_fn(|q| {
+        f64::from_bits(0u64.wrapping_sub(((raw >> (11 - q % 12)) & 1) as u64))
+    });
+    // Whether the samples of element `i` (`v`) disagree (lane masks).
+    let disagree = |i: usize, v: f64x2, may_turn: bool| {
+        let d = phase_deg[i] - b;
+        let rel = if may_turn {
+            // `d + 360`, `d − 360` or `d + 0` (which is `d`: never −0).
+            d + ((d.cmp_lt(f64x2::ZERO) & full) | (d.cmp_ge(full) & -full))
+        } else {
+            d
+        };
+        let r = (rel / thirty - half) + round;
+        let within = rel - thirty * (r - round);
+        let clear = within.cmp_ge(lo) & within.cmp_le(hi);
+        let [qa, qb] = r.to_array().map(|v| v.to_bits() as usize & 15);
+        let bit = f64x2::new([bits[qa], bits[qb]]);
+        clear & (bit ^ v.cmp_gt(thr))
+    };
+    let mut bad = f64x2::ZERO;
+    let mut chunk = |c: usize, may_turn: bool| {
+        for (k, v) in ring.chunk(c).into_iter().enumerate() {
+            bad |= disagree(3 * c + k, v, may_turn);
+        }
+    };
+    // Elements 6 to 32: samples 6 … 32 and 42 … 68, 20° and more from 0°.
+    for c in [0, 1, 11] {
+        chunk(c, true);
+    }
+    for c in 2..11 {
+        chunk(c, false);
+    }
+    bad.move_mask() == 0
+}
+
+/// The bits of the 12 sectors from their samples, two sectors to a lane
+/// pair (element `6k + i` holds sample `i` of sectors `k` and `k + 6`), in
+/// reading order (sector 0 most significant); or the first sector (in
+/// order) that is uncertain, and why. A sector's mean must be `margins.0`
+/// clear of the threshold, each sample `margins.1` clear of it on the
+/// mean's side (its smallest or largest sample against one bound: the same
+/// comparisons as each sample, as no sample is NaN). Each lane does the
+/// operations of one sector at a time (the mean summed in the samples'
+/// order).
+#[inline(always)]
+fn classify(
+    s: &[f64x2; SECTOR_PAIRS],
+    thr: f64,
+    (margin, sample_margin): (f64, f64),
+) -> Result<u16, (usize, Uncertainty)> {
+    let splat = f64x2::splat;
+    let (thr2, margin) = (splat(thr), splat(margin));
+    let (low, high) = (splat(thr + sample_margin), splat(thr - sample_margin));
+    // The bits of lane 0 (sectors 0 to 5) and of lane 1 (6 to 11) apart,
+    // first sector most significant; the first uncertain sector of lane
+    // 1 (any of lane 0 comes before it, and is returned as found).
+    let (mut bits, mut later) = ([0u16; 2], None);
+    for (k, v) in s.as_chunks::<6>().0.iter().enumerate() {
+        let mean = (v[0] + v[1] + v[2] + v[3] + v[4] + v[5]) / splat(v.len() as f64);
+        let close = (mean - thr2).abs().cmp_lt(margin);
+        let bit = mean.cmp_gt(thr2);
+        let least = v[0].fast_min(v[1]).fast_min(v[2]).fast_min(v[3]);
+        let most = v[0].fast_max(v[1]).fast_max(v[2]).fast_max(v[3]);
+        let least = least.fast_min(v[4]).fast_min(v[5]);
+        let most = most.fast_max(v[4]).fast_max(v[5]);
+        let off_side = (bit & least.cmp_lt(low)) | (!bit & most.cmp_gt(high));
+        let uncertain = (close | off_side).move_mask();
+        if uncertain != 0 {
+            let why = |lane: i32| match close.move_mask() >> lane & 1 {
+                1 => Uncertainty::MarginalSector,
+                _ => Uncertainty::SectorDisagrees,
+            };
+            if uncertain & 1 == 1 {
+                return Err((k, why(0)));
+            }
+            later = later.or(Some((k + 6, why(1))));
+        }
+        let bit = bit.move_mask() as u16;
+        bits = [bits[0] << 1 | (bit & 1), bits[1] << 1 | bit >> 1];
+    }
+    match later {
+        Some(first) => Err(first),
+        None => Ok(bits[0] << 6 | bits[1]),
+    }
+}
+
 /// Reads the ring around a dot.
 pub fn read<P: Pixel>(
     plane: &Plane<P>,
@@ -529,7 +810,21 @@ pub fn read<P: Pixel>(
     accepted: &CodeSet,
     tables: &RingTables,
 ) -> Reading {
-    read_with::<P, true>(plane, f, params, accepted, tables)
+    read_with::<P, true>(plane, f, None, params, accepted, tables)
+}
+
+/// [`read`] with the grey value at the dot's centre given where it is
+/// known (`None`: sampled here; a value outside the image is never
+/// given): the same reading.
+pub(crate) fn read_centred<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    centre: Option<f64>,
+    params: &CodeParams,
+    accepted: &CodeSet,
+    tables: &RingTables,
+) -> Reading {
+    read_with::<P, true>(plane, f, centre, params, accepted, tables)
 }
 
 /// [`read`], with whole circles of samples two at a time (`FAST`) or one
@@ -537,6 +832,7 @@ pub fn read<P: Pixel>(
 fn read_with<P: Pixel, const FAST: bool>(
     plane: &Plane<P>,
     f: &RingFrame,
+    centre: Option<f64>,
     params: &CodeParams,
     accepted: &CodeSet,
     tables: &RingTables,
@@ -551,18 +847,15 @@ fn read_with<P: Pixel, const FAST: bool>(
     };
     // Bright level: the dot's centre and eight points at 0.3 r.
     let plane = &Sampler::<P, FAST>::new(plane, f);
-    let mut bright = match plane.at(f.col, f.row) {
-        Some(v) => v,
-        None => return out,
+    let Some(mut bright) = centre.or_else(|| plane.at(f.col, f.row)) else {
+        return out;
     };
-    if plane.fast() {
-        let mut v = [f64x2::ZERO; 4];
-        circle_inside(plane.plane, f, 0.3, &tables.bright_x2, &mut v);
-        for v in &v {
+    if let Some(cells) = &plane.cells {
+        circle(cells, f, tables.bright_x2.iter().copied(), |_, v| {
             let [a, b] = v.to_array();
             bright += a;
             bright += b;
-        }
+        });
     } else {
         for &cs in &tables.bright {
             let (x, y) = f.point_cs(0.3, cs);
@@ -573,7 +866,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         }
     }
     bright /= 9.0;
-    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], tables) else {
+    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], &tables.gap_x2, tables) else {
         return out;
     };
     out.bright = bright;
@@ -587,51 +880,64 @@ fn read_with<P: Pixel, const FAST: bool>(
     let too_dim_to_read = contrast < params.min_contrast;
     let thr = dark + 0.5 * contrast;
     // Presence and phase: the ring's middle every 5°, first every 15° (at
-    // least one sample in the middle half of every sector).
-    let mut ring = [0.0f64; PHASE_SAMPLES];
-    let mut n_bright = 0;
+    // least one sample in the middle half of every sector). Kept as the
+    // passes take them: element `c` of `first` holds samples `3c` and `3c
+    // + 36`, elements `2c` and `2c + 1` of `rest` those from `3c + 1` and
+    // `3c + 2` (see [`HALF`]).
+    let mut first = [f64x2::ZERO; HALF / 3];
+    // The count of bright samples as a float (exact), two lanes at a time
+    // on the fast path (1.0 per lane that is).
+    let mut n_bright = 0.0;
     let mut outside = false;
-    let sample =
-        |j: usize, ring: &mut [f64; PHASE_SAMPLES]| phase_sample(plane, f, tables, thr, j, ring);
-    if plane.fast() {
-        let mut v = [f64x2::ZERO; PHASE_SAMPLES / 6];
-        circle_inside(plane.plane, f, 2.5, &tables.phase_first, &mut v);
-        for (j, v) in v.iter().enumerate() {
-            let [a, b] = v.to_array();
-            ring[6 * j] = a;
-            ring[6 * j + 3] = b;
-            n_bright += (a > thr) as usize + (b > thr) as usize;
-        }
-    } else {
+    let thr2 = f64x2::splat(thr);
+    let count = |v: &[f64x2]| {
+        let one = f64x2::splat(1.0);
+        let n = v
+            .iter()
+            .fold(f64x2::ZERO, |n, v| n + (v.cmp_gt(thr2) & one));
+        let [a, b] = n.to_array();
+        a + b
+    };
+    // One at a time: into its lane; whether it is bright (`None`: outside).
+    let sample = |j: usize, into: &mut f64x2| {
+        phase_sample(plane, f, tables, j).map(|v| {
+            into.as_array_mut()[j / HALF] = v;
+            v > thr
+        })
+    };
+    // No sample is bright where no pixel of its cell reaches the
+    // threshold ([`Cells::corners_bound`]): an uncoded target's, found
+    // without interpolating.
+    let none_bright = |cells: &Cells<'_, P>| below(cells, f, &tables.phase_first, thr);
+    if let Some(cells) = plane.cells.as_ref().filter(|&c| !none_bright(c)) {
+        samples_at(cells, f, &tables.phase_first, &mut first);
+        n_bright = count(&first);
+    } else if plane.cells.is_none() {
         for j in (0..PHASE_SAMPLES).step_by(3) {
-            match sample(j, &mut ring) {
-                Some(b) => n_bright += b as usize,
+            match sample(j, &mut first[j % HALF / 3]) {
+                Some(b) => n_bright += b as u8 as f64,
                 None => outside = true,
             }
         }
     }
-    if n_bright > 0 {
-        if plane.fast() {
-            let mut v = [f64x2::ZERO; PHASE_SAMPLES / 3];
-            circle_inside(plane.plane, f, 2.5, &tables.phase_rest, &mut v);
-            for (j, v) in v.iter().enumerate() {
-                let [a, b] = v.to_array();
-                ring[3 * j + 1] = a;
-                ring[3 * j + 2] = b;
-                n_bright += (a > thr) as usize + (b > thr) as usize;
-            }
+    // The second pass once one sample is bright.
+    let mut second = None;
+    if n_bright > 0.0 {
+        let rest = second.insert([f64x2::ZERO; 2 * HALF / 3]);
+        if let Some(cells) = &plane.cells {
+            samples_at(cells, f, &tables.phase_rest, rest);
+            n_bright += count(rest);
         } else {
-            for j in 0..PHASE_SAMPLES / 3 {
-                for j in [3 * j + 1, 3 * j + 2] {
-                    match sample(j, &mut ring) {
-                        Some(b) => n_bright += b as usize,
-                        None => outside = true,
-                    }
+            for j in (0..PHASE_SAMPLES).filter(|j| j % 3 != 0) {
+                let i = j % HALF;
+                match sample(j, &mut rest[2 * (i / 3) + i % 3 - 1]) {
+                    Some(b) => n_bright += b as u8 as f64,
+                    None => outside = true,
                 }
             }
         }
     }
-    out.ring_present = n_bright >= 2;
+    out.ring_present = n_bright >= 2.0;
     let dark_limit = dark + params.dark_tolerance * contrast;
     if gap_max > dark_limit {
         out.gap = Gap::NotDark;
@@ -639,14 +945,21 @@ fn read_with<P: Pixel, const FAST: bool>(
         return out;
     }
     out.gap = Gap::Dark;
-    if !out.ring_present {
-        out.status = if outside {
-            CodeStatus::Uncertain(Uncertainty::OutsideImage)
-        } else {
-            CodeStatus::NoRing
-        };
-        return out;
-    }
+    // (A ring is present only where one sample was bright.)
+    let ring = match &second {
+        Some(rest) if out.ring_present => Middle {
+            first: &first,
+            rest,
+        },
+        _ => {
+            out.status = if outside {
+                CodeStatus::Uncertain(Uncertainty::OutsideImage)
+            } else {
+                CodeStatus::NoRing
+            };
+            return out;
+        }
+    };
     if outside {
         return out;
     }
@@ -654,7 +967,13 @@ fn read_with<P: Pixel, const FAST: bool>(
         out.status = CodeStatus::Uncertain(Uncertainty::LowContrast);
         return out;
     }
-    match zone(plane, f, ZONE_RADII[1], tables) {
+    // Dark where no pixel of its cells reaches the limit (see
+    // [`Cells::corners_bound`]); else each sample against it.
+    let quiet = |cells: &Cells<'_, P>| below(cells, f, &tables.quiet_x2, dark_limit);
+    match plane.cells.as_ref().filter(|&c| quiet(c)).map_or_else(
+        || zone(plane, f, ZONE_RADII[1], &tables.quiet_x2, tables),
+        |_| Some((0.0, f64::MIN)),
+    ) {
         None => return out,
         Some((_, quiet_max)) if quiet_max > dark_limit => {
             out.status = CodeStatus::Uncertain(Uncertainty::QuietZoneNotDark);
@@ -663,19 +982,11 @@ fn read_with<P: Pixel, const FAST: bool>(
         Some(_) => {}
     }
     // Sector boundaries: 12th harmonic of the transitions' strength.
-    let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
-    for j in 0..PHASE_SAMPLES {
-        let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
-        // 12 × (j + 0.5) × 5° = (j + 0.5) × 60°: six distinct angles.
-        let (c, sn) = HARMONIC[j % 6];
-        re += g * c;
-        im += g * sn;
-        total += g;
-    }
+    let (re, im, total) = harmonic(&ring);
     if total < params.min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
         // A full ring (4095) has no transitions; anything else without a
         // 30° pattern is not a code.
-        out.status = if n_bright == PHASE_SAMPLES {
+        out.status = if n_bright == PHASE_SAMPLES as f64 {
             CodeStatus::NotInField { value: codes::MASK }
         } else {
             CodeStatus::Uncertain(Uncertainty::NoPhase)
@@ -691,61 +1002,49 @@ fn read_with<P: Pixel, const FAST: bool>(
     // The sample angles turned to the ring's phase: at the middle radius,
     // then reused at the inner and outer ones.
     let mut turned = [[(0.0f64, 0.0f64); SECTOR_OFFSETS.len()]; 12];
-    // The same two to a lane pair.
-    let mut turned_x2 = [[(f64x2::ZERO, f64x2::ZERO); SECTOR_OFFSETS.len() / 2]; 12];
+    // The same two to a lane pair as [`classify`] takes them (whole
+    // circles two at a time: every sample of a radius, then its sectors).
+    let mut turned_x2 = [(f64x2::ZERO, f64x2::ZERO); SECTOR_PAIRS];
     let boundary_x2 = (f64x2::splat(boundary_cs.0), f64x2::splat(boundary_cs.1));
     for (ri, &k) in RING_RADII.iter().enumerate() {
         let relax = if ri == 0 { 1.0 } else { CROSS_MARGIN };
-        let (margin, sample_margin) = (base_margin * relax, base_sample_margin * relax);
-        let mut word = 0u16;
-        for (sector, (turned, turned_x2)) in turned.iter_mut().zip(&mut turned_x2).enumerate() {
-            let mut s = [0.0f64; SECTOR_OFFSETS.len()];
-            if plane.fast() {
-                if ri == 0 {
-                    for (t, &a) in turned_x2.iter_mut().zip(&tables.sector_x2[sector]) {
-                        *t = rotate_cs(a, boundary_x2);
-                    }
-                }
-                let mut v = [f64x2::ZERO; SECTOR_OFFSETS.len() / 2];
-                circle_inside(plane.plane, f, k, turned_x2, &mut v);
-                for (s, v) in s.chunks_exact_mut(2).zip(&v) {
-                    s.copy_from_slice(v.as_array_ref());
-                }
-            } else {
+        let margins = (base_margin * relax, base_sample_margin * relax);
+        let mut s = [f64x2::ZERO; SECTOR_PAIRS];
+        // One sample at a time, sector by sector: the first sector with a
+        // sample outside the image (12: none).
+        let mut cut = 12;
+        if let Some(cells) = &plane.cells {
+            let turn = (ri == 0).then_some((&tables.sector_x2, boundary_x2));
+            sectors_at(cells, f, k, turn, &mut turned_x2, &mut s);
+        } else {
+            'sectors: for (sector, turned) in turned.iter_mut().enumerate() {
                 if ri == 0 {
                     for (t, &a) in turned.iter_mut().zip(&tables.sector[sector]) {
                         *t = rotate_cs(a, boundary_cs);
                     }
                 }
-                for (v, &cs) in s.iter_mut().zip(turned.iter()) {
+                for (i, &cs) in turned.iter().enumerate() {
                     let (x, y) = f.point_cs(k, cs);
                     match plane.at(x, y) {
-                        Some(g) => *v = g,
-                        None => return out,
+                        Some(g) => s[6 * (sector % 6) + i].as_array_mut()[sector / 6] = g,
+                        None => {
+                            cut = sector;
+                            break 'sectors;
+                        }
                     }
                 }
             }
-            let mean = s.iter().sum::<f64>() / s.len() as f64;
-            if (mean - thr).abs() < margin {
-                out.status = CodeStatus::Uncertain(Uncertainty::MarginalSector);
-                return out;
-            }
-            let bit = mean > thr;
-            // Each sample on its sector's side by the margin (the bound
-            // formed once, the same sum as per sample).
-            let off_side = if bit {
-                let low = thr + sample_margin;
-                s.iter().any(|&v| v < low)
-            } else {
-                let high = thr - sample_margin;
-                s.iter().any(|&v| v > high)
-            };
-            if off_side {
-                out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
-                return out;
-            }
-            word = (word << 1) | bit as u16;
         }
+        // The sectors before the cut are classified as if read in order.
+        let word = match classify(&s, thr, margins) {
+            Err((sector, why)) if sector < cut => {
+                out.status = CodeStatus::Uncertain(why);
+                return out;
+            }
+            Ok(word) if cut == 12 => word,
+            // A sample outside the image before any uncertain sector.
+            _ => return out,
+        };
         if ri == 0 {
             raw = word;
         } else if word != raw {
@@ -756,31 +1055,10 @@ fn read_with<P: Pixel, const FAST: bool>(
     // Every phase sample clear of a sector boundary must agree with its
     // sector: catches marks (a bar's shadow) that hide a sector's middle
     // but not its edges.
-    let boundary_deg = boundary / DEG;
-    for (j, &v) in ring.iter().enumerate() {
-        let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
-        debug_assert!(!outside);
-        // `(t − boundary) mod 360` and its remainder modulo 30, exactly
-        // (the offset lies within (−30°, 390°); no libm `fmod`).
-        let d = t - boundary_deg;
-        let rel = if d < 0.0 {
-            d + 360.0
-        } else if d >= 360.0 {
-            d - 360.0
-        } else {
-            d
-        };
-        let q = (rel / 30.0) as u32;
-        let within = rel - 30.0 * q as f64;
-        if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
-            continue;
-        }
-        let sector = q % 12;
-        let bit = (raw >> (11 - sector)) & 1 == 1;
-        if bit != (v > thr) {
-            out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
-            return out;
-        }
+    debug_assert!(!outside);
+    if !phase_agrees(&ring, &tables.phase_deg, boundary / DEG, raw, thr) {
+        out.status = CodeStatus::Uncertain(Uncertainty::SectorDisagrees);
+        return out;
     }
     out.raw = raw;
     let value = codes::canonical(raw);
@@ -809,16 +1087,21 @@ mod tests {
     }
 
     /// Reads the ring in `f` both ways and checks the readings agree bit
-    /// for bit; the reading, and whether whole circles went two at a time.
+    /// for bit; the reading, whether whole circles went two at a time, and
+    /// whether the ring was inside the window but not clear of its edges.
     fn read_both<P: Pixel>(
         plane: &Plane<P>,
         f: &RingFrame,
         params: &CodeParams,
         tables: &RingTables,
-    ) -> (Reading, bool) {
+    ) -> (Reading, bool, bool) {
         let accepted = CodeSet::all();
-        let fast = read_with::<P, true>(plane, f, params, &accepted, tables);
-        let one = read_with::<P, false>(plane, f, params, &accepted, tables);
+        let fast = read_with::<P, true>(plane, f, None, params, &accepted, tables);
+        let one = read_with::<P, false>(plane, f, None, params, &accepted, tables);
+        // The centre's value given (as the detector gives it): the same.
+        let centre = plane.bilinear(f.col, f.row);
+        let given = read_with::<P, true>(plane, f, centre, params, &accepted, tables);
+        assert_eq!(given, fast, "{f:?}");
         assert_eq!(fast.status, one.status, "{f:?}");
         assert_eq!(
             (fast.gap, fast.ring_present, fast.raw),
@@ -826,18 +1109,20 @@ mod tests {
         );
         assert_eq!(fast.bright.to_bits(), one.bright.to_bits(), "{f:?}");
         assert_eq!(fast.dark.to_bits(), one.dark.to_bits(), "{f:?}");
-        (fast, Sampler::<P, true>::new(plane, f).inside)
+        let s = Sampler::<P, true>::new(plane, f);
+        (fast, s.cells.is_some(), s.inside && s.cells.is_none())
     }
 
     /// Whole circles of samples two at a time read every ring exactly as
     /// one sample at a time: coded targets and dots under tilted views,
     /// frames off their centres and of other sizes, and frames anywhere
-    /// (wholly inside, near and across the window's edges); 8 and 16 bits,
-    /// the whole frame and a window.
+    /// (wholly inside, near and across the window's edges, within half a
+    /// pixel of them); 8 and 16 bits, the whole frame and a window.
     #[test]
     fn circles_two_at_a_time_read_as_one_at_a_time() {
         use crate::testutil::{window, Drawn, Rng, Scene, View};
-        let (w, h) = (210usize, 150usize);
+        // (Large enough for the cells of a ring: more than 2¹⁶ pixels.)
+        let (w, h) = (330usize, 210usize);
         let mut scene = Scene::new(w, h, 15.0);
         let mut rng = Rng::new(5);
         let ids: Vec<u64> = codes::even_ids().step_by(11).collect();
@@ -907,23 +1192,243 @@ mod tests {
             let b = rng.range(-0.9, 0.9) * (a * c).sqrt();
             frames.push(RingFrame::from_moments(col, row, a, c, b).unwrap());
         }
-        let (mut read, mut fast, mut slow) = (0, 0, 0);
+        // Frames whose quiet zone ends just inside (or just outside) the
+        // margin of the fast path, half a pixel from the window's edges.
+        for k in 0..40 {
+            let (cxx, cyy) = (rng.range(2.0, 5.0), rng.range(2.0, 5.0));
+            let cxy = rng.range(-0.5, 0.5) * (cxx * cyy).sqrt();
+            let probe = RingFrame::from_moments(0.0, 0.0, cxx, cyy, cxy).unwrap();
+            let k3 = ZONE_RADII[1];
+            let [a, b, c] = probe.e;
+            let (hx, hy) = (k3 * (a * a + b * b).sqrt(), k3 * (b * b + c * c).sqrt());
+            let d = [0.0, 0.25, 0.5, 0.5 + 1e-9, 0.75][k % 5] + rng.range(-1e-6, 1e-6);
+            let (col, row) = match k / 5 % 4 {
+                0 => (d + hx, rng.range(hy + 1.0, h as f64 - hy - 1.0)),
+                1 => (
+                    w as f64 - 1.0 - d - hx,
+                    rng.range(hy + 1.0, h as f64 - hy - 1.0),
+                ),
+                2 => (rng.range(hx + 1.0, w as f64 - hx - 1.0), d + hy),
+                _ => (
+                    rng.range(hx + 1.0, w as f64 - hx - 1.0),
+                    h as f64 - 1.0 - d - hy,
+                ),
+            };
+            frames.push(RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap());
+        }
+        let (mut read, mut fast, mut slow, mut near) = (0, 0, 0, 0);
         for f in &frames {
-            for (reading, inside) in [
+            for (reading, inside, edge) in [
                 read_both(&Plane::whole(&px8, w, h), f, &params, &tables),
-                read_both(&window(&px8, w, (13, 7, 170, 121)), f, &params, &tables),
+                read_both(&window(&px8, w, (13, 7, 300, 190)), f, &params, &tables),
                 read_both(&Plane::whole(&px16, w, h), f, &params, &tables),
-                read_both(&window(&px16, w, (2, 31, 201, 95)), f, &params, &tables),
+                read_both(&window(&px16, w, (2, 3, 320, 200)), f, &params, &tables),
             ] {
                 read += matches!(reading.status, CodeStatus::Read { .. }) as usize;
                 fast += inside as usize;
                 slow += !inside as usize;
+                near += edge as usize;
             }
         }
         assert!(
-            read > 40 && fast > 200 && slow > 200,
-            "{read} {fast} {slow}"
+            read > 40 && fast > 200 && slow > 200 && near > 30,
+            "{read} {fast} {slow} {near}"
         );
+    }
+
+    /// The ring's middle as the passes take it ([`Middle`]): its first
+    /// pass and its second.
+    fn passes(ring: &[f64; PHASE_SAMPLES]) -> ([f64x2; HALF / 3], [f64x2; 2 * HALF / 3]) {
+        let half = |i: usize| f64x2::new([ring[i], ring[i + HALF]]);
+        let first = std::array::from_fn(|c| half(3 * c));
+        let rest = std::array::from_fn(|e| half(3 * (e / 2) + 1 + e % 2));
+        (first, rest)
+    }
+
+    /// [`harmonic`] one sample at a time (the reference).
+    fn harmonic_plain(ring: &[f64; PHASE_SAMPLES]) -> (f64, f64, f64) {
+        let (mut re, mut im, mut total) = (0.0, 0.0, 0.0);
+        for j in 0..PHASE_SAMPLES {
+            let g = (ring[(j + 1) % PHASE_SAMPLES] - ring[j]).abs();
+            let (c, sn) = HARMONIC[j % 6];
+            re += g * c;
+            im += g * sn;
+            total += g;
+        }
+        (re, im, total)
+    }
+
+    /// [`phase_agrees`] one sample at a time (the reference).
+    fn phase_agrees_plain(
+        ring: &[f64; PHASE_SAMPLES],
+        boundary_deg: f64,
+        raw: u16,
+        thr: f64,
+    ) -> bool {
+        for (j, &v) in ring.iter().enumerate() {
+            let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
+            let d = t - boundary_deg;
+            let rel = if d < 0.0 {
+                d + 360.0
+            } else if d >= 360.0 {
+                d - 360.0
+            } else {
+                d
+            };
+            let q = (rel / 30.0) as u32;
+            let within = rel - 30.0 * q as f64;
+            if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
+                continue;
+            }
+            let sector = q % 12;
+            let bit = (raw >> (11 - sector)) & 1 == 1;
+            if bit != (v > thr) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// [`classify`] one sector at a time (the reference): sector `k`'s
+    /// samples in `sectors[k]`.
+    fn classify_plain(
+        sectors: &[[f64; 6]; 12],
+        thr: f64,
+        (margin, sample_margin): (f64, f64),
+    ) -> Result<u16, (usize, Uncertainty)> {
+        let mut word = 0u16;
+        for (k, s) in sectors.iter().enumerate() {
+            let mean = s.iter().sum::<f64>() / s.len() as f64;
+            if (mean - thr).abs() < margin {
+                return Err((k, Uncertainty::MarginalSector));
+            }
+            let bit = mean > thr;
+            let off_side = if bit {
+                let low = thr + sample_margin;
+                s.iter().any(|&v| v < low)
+            } else {
+                let high = thr - sample_margin;
+                s.iter().any(|&v| v > high)
+            };
+            if off_side {
+                return Err((k, Uncertainty::SectorDisagrees));
+            }
+            word = (word << 1) | bit as u16;
+        }
+        Ok(word)
+    }
+
+    /// Two sectors at a time classify as one at a time: clear and noisy
+    /// sectors, means and samples on the margins' edges, every sector
+    /// the first uncertain one now and then.
+    #[test]
+    fn sectors_two_at_a_time_classify_as_one_at_a_time() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(23);
+        let (mut read, mut marginal, mut disagree) = (0, 0, 0);
+        for round in 0..20000 {
+            let (thr, margins) = (100.0, (12.0, 4.0));
+            let word = rng.range(0.0, 4096.0) as u16;
+            let mut sectors = [[0.0f64; 6]; 12];
+            for (k, s) in sectors.iter_mut().enumerate() {
+                let lit = word >> (11 - k) & 1 == 1;
+                let level = if lit { 160.0 } else { 40.0 };
+                let noise = [0.0, 5.0, 50.0, 70.0][round % 4];
+                for v in s.iter_mut() {
+                    *v = (level + rng.range(-noise, noise)).max(0.0);
+                }
+                // Now and then a sample on its bound, or a mean on the
+                // sector margin's edge.
+                match (round / 4 + k) % 23 {
+                    0 => s[k % 6] = if lit { 104.0 } else { 96.0 },
+                    1 => *s = [112.0, 112.0, 112.0, 112.0, 112.0, 112.0],
+                    2 => *s = [88.0, 88.0, 88.0, 88.0, 88.0, 88.0],
+                    3 => *s = [111.0, 113.0, 111.0, 113.0, 111.0, 113.0],
+                    4 => *s = [111.9, 100.0, 120.0, 111.0, 113.0, 98.0],
+                    5 => *s = [88.1, 88.1, 88.1, 88.1, 88.1, 88.1],
+                    _ => {}
+                }
+            }
+            let mut x2 = [f64x2::ZERO; SECTOR_PAIRS];
+            for (k, s) in sectors.iter().enumerate() {
+                for (i, &v) in s.iter().enumerate() {
+                    x2[6 * (k % 6) + i].as_array_mut()[k / 6] = v;
+                }
+            }
+            let want = classify_plain(&sectors, thr, margins);
+            assert_eq!(classify(&x2, thr, margins), want, "{round}");
+            match want {
+                Ok(_) => read += 1,
+                Err((_, Uncertainty::MarginalSector)) => marginal += 1,
+                Err(_) => disagree += 1,
+            }
+        }
+        assert!(
+            read > 2000 && marginal > 2000 && disagree > 2000,
+            "{read} {marginal} {disagree}"
+        );
+    }
+
+    /// The harmonic and the check of the phase samples against their
+    /// sectors two at a time equal one at a time: rings drawn from codes
+    /// with blurred and noisy edges (and some flat or random ones), the
+    /// code read and others, boundaries anywhere in ±15° and on the edges
+    /// of the clearance and of the turn (±0, tiny, whole degrees).
+    #[test]
+    fn harmonic_and_phase_check_two_at_a_time_equal_one_at_a_time() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(17);
+        let tables = RingTables::default();
+        let (mut agree, mut disagree) = (0, 0);
+        for round in 0..3000 {
+            let raw = (rng.range(0.0, 4096.0) as u16).min(codes::MASK);
+            let boundary = match round % 4 {
+                0 => rng.range(-15.0, 15.0),
+                1 => [
+                    0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
+                ][round / 4 % 12],
+                2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
+                _ => rng.range(-1.0, 1.0),
+            };
+            let ring: [f64; PHASE_SAMPLES] = std::array::from_fn(|j| {
+                let t = j as f64 * 5.0 - boundary;
+                let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
+                let lit = (raw >> (11 - sector)) & 1 == 1;
+                match round % 7 {
+                    0 => rng.range(0.0, 255.0),
+                    1 => 40.0,
+                    2 => {
+                        if lit {
+                            200.0
+                        } else {
+                            20.0
+                        }
+                    }
+                    _ => (if lit { 200.0 } else { 20.0 }) + rng.range(-30.0, 30.0),
+                }
+            });
+            let thr = [110.0, rng.range(0.0, 255.0), 40.0, 200.0][round % 4];
+            let (first, rest) = passes(&ring);
+            let middle = Middle {
+                first: &first,
+                rest: &rest,
+            };
+            let h = harmonic(&middle);
+            let want = harmonic_plain(&ring);
+            assert_eq!(
+                [h.0, h.1, h.2].map(f64::to_bits),
+                [want.0, want.1, want.2].map(f64::to_bits),
+                "{round}"
+            );
+            for raw in [raw, raw ^ 1, raw ^ 0x800, !raw & codes::MASK] {
+                let want = phase_agrees_plain(&ring, boundary, raw, thr);
+                let got = phase_agrees(&middle, &tables.phase_deg, boundary, raw, thr);
+                assert_eq!(got, want, "{round} {raw} {boundary}");
+                agree += want as usize;
+                disagree += !want as usize;
+            }
+        }
+        assert!(agree > 500 && disagree > 1000, "{agree} {disagree}");
     }
 
     #[test]

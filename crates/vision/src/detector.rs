@@ -897,42 +897,13 @@ pub(crate) fn read_ring<P: Pixel>(
     o: &DetectorOptions,
     tables: &RingTables,
 ) -> Ring {
-    // The dot's amplitude from five samples half a pixel apart: without
-    // range checks when all five lie inside (the same values).
-    let inside = plane.width >= 2
-        && plane.height >= 2
-        && m.col - 0.5 >= plane.col0 as f64
-        && m.row - 0.5 >= plane.row0 as f64
-        && m.col + 0.5 <= plane.last_col() as f64
-        && m.row + 0.5 <= plane.last_row() as f64;
-    let at = |col: f64, row: f64| {
-        if inside {
-            plane.bilinear_inside(col, row)
-        } else {
-            plane.bilinear(col, row).unwrap_or(0.0)
-        }
-    };
-    let mut amplitude = at(m.col, m.row);
-    if inside {
-        // The four neighbours two at a time (the same values, in the same
-        // order of the sum).
-        let (col, row) = (f64x2::splat(m.col), f64x2::splat(m.row));
-        for (dx, dy) in [([0.5, -0.5], [0.0; 2]), ([0.0; 2], [0.5, -0.5])] {
-            let v = plane.bilinear_inside_x2(col + f64x2::new(dx), row + f64x2::new(dy));
-            let [a, b] = v.to_array();
-            amplitude += a;
-            amplitude += b;
-        }
-    } else {
-        for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
-            amplitude += at(m.col + dx, m.row + dy);
-        }
-    }
-    amplitude = amplitude / 5.0 - m.background;
+    // (The reader's bright level starts from the centre's value.)
+    let (centre, amplitude) = dot_samples(plane, m.col, m.row);
+    let amplitude = amplitude / 5.0 - m.background;
     let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
     let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
     let reading = match &frame {
-        Some(f) => code::read(plane, f, params, &o.codes, tables),
+        Some(f) => code::read_centred(plane, f, centre, params, &o.codes, tables),
         None => Reading {
             gap: Gap::NotDark,
             status: CodeStatus::Uncertain(Uncertainty::LowContrast),
@@ -947,6 +918,41 @@ pub(crate) fn read_ring<P: Pixel>(
         moments: (cxx, cyy, cxy),
         reading,
     }
+}
+
+/// The grey value at a dot's centre `(col, row)` (`None` outside the
+/// window) and the sum of the values there and half a pixel to the right,
+/// left, below and above (in that order; 0 for one outside): without range
+/// checks and two at a time when all five lie inside (the same values, the
+/// centre in both the first and the last pair).
+fn dot_samples<P: Pixel>(plane: &Plane<'_, P>, col: f64, row: f64) -> (Option<f64>, f64) {
+    let inside = plane.width >= 2
+        && plane.height >= 2
+        && col - 0.5 >= plane.col0 as f64
+        && row - 0.5 >= plane.row0 as f64
+        && col + 0.5 <= plane.last_col() as f64
+        && row + 0.5 <= plane.last_row() as f64;
+    if inside {
+        let (c2, r2) = (f64x2::splat(col), f64x2::splat(row));
+        // (An offset of 0 leaves a positive coordinate as it is.)
+        let step = |d: [f64; 2]| f64x2::new(d);
+        let [c, right] = plane
+            .bilinear_inside_x2(c2 + step([0.0, 0.5]), r2)
+            .to_array();
+        let [left, down] = plane
+            .bilinear_inside_x2(c2 + step([-0.5, 0.0]), r2 + step([0.0, 0.5]))
+            .to_array();
+        let [up, _] = plane
+            .bilinear_inside_x2(c2, r2 + step([-0.5, 0.0]))
+            .to_array();
+        return (Some(c), c + right + left + down + up);
+    }
+    let centre = plane.bilinear(col, row);
+    let mut sum = centre.unwrap_or(0.0);
+    for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+        sum += plane.bilinear(col + dx, row + dy).unwrap_or(0.0);
+    }
+    (centre, sum)
 }
 
 /// Whether a ring's reading leaves the dot a target: its dark gap must be
@@ -986,6 +992,51 @@ mod tests {
     use photopose_field::design::default_plate;
     use photopose_geometry::{Camera, Exterior, Vector3};
     use photopose_render::{RenderOptions, Renderer};
+
+    /// A dot's five samples two at a time (inside the window) are those
+    /// one at a time: 8 and 16 bits, windows at odd origins, centres on
+    /// and off the grid, and near the edges (one at a time there).
+    #[test]
+    fn dot_samples_two_at_a_time_are_the_plain_ones() {
+        use crate::testutil::window;
+        let (w, h) = (40usize, 30usize);
+        let d16: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 65536) as u16).collect();
+        let d8: Vec<u8> = (0..w * h).map(|i| ((i * 7919) % 256) as u8).collect();
+        fn check<P: Pixel>(win: &Plane<P>, col: f64, row: f64) -> bool {
+            let plain = win.bilinear(col, row);
+            let mut sum = plain.unwrap_or(0.0);
+            for (dx, dy) in [(0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5)] {
+                sum += win.bilinear(col + dx, row + dy).unwrap_or(0.0);
+            }
+            let (centre, got) = dot_samples(win, col, row);
+            assert_eq!(
+                centre.map(f64::to_bits),
+                plain.map(f64::to_bits),
+                "{col} {row}"
+            );
+            assert_eq!(got.to_bits(), sum.to_bits(), "{col} {row}");
+            plain.is_some()
+        }
+        let mut n = 0;
+        for (c0, r0, ww, hh) in [(0, 0, w, h), (3, 1, 31, 25)] {
+            let (win8, win16) = (
+                window(&d8, w, (c0, r0, ww, hh)),
+                window(&d16, w, (c0, r0, ww, hh)),
+            );
+            for k in 0..4000 {
+                let col = c0 as f64 - 1.0 + (k % 97) as f64 * (ww as f64 + 1.0) / 96.0;
+                let row = r0 as f64 - 1.0 + (k / 97) as f64 * (hh as f64 + 1.0) / 41.0;
+                let (col, row) = if k % 3 == 0 {
+                    (col.round() + 0.5, row.round())
+                } else {
+                    (col, row)
+                };
+                n += check(&win8, col, row) as usize;
+                check(&win16, col, row);
+            }
+        }
+        assert!(n > 4000, "{n}");
+    }
 
     /// The ring-part suppression looking up candidates by row suppresses
     /// exactly what the plain one over all candidates does, on rendered

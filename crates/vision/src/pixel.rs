@@ -5,7 +5,7 @@
 //! position a [`Plane`] takes is in full-frame pixel coordinates.
 
 use crate::threshold::Threshold;
-use wide::{f64x2, i16x8, i32x4, u8x16, CmpGt};
+use wide::{f64x2, i16x8, i32x4, i32x8, u16x8, u8x16, CmpGt};
 
 /// A grey value type the detector reads.
 pub trait Pixel: Copy + Send + Sync + 'static {
@@ -63,6 +63,27 @@ pub trait Pixel: Copy + Send + Sync + 'static {
     fn moment_sums(line: &[Self], a: usize, n: usize, k0: i64) -> [i64; 3] {
         scalar_moment_sums(&line[a..a + n], k0, |p| p.value() as i64)
     }
+    /// The corners `[p00, p01, p10, p11]` of two cells of bilinear
+    /// interpolation, lane 0 from `a`, lane 1 from `b`, each cell as the
+    /// pixels from its top-left corner and from its bottom-left one (at
+    /// least two each).
+    #[inline(always)]
+    fn corners_x2(a: [&[Self]; 2], b: [&[Self]; 2]) -> [f64x2; 4] {
+        corners_x2(a, b)
+    }
+    /// A bound of the pixels of pairs of cells (each pair as
+    /// [`Pixel::corners_x2`] takes it): their bitwise or (at least the
+    /// largest, one operation a pixel), 0 for none.
+    #[inline(always)]
+    fn cells_bound<'p>(cells: impl Iterator<Item = [[&'p [Self]; 2]; 2]>) -> u32
+    where
+        Self: 'p,
+    {
+        cells.fold(0, |m, [[a0, a1], [b0, b1]]| {
+            let [a0, a1, b0, b1] = [a0, a1, b0, b1].map(|p| p[0].value() | p[1].value());
+            m | a0 | a1 | b0 | b1
+        })
+    }
     /// The pixels as bytes if they are 8-bit (for the paths that take an
     /// 8-bit row sixteen pixels at a time).
     #[inline(always)]
@@ -105,18 +126,15 @@ pub(crate) fn scalar_moment_sums<P: Pixel>(px: &[P], k0: i64, w: impl Fn(P) -> i
     [t0, t1, t2]
 }
 
-/// The corners `[p00, p01, p10, p11]` of two cells of bilinear
-/// interpolation, lane 0 from `a`, lane 1 from `b`: `p00`, `p01` the first
-/// two pixels of a slice, `p10`, `p11` the two from `s` (the row stride;
-/// both slices hold at least `s + 2` pixels).
+/// [`Pixel::corners_x2`] one pixel at a time.
 #[inline(always)]
-fn corners_x2<P: Pixel>(a: &[P], b: &[P], s: usize) -> [f64x2; 4] {
+fn corners_x2<P: Pixel>([a0, a1]: [&[P]; 2], [b0, b1]: [&[P]; 2]) -> [f64x2; 4] {
     let v = |p: P| p.value() as f64;
     [
-        f64x2::new([v(a[0]), v(b[0])]),
-        f64x2::new([v(a[1]), v(b[1])]),
-        f64x2::new([v(a[s]), v(b[s])]),
-        f64x2::new([v(a[s + 1]), v(b[s + 1])]),
+        f64x2::new([v(a0[0]), v(b0[0])]),
+        f64x2::new([v(a0[1]), v(b0[1])]),
+        f64x2::new([v(a1[0]), v(b1[0])]),
+        f64x2::new([v(a1[1]), v(b1[1])]),
     ]
 }
 
@@ -162,6 +180,16 @@ fn mask64(v: [u8x16; 4], t: u8x16) -> u64 {
     m
 }
 
+/// `[p00, p01, p10, p11]` of an 8-bit cell (its top pair and its bottom
+/// pair, [`Pixel::corners_x2`]) as the low bytes of a vector, two pixels a
+/// load.
+#[inline(always)]
+fn cell_bytes([top, bottom]: [&[u8]; 2]) -> u8x16 {
+    let pair = |c: &[u8]| u16::from_le_bytes([c[0], c[1]]) as u32;
+    let [x0, x1, x2, x3] = (pair(top) | pair(bottom) << 16).to_le_bytes();
+    u8x16::new([x0, x1, x2, x3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
+}
+
 impl Pixel for u8 {
     const MAX: u32 = u8::MAX as u32;
     #[inline(always)]
@@ -175,6 +203,25 @@ impl Pixel for u8 {
     #[inline(always)]
     fn max_of(chunk: &[Self]) -> u32 {
         chunk.iter().fold(0u8, |m, &p| m.max(p)) as u32
+    }
+    /// Two pixels a load (a 16-bit or), the halves or-ed at the end.
+    #[inline(always)]
+    fn cells_bound<'p>(cells: impl Iterator<Item = [[&'p [Self]; 2]; 2]>) -> u32 {
+        let pair = |p: &[u8]| u16::from_le_bytes([p[0], p[1]]);
+        let w = cells.fold(0u16, |m, [[a0, a1], [b0, b1]]| {
+            m | pair(a0) | pair(a1) | pair(b0) | pair(b1)
+        });
+        ((w | w >> 8) & 0xff) as u32
+    }
+    /// Two pixels at a time (a 16-bit load), the eight bytes interleaved
+    /// and widened to 32 bits in vectors, converted two at a time: the
+    /// same values.
+    #[inline(always)]
+    fn corners_x2(a: [&[Self]; 2], b: [&[Self]; 2]) -> [f64x2; 4] {
+        let v = u8x16::unpack_low(cell_bytes(a), cell_bytes(b));
+        let d = i32x8::from_u16x8(u16x8::from_u8x16_low(v)).to_array();
+        let f = |i: usize| f64x2::new([d[i] as f64, d[i + 1] as f64]);
+        [f(0), f(2), f(4), f(6)]
     }
     /// Sixteen pixels at a time (SSE2 on x86-64): a pixel is foreground
     /// where it is not `≤ level`, i.e. where `v − level` (saturating) is not 0.
@@ -544,45 +591,180 @@ impl<'a, P: Pixel> Plane<'a, P> {
     /// `col` and `row` is a position): each lane does exactly the scalar's
     /// floating-point operations in the same order, so the two values are
     /// those of two scalar calls bit for bit. Only the index of the cell is
-    /// formed otherwise, in floating point: `ri · stride + ci` (an integer
-    /// below 2⁵¹, so exact) is offset by 1.5 · 2⁵² once and taken from the
-    /// low mantissa bits of both lanes.
+    /// formed otherwise, exactly in floating point, and taken from the low
+    /// mantissa bits of both lanes.
     #[inline(always)]
     pub fn bilinear_inside_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
-        const ROUND: f64 = 6_755_399_441_055_744.0;
         const LOW_51: u64 = (1 << 51) - 1;
         let (w, h) = (self.width, self.height);
         let (c0, r0) = (self.col0 as u32 as f64, self.row0 as u32 as f64);
-        let (c_lo, r_lo) = (ROUND + c0, ROUND + r0);
-        let c_hi = ROUND + c0 + w.saturating_sub(2) as u32 as f64;
-        let r_hi = ROUND + r0 + h.saturating_sub(2) as u32 as f64;
-        let round = f64x2::splat(ROUND);
-        let half = f64x2::splat(0.5);
+        let (cc, rc) = rounded_x2(col, row);
         // `fast_max`/`fast_min` are SSE2's `maxpd`/`minpd`: `v > lo ? v :
         // lo` and `v < hi ? v : hi`, the scalar's clamp (also for NaN; on
         // targets without SSE2 the same except for NaN).
-        let cc = ((col - half) + round)
-            .fast_max(f64x2::splat(c_lo))
-            .fast_min(f64x2::splat(c_hi));
-        let rc = ((row - half) + round)
-            .fast_max(f64x2::splat(r_lo))
-            .fast_min(f64x2::splat(r_hi));
-        let fx = col - (cc - round);
-        let fy = row - (rc - round);
+        let (c_lo, r_lo) = (ROUND + c0, ROUND + r0);
+        let c_hi = ROUND + c0 + w.saturating_sub(2) as u32 as f64;
+        let r_hi = ROUND + r0 + h.saturating_sub(2) as u32 as f64;
+        let cc = cc.fast_max(f64x2::splat(c_lo)).fast_min(f64x2::splat(c_hi));
+        let rc = rc.fast_max(f64x2::splat(r_lo)).fast_min(f64x2::splat(r_hi));
         let s = self.stride;
-        let i =
-            (rc - f64x2::splat(r_lo)) * f64x2::splat(s as f64) + (cc - f64x2::splat(c_lo)) + round;
+        let (i, fx, fy) = cell_x2(col, row, cc, rc, s as f64, ROUND - self.origin(0));
         let [ia, ib] = i.to_array().map(|v| (v.to_bits() & LOW_51) as usize);
         // Two range checks per cell (its start, then its length; the
         // length not wrapping is checked once, out of the loops).
         let n = s.checked_add(2).expect("stride");
         let a = &self.data[ia..][..n];
         let b = &self.data[ib..][..n];
-        let [p00, p01, p10, p11] = corners_x2(a, b, s);
-        let top = p00 + fx * (p01 - p00);
-        let bottom = p10 + fx * (p11 - p10);
-        top + fy * (bottom - top)
+        interpolate(P::corners_x2([a, &a[s..]], [b, &b[s..]]), fx, fy)
     }
+
+    /// The full-frame offset of element `start` of the buffer, `row0 ·
+    /// stride + col0 + start` (an integer below 2⁵¹ for any frame, exact).
+    fn origin(&self, start: usize) -> f64 {
+        (self.row0 as u32 as u64 * self.stride as u64 + self.col0 as u32 as u64 + start as u64)
+            as f64
+    }
+
+    /// The cells whose top-left pixels lie in the full-frame box `col0..=
+    /// col1 × row0..=row1` (inside the window, short of its last column
+    /// and row), for [`Cells::bilinear_x2`]; `None` if the box spans more
+    /// than [`CELLS`] pixels of the buffer or the buffer holds too few
+    /// pixels around it (a stride of 2¹⁶ or more, a window's last rows).
+    pub fn cells(
+        &self,
+        (col0, row0): (usize, usize),
+        (col1, row1): (usize, usize),
+    ) -> Option<Cells<'a, P>> {
+        let inside = self.col0 <= col0
+            && col0 <= col1
+            && col1 + 1 < self.col0 + self.width
+            && self.row0 <= row0
+            && row0 <= row1
+            && row1 + 1 < self.row0 + self.height;
+        let s = self.stride;
+        if !inside || s >= CELLS {
+            return None;
+        }
+        let first = (row0 - self.row0) * s + (col0 - self.col0);
+        let last = (row1 - self.row0) * s + (col1 - self.col0);
+        let len = self.data.len();
+        if last - first >= CELLS || last + s + 2 > len {
+            return None;
+        }
+        // The blocks from the box's first cell, or from as far before it
+        // as the buffer's end requires (the box's last cell still among
+        // the first CELLS: `last + s + 2 ≤ len`).
+        let start = first.min(len.checked_sub(s + CELLS + 1)?);
+        Some(Cells {
+            top: self.data[start..].first_chunk()?,
+            bottom: self.data[start + s..].first_chunk()?,
+            k: ROUND - self.origin(start),
+            stride: s as f64,
+        })
+    }
+}
+
+/// `1.5 · 2⁵²`: adding it rounds a float of magnitude below 2⁵¹ to an
+/// integer (ties to even), whose value is then the low mantissa bits.
+const ROUND: f64 = 6_755_399_441_055_744.0;
+
+/// How many cells a [`Cells`] holds (their top-left pixels).
+pub const CELLS: usize = 1 << 16;
+
+/// The cells of a part of a window ([`Plane::cells`]) as two blocks of
+/// fixed size, the pixels from its first cell's top-left pixel and those a
+/// stride on (the cells' bottom rows): a cell's index, masked into the
+/// block, needs no range checks.
+#[derive(Debug, Clone, Copy)]
+pub struct Cells<'a, P> {
+    top: &'a [P; CELLS + 1],
+    bottom: &'a [P; CELLS + 1],
+    /// `1.5 · 2⁵²` less the full-frame offset of the blocks' first pixel.
+    k: f64,
+    stride: f64,
+}
+
+impl<'a, P: Pixel> Cells<'a, P> {
+    /// [`Plane::bilinear_inside_x2`] at positions whose cells lie in the
+    /// box the blocks were made for and half a pixel clear of the window's
+    /// edges (`col0 + 0.5 ≤ col ≤ col0 + width − 1.5`, likewise for rows):
+    /// there the cells need no clamping to the window (a corner, `col −
+    /// 0.5` rounded, lies between the first and the last but one column),
+    /// and the values are the same bit for bit. Elsewhere the value of
+    /// some cell of the blocks (never a panic).
+    #[inline(always)]
+    pub fn bilinear_x2(&self, col: f64x2, row: f64x2) -> f64x2 {
+        let ([a, b], fx, fy) = self.cells_x2(col, row);
+        interpolate(P::corners_x2(a, b), fx, fy)
+    }
+
+    /// A bound `m` of the pixels of the cells of `positions` (two at a
+    /// time, as [`Cells::bilinear_x2`] takes them; [`Pixel::cells_bound`]),
+    /// and so of the values there: an interpolated value is at most the
+    /// float after its cell's largest pixel (the fractions lie in `[0,
+    /// 1]`, rounding is monotonic, and only the last step's difference
+    /// may round up, by half an ulp of at most that pixel), below any
+    /// limit above `m`.
+    #[inline(always)]
+    pub fn corners_bound(&self, positions: impl IntoIterator<Item = (f64x2, f64x2)>) -> u32 {
+        P::cells_bound(
+            positions
+                .into_iter()
+                .map(|(col, row)| self.cells_x2(col, row).0),
+        )
+    }
+
+    /// The cells of two positions (their top and bottom pairs of pixels)
+    /// and the positions' fractions in them.
+    #[inline(always)]
+    fn cells_x2(&self, col: f64x2, row: f64x2) -> ([[&'a [P]; 2]; 2], f64x2, f64x2) {
+        let (cc, rc) = rounded_x2(col, row);
+        let (i, fx, fy) = cell_x2(col, row, cc, rc, self.stride, self.k);
+        let [ia, ib] = i.to_array().map(|v| v.to_bits() as usize & (CELLS - 1));
+        let (top, bottom): (&'a [P; CELLS + 1], &'a [P; CELLS + 1]) = (self.top, self.bottom);
+        let cell = |i: usize| [&top[i..i + 2], &bottom[i..i + 2]];
+        ([cell(ia), cell(ib)], fx, fy)
+    }
+}
+
+/// The corners of the cells of two positions, `col − 0.5` and `row − 0.5`
+/// rounded to integers, offset by [`ROUND`] (not yet clamped).
+#[inline(always)]
+fn rounded_x2(col: f64x2, row: f64x2) -> (f64x2, f64x2) {
+    let (round, half) = (f64x2::splat(ROUND), f64x2::splat(0.5));
+    ((col - half) + round, (row - half) + round)
+}
+
+/// The index of two cells with their corners `(cc, rc)` (offset by
+/// [`ROUND`]) and the fractions of the positions in them. The index, `ri
+/// · stride + ci` less an origin, is formed in floating point as `ri ·
+/// stride + (ci + k)` with `k = 1.5 · 2⁵² − origin`: every term an integer
+/// below 2⁵³ (exact), the sum `1.5 · 2⁵²` plus the index, which its low
+/// mantissa bits hold (three operations on the cell's corner, which the
+/// fractions need anyway).
+#[inline(always)]
+fn cell_x2(
+    col: f64x2,
+    row: f64x2,
+    cc: f64x2,
+    rc: f64x2,
+    stride: f64,
+    k: f64,
+) -> (f64x2, f64x2, f64x2) {
+    let round = f64x2::splat(ROUND);
+    // The cell's corner in full-frame coordinates (exact).
+    let (ci, ri) = (cc - round, rc - round);
+    let i = ri * f64x2::splat(stride) + (ci + f64x2::splat(k));
+    (i, col - ci, row - ri)
+}
+
+/// Bilinear interpolation of two cells (lane by lane) from their corners
+/// and fractions: the same operations as [`Plane::bilinear`].
+#[inline(always)]
+fn interpolate([p00, p01, p10, p11]: [f64x2; 4], fx: f64x2, fy: f64x2) -> f64x2 {
+    let top = p00 + fx * (p01 - p00);
+    let bottom = p10 + fx * (p11 - p10);
+    top + fy * (bottom - top)
 }
 
 impl<'a, P: Pixel> Plane<'a, P> {
@@ -856,6 +1038,191 @@ mod tests {
                 (1e12, -1e12),
             ] {
                 let _ = win16.bilinear_inside_x2(f64x2::new([c, c0]), f64x2::new([r, r0]));
+            }
+        }
+    }
+
+    /// Cells in fixed-size blocks (no clamping, no range checks) give two
+    /// positions at a time as one at a time bit for bit wherever their
+    /// cells lie in the box and half a pixel clear of the window's edges (8
+    /// and 16 bits, windows at even and odd origins, boxes at the buffer's
+    /// start and end, integer, half-integer and other positions, the
+    /// box's edges); boxes too large or too near the buffer's end have
+    /// none.
+    #[test]
+    fn cells_interpolate_two_at_a_time_as_one_at_a_time() {
+        let (w, h) = (301usize, 260usize);
+        let d16: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 65536) as u16).collect();
+        let d8: Vec<u8> = (0..w * h).map(|i| ((i * 7919) % 256) as u8).collect();
+        let mut x = 11u64;
+        let mut next = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            x >> 11
+        };
+        fn check<P: Pixel>(win: &Plane<P>, cells: &Cells<P>, a: (f64, f64), b: (f64, f64)) {
+            let v = cells.bilinear_x2(f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
+            let [va, vb] = v.to_array();
+            let want = |(c, r): (f64, f64)| win.bilinear(c, r).unwrap().to_bits();
+            assert_eq!(va.to_bits(), want(a), "{a:?}");
+            assert_eq!(vb.to_bits(), want(b), "{b:?}");
+        }
+        let (mut edges, mut ends) = (0, 0);
+        for (c0, r0, ww, hh) in [
+            (0, 0, w, h),
+            (1, 2, 290, 250),
+            (2, 1, 77, 256),
+            (5, 40, 80, 79),
+        ] {
+            let (win8, win16) = (
+                window(&d8, w, (c0, r0, ww, hh)),
+                window(&d16, w, (c0, r0, ww, hh)),
+            );
+            for k in 0..60 {
+                // A box inside the window short of its last column and
+                // row, at most 150 rows (the last ones now and then).
+                let (bw, bh) = (
+                    1 + next() as usize % (ww - 1),
+                    1 + next() as usize % (hh - 1).min(150),
+                );
+                let bc = c0 + next() as usize % (ww - bw);
+                let br = if k % 4 == 0 {
+                    r0 + hh - 1 - bh
+                } else {
+                    r0 + next() as usize % (hh - bh)
+                };
+                let (lo, hi) = ((bc, br), (bc + bw - 1, br + bh - 1));
+                let span = (bh - 1) * w + bw - 1;
+                let Some(cells) = win8.cells(lo, hi) else {
+                    assert!(
+                        span >= CELLS
+                            || win8.data.len() < (br - r0 + bh) * w + 2
+                            || win8.data.len() < w + CELLS + 1,
+                        "{lo:?} {hi:?}"
+                    );
+                    continue;
+                };
+                let cells16 = win16.cells(lo, hi).unwrap();
+                let first = (br - r0) * w + bc - c0;
+                ends += (win8.data.len() - first < w + CELLS + 1) as usize;
+                // Positions whose cells lie in the box.
+                let (cl, ch) = (bc as f64 + 0.5, (bc + bw - 1) as f64 + 0.5);
+                let (rl, rh) = (br as f64 + 0.5, (br + bh - 1) as f64 + 0.5);
+                let unit = |v: u64| (v % 1_000_003) as f64 / 1_000_003.0;
+                for j in 0..200 {
+                    let mut pos = |j: usize| {
+                        let (c, r) = (cl + unit(next()) * (ch - cl), rl + unit(next()) * (rh - rl));
+                        match j % 4 {
+                            0 => ((2.0 * c).round() / 2.0, (2.0 * r).round() / 2.0),
+                            1 => ([cl, ch][j / 4 % 2], r),
+                            2 => (c, [rl, rh][j / 4 % 2]),
+                            _ => (c, r),
+                        }
+                    };
+                    let (a, b) = (pos(j), pos(j + 1));
+                    edges += (j % 4 == 1) as usize;
+                    check(&win8, &cells, a, b);
+                    check(&win16, &cells16, a, b);
+                }
+            }
+        }
+        assert!(edges > 10000 && ends > 20, "{edges} {ends}");
+        // None: a box spanning more than CELLS pixels, a buffer too short.
+        let win = window(&d8, w, (0, 0, w, h));
+        assert!(win.cells((0, 0), (10, CELLS / w + 1)).is_none());
+        assert!(window(&d8, w, (0, h - 100, w, 100))
+            .cells((0, h - 90), (5, h - 80))
+            .is_none());
+        assert!(win.cells((3, 4), (w - 1, 5)).is_none() && win.cells((3, 4), (w - 2, 5)).is_some());
+    }
+
+    /// A bound of the pixels of cells is at least their largest, and no
+    /// value interpolated in them exceeds the float after it (8 and 16
+    /// bits, flat and steep cells, positions on the cells' edges and just
+    /// inside them): below a limit above the bound, every value is too.
+    #[test]
+    fn cells_bound_their_values() {
+        let (w, h) = (300usize, 240usize);
+        let mut x = 5u64;
+        let mut next = move || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            x >> 11
+        };
+        let d8: Vec<u8> = (0..w * h)
+            .map(|_| match next() % 4 {
+                0 => 255,
+                1 => (next() % 8) as u8,
+                _ => (next() % 256) as u8,
+            })
+            .collect();
+        let d16: Vec<u16> = d8
+            .iter()
+            .map(|&v| v as u16 * 257 - (next() % 200) as u16 * (v > 0) as u16)
+            .collect();
+        fn check<P: Pixel>(win: &Plane<P>, cells: &Cells<P>, a: (f64, f64), b: (f64, f64)) {
+            let (col, row) = (f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
+            let bound = cells.corners_bound([(col, row)]);
+            for (c, r) in [a, b] {
+                let (ci, ri) = (
+                    (c - 0.5).round_ties_even() as usize,
+                    (r - 0.5).round_ties_even() as usize,
+                );
+                for (dc, dr) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    assert!(win.at(ci + dc, ri + dr) <= bound as f64, "{c} {r}");
+                }
+            }
+            let v = cells.bilinear_x2(col, row).to_array();
+            let limit = (bound as f64).next_up();
+            assert!(v.iter().all(|&v| v <= limit), "{a:?} {b:?} {v:?} {bound}");
+        }
+        let (win8, win16) = (
+            window(&d8, w, (1, 1, w - 2, h - 2)),
+            window(&d16, w, (1, 1, w - 2, h - 2)),
+        );
+        // (A box of fewer than CELLS pixels.)
+        let (lo, hi) = ((1, 1), (w - 3, 200));
+        let (cells8, cells16) = (win8.cells(lo, hi).unwrap(), win16.cells(lo, hi).unwrap());
+        let unit = |v: u64| (v % 1_000_003) as f64 / 1_000_003.0;
+        for k in 0..200_000 {
+            let mut pos = || {
+                let (c, r) = (
+                    1.5 + unit(next()) * (w as f64 - 4.0),
+                    1.5 + unit(next()) * 198.0,
+                );
+                match k % 4 {
+                    0 => (c.floor() + 0.5, r.floor() + 0.5),
+                    1 => (c.floor() + 1.0 - 1e-12, r.floor() + 1.0 - 1e-12),
+                    2 => (c.floor() + 1e-9, r),
+                    _ => (c, r),
+                }
+            };
+            let (a, b) = (pos(), pos());
+            check(&win8, &cells8, a, b);
+            check(&win16, &cells16, a, b);
+        }
+    }
+
+    /// The 8-bit corners of two cells (two pixels a load, interleaved and
+    /// widened in vectors) are the plain ones, for every byte value in
+    /// every corner and lane.
+    #[test]
+    fn u8_corners_equal_the_plain_ones() {
+        let s = 5;
+        for v in 0..=255u8 {
+            for k in 0..8 {
+                let mut a = [17u8, 200, 0, 3, 9, 255, 1, 128];
+                let mut b = [255u8, 0, 7, 77, 1, 2, 254, 31];
+                let at = [0, 1, s, s + 1][k % 4];
+                if k < 4 {
+                    a[at] = v
+                } else {
+                    b[at] = v
+                }
+                let (a, b) = ([&a[..], &a[s..]], [&b[..], &b[s..]]);
+                assert_eq!(
+                    u8::corners_x2(a, b).map(|c| c.to_array()),
+                    corners_x2(a, b).map(|c| c.to_array()),
+                    "{v} {k}"
+                );
             }
         }
     }
