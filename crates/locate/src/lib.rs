@@ -199,6 +199,10 @@ pub struct Locator {
     /// Tracking mode's order of the coded targets whose rings are read
     /// (`track::spread_order`).
     verify_order: Vec<usize>,
+    /// A ball holding every field target (centre, radius, mm): the
+    /// tracked frame's jump check bounds the shift of all at once.
+    plate_centre: Vector3<f64>,
+    plate_radius: f64,
 }
 
 /// A tracked target's window, before it is measured.
@@ -272,6 +276,12 @@ impl Locator {
             })
             .collect();
         let window = WindowMeasurer::new(*detector.options());
+        let plate_centre =
+            targets.iter().fold(Vector3::zeros(), |s, t| s + t.position) / n.max(1) as f64;
+        let plate_radius = targets
+            .iter()
+            .map(|t| (t.position - plate_centre).norm())
+            .fold(0.0, f64::max);
         Ok(Locator {
             resection: Resection::new(&camera, options.resection),
             grid: Grid::new(camera.sensor.width, camera.sensor.height, 16, 4 * n.max(64)),
@@ -292,6 +302,8 @@ impl Locator {
             windows: Vec::with_capacity(n),
             seeds: vec![None; n],
             verify_order: track::spread_order(targets, TargetKind::Coded),
+            plate_centre,
+            plate_radius,
             field,
         })
     }

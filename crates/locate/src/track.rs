@@ -314,22 +314,8 @@ impl Locator {
             Ok(r) => r,
             Err(_) => return Err(TrackLost::NoPose),
         };
-        // Every target of the refined pose must lie within its gate of the
-        // prediction: a pose that moved a grid step is a wrong match. The
-        // shift is measured in ideal image coordinates: the lens distortion
-        // changes a shift of a few pixels by a small fraction of it, and
-        // the gates are far from a grid step.
-        for pr in &self.projected {
-            let t = &self.field.targets()[pr.field_index];
-            let Some(q) = report.exterior.project_ideal(c, &t.position) else {
-                return Err(TrackLost::Jump);
-            };
-            let shift = (q - pr.ideal).norm() / px;
-            if shift.is_nan()
-                || shift > options.max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px)
-            {
-                return Err(TrackLost::Jump);
-            }
+        if self.jumped(e, &report.exterior, options.max_shift_ratio) {
+            return Err(TrackLost::Jump);
         }
         let rejected = self.resection.rejected_ids();
         for t in &mut self.identified {
@@ -339,6 +325,44 @@ impl Locator {
         self.pose = Some(report);
         self.status = PoseStatus::Ok;
         Ok(self.pose.as_ref().expect("just set"))
+    }
+}
+
+impl Locator {
+    /// Whether the refined pose `refined` projects a tracked target outside
+    /// its gate of the prediction made with `prior`: a pose that moved a
+    /// grid step is a wrong match. The shift is measured in ideal image
+    /// coordinates: the lens distortion changes a shift of a few pixels by
+    /// a small fraction of it, and the gates are far from a grid step.
+    ///
+    /// Every gate is at least `max_shift_ratio · gate_min_px` wide, so a
+    /// bound on the shift of every point of the plate
+    /// ([`photopose_geometry::Exterior::shift_bound`]) below that proves
+    /// the answer without projecting a target; only otherwise is each one
+    /// projected ([`Locator::jumped_plain`], the same answer).
+    fn jumped(&self, prior: &Exterior, refined: &Exterior, max_shift_ratio: f64) -> bool {
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        let narrowest = max_shift_ratio * self.options.gate_min_px;
+        let bound = prior.shift_bound(refined, c, &self.plate_centre, self.plate_radius);
+        if bound.is_some_and(|b| b / px < narrowest) {
+            return false;
+        }
+        self.jumped_plain(refined, max_shift_ratio)
+    }
+
+    /// [`Locator::jumped`] target by target.
+    fn jumped_plain(&self, refined: &Exterior, max_shift_ratio: f64) -> bool {
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        self.projected.iter().any(|pr| {
+            let t = &self.field.targets()[pr.field_index];
+            let Some(q) = refined.project_ideal(c, &t.position) else {
+                return true;
+            };
+            let shift = (q - pr.ideal).norm() / px;
+            shift.is_nan() || shift > max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px)
+        })
     }
 }
 
@@ -356,6 +380,68 @@ mod tests {
             }
         }
         d
+    }
+
+    /// The jump check through the plate's shift bound answers as the check
+    /// target by target does, for refined poses from a rounding to several
+    /// pixels away from the prediction (both answers occur, and the bound
+    /// decides some of them).
+    #[test]
+    fn the_bounded_jump_check_answers_as_the_plain_one() {
+        use photopose_geometry::{rotation::cayley, Camera};
+        use photopose_render::{RenderOptions, Renderer};
+        let camera = Camera::reference();
+        let field = default_plate();
+        let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
+        let mut locator = Locator::new(camera, field, crate::LocateOptions::default()).unwrap();
+        let truth = Exterior::from_kuka_pose([30.0, -20.0, 1000.0, 20.0, 5.0, -3.0]);
+        let mut img = renderer.new_image();
+        renderer.render(&truth, &mut img).unwrap();
+        let whole = locator.locate(img.view()).unwrap();
+        let pose = *whole.pose.unwrap();
+        let prior = Prior {
+            exterior: pose.exterior,
+            covariance: pose.covariance,
+            motion_px: 0.0,
+            threshold: whole.detections.threshold,
+        };
+        locator
+            .track(img.view(), &prior, &TrackOptions::default())
+            .unwrap();
+        assert!(locator.projected.len() > 100);
+        let e = &prior.exterior;
+        let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+        let mut state = 0x5eed_u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let (mut jumps, mut stays, mut proved) = (0, 0, 0);
+        for k in 0..4000 {
+            // From no change at all to a few pixels, in rotation and
+            // position; ratios around one.
+            let scale = 10f64.powf(-9.0 + 7.0 * (k as f64 / 4000.0));
+            let refined = Exterior::new(
+                e.rotation * cayley(scale * next(), scale * next(), scale * next()),
+                e.center + Vector3::new(next(), next(), next()) * 1000.0 * scale,
+            );
+            let ratio = [1.0, 0.5, 2.0, 0.0, -1.0, f64::NAN][k % 6];
+            let plain = locator.jumped_plain(&refined, ratio);
+            assert_eq!(locator.jumped(e, &refined, ratio), plain, "case {k}");
+            let bound = e.shift_bound(&refined, c, &locator.plate_centre, locator.plate_radius);
+            proved += bound.is_some_and(|b| b / px < ratio * 1.5) as usize;
+            if plain {
+                jumps += 1;
+            } else {
+                stays += 1;
+            }
+        }
+        assert!(
+            jumps > 300 && stays > 1000 && proved > 1000,
+            "{jumps} {stays} {proved}"
+        );
     }
 
     #[test]
