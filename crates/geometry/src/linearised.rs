@@ -12,7 +12,7 @@
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
 use crate::observation::{Observation, Status};
-use nalgebra::{Matrix6, Vector6};
+use nalgebra::{Matrix3, Matrix6, Vector6};
 use wide::f64x2;
 
 /// Normal equations of the six exterior unknowns `(Xc, Yc, Zc, a, b, c)`.
@@ -81,6 +81,127 @@ fn sweep<const I: usize, const K: usize>(rows: &[[f64; 14]], p: &mut [[f64; 7]; 
     }
 }
 
+/// A pose's rotation `R` as the Jacobian rows are formed from it: its
+/// entries, and per column `k` the pairs `(r0, r1)`, `(r1, r2)` and
+/// `(r2, r0)` of that column.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RotationPairs {
+    rr: [[f64; 3]; 3],
+    rxy: [f64x2; 3],
+    ryz: [f64x2; 3],
+    rzx: [f64x2; 3],
+}
+
+impl RotationPairs {
+    pub(crate) fn of(r: &Matrix3<f64>) -> Self {
+        let rr = [
+            [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
+            [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
+            [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
+        ];
+        RotationPairs {
+            rr,
+            rxy: std::array::from_fn(|k| f64x2::new([rr[0][k], rr[1][k]])),
+            ryz: std::array::from_fn(|k| f64x2::new([rr[1][k], rr[2][k]])),
+            rzx: std::array::from_fn(|k| f64x2::new([rr[2][k], rr[0][k]])),
+        }
+    }
+
+    /// `R u` as the x and y pair and the z of the camera point, each sum
+    /// in the order of nalgebra's product (`(r0 u0 + r1 u1) + r2 u2`).
+    #[inline(always)]
+    fn apply(&self, u: [f64; 3]) -> (f64x2, f64) {
+        let rr = &self.rr;
+        let zxy = self.rxy[0] * f64x2::splat(u[0])
+            + self.rxy[1] * f64x2::splat(u[1])
+            + self.rxy[2] * f64x2::splat(u[2]);
+        (zxy, rr[2][0] * u[0] + rr[2][1] * u[1] + rr[2][2] * u[2])
+    }
+
+    /// The partials of the ideal image point `−c (x, y) / z` at the camera
+    /// point `(zxy, zz)`, with `f = −c / zz` and `g = zxy / zz` in both
+    /// lanes: per axis `k` the centre's column `dZ/dC_k = −R e_k` of both
+    /// rows, `f (g r2 − (r0, r1))`, and of `(R e_k) × Z`, which a rotation
+    /// about axis `k` moves the point along, the x and y pair and the z.
+    /// The resection's rotation columns are `f (2 w_xy − g · 2 w_z)`, the
+    /// projected covariance's `f (w_xy − g w_z)` (rotations by `ω`, twice
+    /// the Cayley increment).
+    #[inline(always)]
+    pub(crate) fn partials(
+        &self,
+        zxy: f64x2,
+        zz: f64,
+        f: f64x2,
+        g: f64x2,
+    ) -> ([f64x2; 3], [f64x2; 3], [f64; 3]) {
+        let rr = &self.rr;
+        let [zx, zy] = zxy.to_array();
+        // (r1, r2) · (zz, zx) − (r2, r0) · (zy, zz): the x and y of
+        // (R e_k) × Z.
+        let (zzx, zyz) = (f64x2::new([zz, zx]), f64x2::new([zy, zz]));
+        let centre = std::array::from_fn(|k| f * (g * f64x2::splat(rr[2][k]) - self.rxy[k]));
+        let w_xy = std::array::from_fn(|k| self.ryz[k] * zzx - self.rzx[k] * zyz);
+        let w_z = std::array::from_fn(|k| rr[0][k] * zy - rr[1][k] * zx);
+        (centre, w_xy, w_z)
+    }
+}
+
+/// One point's Jacobian rows at a pose as [`Linearised::evaluate`] forms
+/// them there (interleaved, not whitened), and `c · g`, `g` the point's
+/// `(x, y) / z` in camera coordinates, which its residuals add to the
+/// image coordinates: formed where the point is projected with that pose
+/// anyway (tracking), so that the adjustment's first pass only copies
+/// them ([`Linearised::evaluate_from`]).
+#[derive(Debug, Clone, Copy)]
+pub struct PointJacobian {
+    a: [f64x2; 6],
+    cg: f64x2,
+}
+
+impl PointJacobian {
+    /// From the partials of [`RotationPairs::partials`] (principal
+    /// distance `c`): the resection's columns.
+    #[inline(always)]
+    pub(crate) fn of(
+        c: f64,
+        f: f64x2,
+        g: f64x2,
+        (centre, w_xy, w_z): ([f64x2; 3], [f64x2; 3], [f64; 3]),
+    ) -> Self {
+        let two = f64x2::splat(2.0);
+        // Rotation increment k: dZ = 2 (R e_k) × Z.
+        let turn = |k: usize| f * (two * w_xy[k] - g * f64x2::splat(2.0 * w_z[k]));
+        PointJacobian {
+            a: [centre[0], centre[1], centre[2], turn(0), turn(1), turn(2)],
+            cg: f64x2::splat(c) * g,
+        }
+    }
+
+    /// The interleaved row of the point with image coordinates `image`.
+    #[inline(always)]
+    fn write(&self, image: (f64, f64), row: &mut [f64; 14]) {
+        for k in 0..3 {
+            [row[2 * k], row[2 * k + 1]] = self.a[k].to_array();
+            [row[6 + 2 * k], row[7 + 2 * k]] = self.a[3 + k].to_array();
+        }
+        let [cgx, cgy] = self.cg.to_array();
+        row[12] = image.0 + cgx;
+        row[13] = image.1 + cgy;
+    }
+}
+
+/// Whitening by the weight's Cholesky factor of a point (`p[5..8]`):
+/// `(x, y) ← U (x, y)` for every column.
+#[inline(always)]
+fn whiten(p: &[f64; 8], row: &mut [f64; 14]) {
+    let (u00, u01, u11) = (p[5], p[6], p[7]);
+    for k in 0..7 {
+        let (x, y) = (row[2 * k], row[2 * k + 1]);
+        row[2 * k] = u00 * x + u01 * y;
+        row[2 * k + 1] = u11 * y;
+    }
+}
+
 /// Fills `rows` with the whitened Jacobian rows and residuals of `pts` at `e`.
 fn linearise_into(
     pts: &[[f64; 8]],
@@ -89,57 +210,22 @@ fn linearise_into(
     c: f64,
     e: &Exterior,
 ) -> Result<(), GeometryError> {
-    let r = &e.rotation;
+    let rot = RotationPairs::of(&e.rotation);
     let (cx, cy, cz) = (e.center.x, e.center.y, e.center.z);
-    let rr = [
-        [r[(0, 0)], r[(0, 1)], r[(0, 2)]],
-        [r[(1, 0)], r[(1, 1)], r[(1, 2)]],
-        [r[(2, 0)], r[(2, 1)], r[(2, 2)]],
-    ];
-    // Column k's (r0, r1), (r1, r2) and (r2, r0) as SIMD pairs.
-    let rxy: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[0][k], rr[1][k]]));
-    let ryz: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[1][k], rr[2][k]]));
-    let rzx: [f64x2; 3] = std::array::from_fn(|k| f64x2::new([rr[2][k], rr[0][k]]));
-    let two = f64x2::splat(2.0);
     let mut behind = 0usize;
     for (p, row) in pts.iter().zip(rows.iter_mut()) {
-        let (ux, uy, uz) = (p[0] - cx, p[1] - cy, p[2] - cz);
         // The x and y parts (of the camera point, of the two Jacobian
         // rows) as SIMD pairs: each lane computes exactly the scalar
         // expression, operation for operation.
-        let zxy = rxy[0] * f64x2::splat(ux) + rxy[1] * f64x2::splat(uy) + rxy[2] * f64x2::splat(uz);
-        let zz = rr[2][0] * ux + rr[2][1] * uy + rr[2][2] * uz;
-        let [zx, zy] = zxy.to_array();
+        let (zxy, zz) = rot.apply([p[0] - cx, p[1] - cy, p[2] - cz]);
         behind += (zz >= 0.0) as usize;
         let inv = 1.0 / zz;
         let g = zxy * f64x2::splat(inv);
-        let [gx, gy] = g.to_array();
         let f = f64x2::splat(-c * inv);
-        // (r1, r2) · (zz, zx) − (r2, r0) · (zy, zz): the x and y of
-        // (R e_k) × Z.
-        let (zzx, zyz) = (f64x2::new([zz, zx]), f64x2::new([zy, zz]));
-        for k in 0..3 {
-            let (r0, r1, r2) = (rr[0][k], rr[1][k], rr[2][k]);
-            // Centre: dZ/dC_k = -R e_k.
-            let centre = f * (g * f64x2::splat(r2) - rxy[k]);
-            // Rotation increment k: dZ = 2 (R e_k) × Z.
-            let dzxy = two * (ryz[k] * zzx - rzx[k] * zyz);
-            let dzz = 2.0 * (r0 * zy - r1 * zx);
-            let turn = f * (dzxy - g * f64x2::splat(dzz));
-            [row[2 * k], row[2 * k + 1]] = centre.to_array();
-            [row[6 + 2 * k], row[7 + 2 * k]] = turn.to_array();
-        }
-        row[12] = p[3] + c * gx;
-        row[13] = p[4] + c * gy;
-        // Whitening by the weight's Cholesky factor: (x, y) ← U (x, y).
-        if unit {
-            continue;
-        }
-        let (u00, u01, u11) = (p[5], p[6], p[7]);
-        for k in 0..7 {
-            let (x, y) = (row[2 * k], row[2 * k + 1]);
-            row[2 * k] = u00 * x + u01 * y;
-            row[2 * k + 1] = u11 * y;
+        let partials = rot.partials(zxy, zz, f, g);
+        PointJacobian::of(c, f, g, partials).write((p[3], p[4]), row);
+        if !unit {
+            whiten(p, row);
         }
     }
     if behind > 0 {
@@ -214,6 +300,40 @@ impl Linearised {
     pub fn evaluate(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
         let rows = &mut self.rows[..self.pts.len()];
         linearise_into(&self.pts, self.unit_weights, rows, c, e)?;
+        Ok(normals_of(rows))
+    }
+
+    /// [`Linearised::evaluate`] at the pose `first` was formed at: each
+    /// loaded point's row copied from its [`PointJacobian`] (`first[i]`
+    /// for the `i`-th loaded point), the same bits without the arithmetic.
+    /// Debug builds form the rows at `e` as well and check that they agree.
+    pub fn evaluate_from(
+        &mut self,
+        c: f64,
+        e: &Exterior,
+        first: &[PointJacobian],
+    ) -> Result<Normals, GeometryError> {
+        let n = self.pts.len();
+        if first.len() != n {
+            return self.evaluate(c, e);
+        }
+        let rows = &mut self.rows[..n];
+        for ((p, row), j) in self.pts.iter().zip(rows.iter_mut()).zip(first) {
+            j.write((p[3], p[4]), row);
+            if !self.unit_weights {
+                whiten(p, row);
+            }
+        }
+        if cfg!(debug_assertions) {
+            let check = &mut self.trial[..n];
+            let same = linearise_into(&self.pts, self.unit_weights, check, c, e).is_ok()
+                && rows
+                    .iter()
+                    .flatten()
+                    .zip(check.iter().flatten())
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "a PointJacobian not formed at this pose");
+        }
         Ok(normals_of(rows))
     }
 
@@ -377,6 +497,82 @@ mod tests {
             );
             if gross {
                 assert_eq!(fast.0, 17);
+            }
+        }
+    }
+
+    /// The rows a projector forms while projecting are the adjustment's
+    /// own at its pose, bit for bit, and so are the normal equations of
+    /// the first pass from them: unit and general weights, turned and
+    /// axis-aligned poses (exact zeros in `R`), points near the image
+    /// centre (zeros in `g`).
+    #[test]
+    fn rows_formed_while_projecting_are_the_adjustments() {
+        use crate::precision::UncertainProjector;
+        use crate::rng::SplitMix64;
+        let mut rng = SplitMix64::new(5);
+        for case in 0..200 {
+            let e = if case % 4 == 0 {
+                Exterior::look_at(
+                    Vector3::new(10.0 * case as f64, 0.0, 1000.0),
+                    Vector3::new(10.0 * case as f64, 0.0, 0.0),
+                    Vector3::x(),
+                )
+                .unwrap()
+            } else {
+                Exterior::new(
+                    cayley(0.2 * rng.normal(), 0.2 * rng.normal(), 0.2 * rng.normal()),
+                    Vector3::new(50.0 * rng.normal(), 50.0 * rng.normal(), 1000.0),
+                )
+            };
+            let cov = Matrix6::from_fn(|i, j| if i == j { 1e-3 } else { 1e-5 });
+            let projector = UncertainProjector::new(12.0, &e, &cov);
+            let (mut obs, mut rows) = (Vec::new(), Vec::new());
+            for k in 0..40 {
+                let object = if k == 0 {
+                    // On the optical axis.
+                    e.center - e.rotation.row(2).transpose() * 1000.0
+                } else {
+                    Vector3::new(300.0 * rng.normal(), 300.0 * rng.normal(), rng.normal())
+                };
+                let Some((z, ideal)) = projector.project_point(&object) else {
+                    continue;
+                };
+                let (cov_z, row) = projector.covariance_and_jacobian_at(&z);
+                assert_eq!(cov_z, projector.covariance_at(&z));
+                let weight = if case % 2 == 1 && k % 3 == 0 {
+                    nalgebra::Matrix2::new(0.25, 0.0, 0.0, 0.25)
+                } else {
+                    nalgebra::Matrix2::identity()
+                };
+                obs.push(Observation {
+                    id: k,
+                    object,
+                    image: ideal + Vector2::new(rng.normal(), rng.normal()) * 1e-3,
+                    weight,
+                });
+                rows.push(row);
+            }
+            let status = vec![Status::Used; obs.len()];
+            let (mut plain, mut from) = (Linearised::default(), Linearised::default());
+            plain.load(&obs, &status);
+            from.load(&obs, &status);
+            let want = plain.evaluate(12.0, &e).unwrap();
+            let got = from.evaluate_from(12.0, &e, &rows).unwrap();
+            let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(want.n.as_slice()),
+                bits(got.n.as_slice()),
+                "case {case}"
+            );
+            assert_eq!(bits(want.g.as_slice()), bits(got.g.as_slice()));
+            assert_eq!(want.cost.to_bits(), got.cost.to_bits());
+            for i in 0..obs.len() {
+                assert_eq!(
+                    bits(&plain.rows[i]),
+                    bits(&from.rows[i]),
+                    "case {case} row {i}"
+                );
             }
         }
     }

@@ -16,7 +16,7 @@ use crate::camera::Camera;
 use crate::closed_form;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
-use crate::linearised::{Linearised, Normals};
+use crate::linearised::{Linearised, Normals, PointJacobian};
 use crate::precision::{std_center, std_rotation_deg, to_omega};
 use crate::rng::SplitMix64;
 use crate::rotation::cayley;
@@ -176,7 +176,7 @@ impl Resection {
         let mut e = start;
         let mut adjusted = None;
         for _ in 0..3 {
-            let result = self.adjust(obs, &mut e)?;
+            let result = self.adjust(obs, &mut e, &[])?;
             let mut changed = false;
             for (k, o) in obs.iter().enumerate() {
                 let ok = e
@@ -217,6 +217,24 @@ impl Resection {
         self.reset(obs.len());
         check_input(obs)?;
         self.snoop(obs, start, None)
+    }
+
+    /// [`Resection::refine`] whose first pass takes the rows at `start`
+    /// from `jacobians` (`jacobians[k]` of `obs[k]`, formed at `start` by
+    /// [`crate::precision::UncertainProjector::covariance_and_jacobian_at`]
+    /// while projecting the targets, as tracking does anyway) instead of
+    /// forming them again: the same result, bit for bit.
+    pub fn refine_from(
+        &mut self,
+        obs: &[Observation],
+        start: Exterior,
+        jacobians: &[PointJacobian],
+    ) -> Result<ResectionReport, GeometryError> {
+        self.reset(obs.len());
+        check_input(obs)?;
+        let mut e = start;
+        let adjusted = self.adjust(obs, &mut e, jacobians)?;
+        self.snoop(obs, e, Some(adjusted))
     }
 
     fn check_consensus(&self, total: usize, _hypotheses: usize) -> Result<(), GeometryError> {
@@ -320,10 +338,12 @@ impl Resection {
     /// Levenberg–Marquardt over the used observations, updating `e`.
     /// Returns the iterations and the normal equations at the solution; the
     /// workspace `lin` then holds the Jacobian and residuals at `e`.
+    /// `first`: the rows at `e` of every used observation, or none.
     fn adjust(
         &mut self,
         obs: &[Observation],
         e: &mut Exterior,
+        first: &[PointJacobian],
     ) -> Result<(usize, Normals), GeometryError> {
         let c = self.c;
         let scale = e.center.norm().max(1.0);
@@ -336,7 +356,11 @@ impl Resection {
                 need: 4,
             });
         }
-        let mut current = self.lin.evaluate(c, e)?;
+        let mut current = if first.is_empty() {
+            self.lin.evaluate(c, e)?
+        } else {
+            self.lin.evaluate_from(c, e, first)?
+        };
         while it < self.options.max_iterations {
             it += 1;
             let mut a = current.n;
@@ -410,7 +434,7 @@ impl Resection {
         loop {
             let (iterations, nm) = match adjusted.take() {
                 Some(done) => done,
-                None => self.adjust(obs, &mut e)?,
+                None => self.adjust(obs, &mut e, &[])?,
             };
             let redundancy = 2 * nm.count - 6;
             if redundancy == 0 {

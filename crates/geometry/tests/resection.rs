@@ -295,3 +295,58 @@ fn uniform_weights_change_nothing_but_sigma0() {
         Err(GeometryError::NonFinite { index: 3 })
     ));
 }
+
+/// A refinement whose first pass copies the rows formed while projecting
+/// ([`Resection::refine_from`]) gives the plain refinement's report bit for
+/// bit: several attitudes, saturated (weighted) points, a gross error that
+/// data snooping removes, a prediction a little and a lot off.
+#[test]
+fn refining_from_projected_rows_is_refining() {
+    use photopose_geometry::precision::UncertainProjector;
+    use photopose_geometry::{Matrix2, Matrix6};
+    let cam = camera();
+    let c = cam.interior.c;
+    let mut rng = SplitMix64::new(19);
+    let (mut plain, mut from) = (
+        Resection::new(&cam, ResectionOptions::default()),
+        Resection::new(&cam, ResectionOptions::default()),
+    );
+    let mut snooped = 0;
+    for (name, truth) in poses() {
+        for (trial, off) in [0.0, 0.3, 5.0].into_iter().enumerate() {
+            let mut obs = observe(&cam, &truth, 0.05, &mut rng);
+            if trial == 1 {
+                obs[3].image.x += 0.01;
+                for o in obs.iter_mut().step_by(7) {
+                    o.weight = Matrix2::identity() * 0.25;
+                }
+            }
+            let start = Exterior::new(
+                truth.rotation,
+                truth.center + Vector3::new(off, -off, 0.5 * off),
+            );
+            let projector = UncertainProjector::new(c, &start, &(Matrix6::identity() * 1e-4));
+            let jacobians: Vec<_> = obs
+                .iter()
+                .map(|o| {
+                    let (z, _) = projector.project_point(&o.object).expect("in front");
+                    projector.covariance_and_jacobian_at(&z).1
+                })
+                .collect();
+            let want = plain.refine(&obs, start).unwrap();
+            let got = from.refine_from(&obs, start, &jacobians).unwrap();
+            let bits = |r: &photopose_geometry::ResectionReport| {
+                let mut v: Vec<u64> = r.exterior.rotation.iter().map(|x| x.to_bits()).collect();
+                v.extend(r.exterior.center.iter().map(|x| x.to_bits()));
+                v.extend(r.covariance.iter().map(|x| x.to_bits()));
+                v.extend([r.sigma0.to_bits(), r.rms_px.to_bits()]);
+                v
+            };
+            assert_eq!(bits(&want), bits(&got), "{name} {off}");
+            assert_eq!(want, got);
+            assert_eq!(plain.rejected_ids(), from.rejected_ids());
+            snooped += want.n_rejected;
+        }
+    }
+    assert!(snooped >= 5, "{snooped} snooped");
+}

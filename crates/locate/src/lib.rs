@@ -21,6 +21,7 @@ pub mod track;
 use gate::Grid;
 use photopose_field::{Field, TargetKind};
 use photopose_frame::ImageView;
+use photopose_geometry::linearised::PointJacobian;
 use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
     Camera, DistortSeed, GeometryError, Matrix2, Observation, Resection, ResectionOptions,
@@ -194,6 +195,9 @@ pub struct Locator {
     window: WindowMeasurer,
     /// Tracking mode's windows of one frame.
     windows: Vec<Window>,
+    /// The rows of each window's target in the refinement's first pass
+    /// (formed while projecting it).
+    jacobians: Vec<PointJacobian>,
     /// Each field target's inverse distortion in the last tracked frame
     /// that projected it (the start of the next: `Camera::distort_seeded`).
     seeds: Vec<Option<DistortSeed>>,
@@ -206,17 +210,18 @@ pub struct Locator {
     plate_radius: f64,
 }
 
-/// A tracked target's window, before it is measured.
+/// A tracked target's window: before it is measured, where to look; once
+/// it is found (the first windows then are the observations'), what the
+/// eccentricity and the jump check need of its projection.
 #[derive(Debug, Clone, Copy)]
 struct Window {
     field_index: usize,
     /// Where to look.
     expected: photopose_vision::Expected,
-    /// Spacing to the nearest neighbour, px.
-    spacing: f64,
     /// The ideal projection, mm.
     ideal: Vector2<f64>,
-    /// The target in camera coordinates, mm.
+    /// The target in camera coordinates with the pose projected from, mm
+    /// (`R (P − C)`, kept for the eccentricity).
     camera: Vector3<f64>,
 }
 
@@ -225,11 +230,6 @@ struct Projected {
     field_index: usize,
     col: f64,
     row: f64,
-    /// The projection in ideal image coordinates, mm.
-    ideal: photopose_geometry::Vector2<f64>,
-    /// The target in camera coordinates with the pose projected from, mm
-    /// (`R (P − C)`, kept for the eccentricity).
-    camera: Vector3<f64>,
     sigma_px: f64,
     spacing: f64,
 }
@@ -301,6 +301,7 @@ impl Locator {
             spacing,
             window,
             windows: Vec::with_capacity(n),
+            jacobians: Vec::with_capacity(n),
             seeds: vec![None; n],
             verify_order: track::spread_order(targets, TargetKind::Coded),
             plate_centre,
@@ -467,14 +468,14 @@ impl Locator {
 
     /// [`Locator::correct_eccentricity`] of a tracked frame with the pose
     /// its targets were projected with: each observation's target comes
-    /// from its projection (no look-up by id) and so does its camera point.
+    /// from its window (no look-up by id) and so does its camera point.
     fn correct_eccentricity_tracked(&mut self, e: &photopose_geometry::Exterior) {
         let pose = EccentricityPose::new(self.camera.interior.c, e);
-        let (targets, projected) = (self.field.targets(), &self.projected);
+        let (targets, windows) = (self.field.targets(), &self.windows);
         let target = |_: &Identified, k: usize| {
-            let pr: &Projected = &projected[k];
-            let t = &targets[pr.field_index];
-            Some((&t.position, pr.camera, t.radius))
+            let w: &Window = &windows[k];
+            let t = &targets[w.field_index];
+            Some((&t.position, w.camera, t.radius))
         };
         let ps = self.camera.sensor.pixel_size;
         correct_in_pairs(&pose, ps, &mut self.obs, &mut self.identified, target);
@@ -519,8 +520,6 @@ impl Locator {
                 field_index: fi,
                 col: p.x,
                 row: p.y,
-                ideal,
-                camera: u.camera,
                 sigma_px: largest_sigma(&u.covariance) / px,
                 spacing,
             });

@@ -20,7 +20,7 @@
 //! [`Motion`] predicts the pose of a later frame from the two latest poses
 //! (constant velocity per frame).
 
-use crate::{Identified, Locator, PoseStatus, Projected, Window};
+use crate::{Identified, Locator, PoseStatus, Window};
 use photopose_field::{Target, TargetKind};
 use photopose_frame::ImageView;
 use photopose_geometry::precision::UncertainProjector;
@@ -194,6 +194,7 @@ impl Locator {
         // the frame's lines come from memory while the targets before them
         // are measured.
         self.windows.clear();
+        self.jacobians.clear();
         let projector = UncertainProjector::new(c, e, &prior.covariance);
         for (fi, t) in self.field.targets().iter().enumerate() {
             // The covariance only of a target that lands on the sensor.
@@ -207,7 +208,10 @@ impl Locator {
             if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
                 continue;
             }
-            let sigma_px = crate::largest_sigma(&projector.covariance_at(&camera)) / px;
+            // With the covariance, the rows of the refinement's first pass
+            // (it starts from this pose): formed from the same partials.
+            let (covariance, jacobian) = projector.covariance_and_jacobian_at(&camera);
+            let sigma_px = crate::largest_sigma(&covariance) / px;
             // `R (P − C)` of the projection, not computed again.
             let depth = camera.z.abs();
             let scale = c / (depth * px);
@@ -227,10 +231,10 @@ impl Locator {
             self.windows.push(Window {
                 field_index: fi,
                 expected,
-                spacing,
                 ideal,
                 camera,
             });
+            self.jacobians.push(jacobian);
         }
         // The coded targets to read: the first `verify_codes` of the spread
         // order that land on the sensor (the windows are in field order).
@@ -247,20 +251,18 @@ impl Locator {
         for w in self.windows.iter().take(PREFETCH_AHEAD) {
             self.window.prefetch(&image, &w.expected);
         }
-        for (wi, w) in self.windows.iter().enumerate() {
-            let Window {
-                field_index: fi,
-                expected,
-                spacing,
-                ideal,
-                camera,
-            } = *w;
+        // The windows of the targets found move to the front, in order:
+        // the first `found` windows and rows then belong to the
+        // observations (nothing moves while every target is found).
+        let mut found = 0;
+        for wi in 0..self.windows.len() {
             if let Some(ahead) = self.windows.get(wi + PREFETCH_AHEAD) {
                 self.window.prefetch(&image, &ahead.expected);
             }
-            let t = &self.field.targets()[fi];
-            let gate = expected.gate_px;
-            let WindowOutcome::Found(m) = self.window.measure(&image, &prior.threshold, &expected)
+            let w = &self.windows[wi];
+            let t = &self.field.targets()[w.field_index];
+            let WindowOutcome::Found(m) =
+                self.window.measure(&image, &prior.threshold, &w.expected)
             else {
                 continue;
             };
@@ -271,15 +273,11 @@ impl Locator {
                     None => {}
                 }
             }
-            self.projected.push(Projected {
-                field_index: fi,
-                col: expected.col,
-                row: expected.row,
-                ideal,
-                camera,
-                sigma_px: gate,
-                spacing,
-            });
+            if found != wi {
+                self.windows[found] = self.windows[wi];
+                self.jacobians[found] = self.jacobians[wi];
+            }
+            found += 1;
             self.identified.push(Identified {
                 id: t.id,
                 kind: t.kind,
@@ -299,6 +297,8 @@ impl Locator {
             }
             self.obs.push(o);
         }
+        self.windows.truncate(found);
+        self.jacobians.truncate(found);
         let found = self.obs.len();
         if found < options.min_targets.max(self.options.min_coded.max(4)) {
             self.status = PoseStatus::TooFewTargets { coded: confirmed };
@@ -310,7 +310,7 @@ impl Locator {
         if self.options.eccentricity {
             self.correct_eccentricity_tracked(e);
         }
-        let report = match self.resection.refine(&self.obs, *e) {
+        let report = match self.resection.refine_from(&self.obs, *e, &self.jacobians) {
             Ok(r) => r,
             Err(_) => return Err(TrackLost::NoPose),
         };
@@ -355,13 +355,14 @@ impl Locator {
     fn jumped_plain(&self, refined: &Exterior, max_shift_ratio: f64) -> bool {
         let c = self.camera.interior.c;
         let px = self.camera.sensor.pixel_size;
-        self.projected.iter().any(|pr| {
-            let t = &self.field.targets()[pr.field_index];
+        self.windows.iter().any(|w| {
+            let t = &self.field.targets()[w.field_index];
             let Some(q) = refined.project_ideal(c, &t.position) else {
                 return true;
             };
-            let shift = (q - pr.ideal).norm() / px;
-            shift.is_nan() || shift > max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px)
+            let shift = (q - w.ideal).norm() / px;
+            let gate = w.expected.gate_px;
+            shift.is_nan() || shift > max_shift_ratio * gate.max(self.options.gate_min_px)
         })
     }
 }
@@ -408,7 +409,7 @@ mod tests {
         locator
             .track(img.view(), &prior, &TrackOptions::default())
             .unwrap();
-        assert!(locator.projected.len() > 100);
+        assert!(locator.windows.len() > 100);
         let e = &prior.exterior;
         let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
         let mut state = 0x5eed_u64;
