@@ -36,8 +36,6 @@ pub struct Normals {
 /// right-hand side and cost at once — accumulates in registers.
 #[derive(Debug, Clone, Default)]
 pub struct Linearised {
-    /// Index into the observation slice of each used point.
-    pub idx: Vec<usize>,
     /// Object point, ideal image point and the Cholesky factor
     /// `U = [[u00, u01], [0, u11]]` of the weight matrix (`W = UᵀU`) of
     /// each used point.
@@ -253,18 +251,27 @@ fn normals_of(rows: &[[f64; 14]]) -> Normals {
 }
 
 impl Linearised {
-    /// Loads the used observations.
-    pub fn load(&mut self, obs: &[Observation], status: &[Status]) {
-        self.idx.clear();
+    /// Loads the used observations; with `check`, an observation no
+    /// resection can use (non-finite, a weight not symmetric positive
+    /// definite) is an error, as the resection's input check has it.
+    pub fn load(
+        &mut self,
+        obs: &[Observation],
+        status: &[Status],
+        check: bool,
+    ) -> Result<(), GeometryError> {
         self.pts.clear();
         self.unit_weights = true;
         for (k, (o, s)) in obs.iter().zip(status).enumerate() {
             if *s != Status::Used {
                 continue;
             }
-            self.idx.push(k);
+            let unit = o.unit_weight();
+            if check && !o.usable(unit) {
+                return Err(GeometryError::NonFinite { index: k });
+            }
             let w = &o.weight;
-            let (u00, u01, u11) = if *w == nalgebra::Matrix2::identity() {
+            let (u00, u01, u11) = if unit {
                 (1.0, 0.0, 1.0)
             } else {
                 self.unit_weights = false;
@@ -279,21 +286,22 @@ impl Linearised {
         // `evaluate` overwrites every row of the loaded points: the rows
         // only grow (a set of fewer points uses the first rows; growing
         // them again would zero them again each frame).
-        let n = self.idx.len();
+        let n = self.pts.len();
         if self.rows.len() < n {
             self.rows.resize(n, [0.0; 14]);
             self.trial.resize(n, [0.0; 14]);
         }
+        Ok(())
     }
 
     /// Number of points loaded.
     pub fn len(&self) -> usize {
-        self.idx.len()
+        self.pts.len()
     }
 
     /// Whether no point is loaded.
     pub fn is_empty(&self) -> bool {
-        self.idx.is_empty()
+        self.pts.is_empty()
     }
 
     /// Linearises at `e` (principal distance `c`) and forms the normal equations.
@@ -484,7 +492,8 @@ mod tests {
                 })
                 .collect();
             let mut lin = Linearised::default();
-            lin.load(&obs, &vec![Status::Used; obs.len()]);
+            lin.load(&obs, &vec![Status::Used; obs.len()], true)
+                .unwrap();
             let nm = lin.evaluate(12.0, &e).unwrap();
             let ch = nm.n.cholesky().unwrap();
             let l_inv = ch.l().solve_lower_triangular(&Matrix6::identity()).unwrap();
@@ -555,8 +564,8 @@ mod tests {
             }
             let status = vec![Status::Used; obs.len()];
             let (mut plain, mut from) = (Linearised::default(), Linearised::default());
-            plain.load(&obs, &status);
-            from.load(&obs, &status);
+            plain.load(&obs, &status, true).unwrap();
+            from.load(&obs, &status, true).unwrap();
             let want = plain.evaluate(12.0, &e).unwrap();
             let got = from.evaluate_from(12.0, &e, &rows).unwrap();
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -591,7 +600,7 @@ mod tests {
         let e = Exterior::new(r, center);
         assert!(e.to_camera(&o.object).z < 0.0);
         let mut lin = Linearised::default();
-        lin.load(&[o], &[Status::Used]);
+        lin.load(&[o], &[Status::Used], true).unwrap();
         lin.evaluate(12.0, &e).unwrap();
         let (ax, ay, _, _) = lin.row(0);
         // The general analytic derivative R0 · dcayley/da_k at zero.

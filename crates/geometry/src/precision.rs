@@ -80,7 +80,7 @@ pub fn normal_matrix(
         })
         .collect();
     let mut lin = Linearised::default();
-    lin.load(&obs, &vec![Status::Used; obs.len()]);
+    lin.load(&obs, &vec![Status::Used; obs.len()], false)?;
     Ok(lin.evaluate(c, e)?.n)
 }
 

@@ -234,6 +234,40 @@ fn unusable_inputs_are_errors_not_answers() {
         rs.solve(&nan),
         Err(GeometryError::NonFinite { index: 5 })
     ));
+    // The refinement checks its input as the solve does, the first
+    // unusable observation named: a NaN, an infinite object point, a
+    // weight that is not positive definite, an asymmetric one.
+    assert!(matches!(
+        rs.refine(&obs[..3], truth),
+        Err(GeometryError::TooFewPoints { got: 3, need: 4 })
+    ));
+    for (k, spoil) in [
+        |o: &mut Observation| o.image.x = f64::NAN,
+        |o: &mut Observation| o.object.z = f64::INFINITY,
+        |o: &mut Observation| o.weight = photopose_geometry::Matrix2::new(1.0, 0.0, 0.0, -1.0),
+        |o: &mut Observation| o.weight = photopose_geometry::Matrix2::new(1.0, 0.5, 0.0, 1.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut bad = obs.clone();
+        spoil(&mut bad[7 + k]);
+        spoil(&mut bad[20]);
+        let want = 7 + k;
+        assert!(matches!(
+            rs.refine(&bad, truth),
+            Err(GeometryError::NonFinite { index }) if index == want
+        ));
+        assert!(matches!(
+            rs.solve(&bad),
+            Err(GeometryError::NonFinite { index }) if index == want
+        ));
+    }
+    // Weights that are fine, not the identity: still a pose.
+    let mut weighted = obs.clone();
+    weighted[3].weight = photopose_geometry::Matrix2::new(2.0, 0.5, 0.5, 1.0);
+    weighted[4].weight = photopose_geometry::Matrix2::new(1.0, -0.0, 0.0, 1.0);
+    assert!(rs.refine(&weighted, truth).is_ok());
     // Random image positions: no pose explains them.
     let mut noise = obs.clone();
     for o in &mut noise {
