@@ -317,9 +317,12 @@ impl Locator {
         if self.jumped(e, &report.exterior, options.max_shift_ratio) {
             return Err(TrackLost::Jump);
         }
+        // Every target was identified as used.
         let rejected = self.resection.rejected_ids();
-        for t in &mut self.identified {
-            t.used = !rejected.contains(&t.id);
+        if !rejected.is_empty() {
+            for t in &mut self.identified {
+                t.used = !rejected.contains(&t.id);
+            }
         }
         self.rejected.extend_from_slice(rejected);
         self.pose = Some(report);
