@@ -339,7 +339,9 @@ impl Resection {
 
     /// Levenberg–Marquardt over the used observations, updating `e`.
     /// Returns the iterations and the normal equations at the solution; the
-    /// workspace `lin` then holds the Jacobian and residuals at `e`.
+    /// workspace `lin` then holds the Jacobian and residuals at `e` (after a
+    /// last tiny step, the residuals and the cost are those before it, the
+    /// step pending in `lin`: [`Linearised::shift_later`]).
     /// `first`: the rows at `e` of every used observation, or none;
     /// `check`: whether to check the used observations as
     /// [`check_input`] does (those of a first adjustment).
@@ -393,7 +395,9 @@ impl Resection {
                 && delta.fixed_rows::<3>(3).norm() <= 1e-6;
             if tiny && lambda <= 1e-6 {
                 *e = candidate;
-                current.cost = self.lin.shift(&delta);
+                // The residuals and their cost move in the next pass that
+                // reads them (the data snooping's).
+                self.lin.shift_later(&delta);
                 return Ok((it, current));
             }
             // The normal equations at the candidate carry its cost: one pass
@@ -437,7 +441,7 @@ impl Resection {
         let max_snooped = (self.options.max_snooped_ratio * n_total as f64).floor() as usize;
         let mut snooped = 0;
         loop {
-            let (iterations, nm) = match adjusted.take() {
+            let (iterations, mut nm) = match adjusted.take() {
                 Some(done) => done,
                 None => self.adjust(obs, &mut e, &[], false)?,
             };
@@ -455,12 +459,16 @@ impl Resection {
                 .l()
                 .solve_lower_triangular(&Matrix6::identity())
                 .ok_or(GeometryError::Singular)?;
+            // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)),
+            // in the pass that moves the residuals by a last small step.
+            let (shifted, worst) = self.lin.worst_standardised(&l_inv);
+            if let Some(cost) = shifted {
+                nm.cost = cost;
+            }
             let sigma0 = (nm.cost / redundancy as f64).sqrt();
             let sigma_test = sigma0.max(self.options.sigma_floor_px * self.pixel_size);
-            // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)).
-            let worst = self
-                .lin
-                .worst_standardised(&l_inv, sigma_test)
+            let worst = worst
+                .map(|(i, w2)| (i, w2.sqrt() / sigma_test))
                 .filter(|(_, w)| *w > self.options.snooping_critical)
                 .map(|(i, w)| (nth_used(&self.status, i), w));
             match worst {
