@@ -88,6 +88,7 @@ const CHORD_TOL_SQ: f64 = 1e-28;
 
 impl Distortion {
     /// Whether all parameters are zero (an ideal lens).
+    #[inline]
     pub fn is_zero(&self) -> bool {
         *self == Distortion::default()
     }
@@ -302,6 +303,9 @@ impl Camera {
     /// 5.01 M → 3.49 M instructions per 50 frames without seeds, → 2.44 M with
     /// them). Falls back to [`Camera::distort`] (and forgets the seed) when
     /// the chord does not settle.
+    // Inline (and `is_zero` with it): called per projected target from
+    // another crate (tracking: 0.18 M of 2.44 M instructions).
+    #[inline]
     pub fn distort_seeded(
         &self,
         ideal: Vector2<f64>,
