@@ -38,10 +38,17 @@ pub struct Normals {
 pub struct Linearised {
     /// Object point, ideal image point and the Cholesky factor
     /// `U = [[u00, u01], [0, u11]]` of the weight matrix (`W = UᵀU`) of
-    /// each used point.
+    /// each used point; none when the points are the observations
+    /// themselves (`direct`).
     pts: Vec<[f64; 8]>,
-    /// Interleaved `[A | v]` rows of each point (the first `pts.len()`;
-    /// the rest are left from a larger set).
+    /// Points loaded.
+    n: usize,
+    /// Whether the loaded points are the observations the evaluations are
+    /// given, every one used and of unit weight (a refinement's first
+    /// set, mostly): read from there, not copied.
+    direct: bool,
+    /// Interleaved `[A | v]` rows of each point (the first `n`; the rest
+    /// are left from a larger set).
     rows: Vec<[f64; 14]>,
     /// The rows of a candidate being tried ([`Linearised::evaluate_trial`]).
     trial: Vec<[f64; 14]>,
@@ -213,9 +220,18 @@ fn whiten(p: &[f64; 8], row: &mut [f64; 14]) {
     }
 }
 
+/// A loaded point of `o` (weight factor `u`): object point, ideal image
+/// point, `[u00, u01, u11]`.
+#[inline(always)]
+fn point(o: &Observation, u: [f64; 3]) -> [f64; 8] {
+    [
+        o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u[0], u[1], u[2],
+    ]
+}
+
 /// Fills `rows` with the whitened Jacobian rows and residuals of `pts` at `e`.
 fn linearise_into(
-    pts: &[[f64; 8]],
+    pts: impl Iterator<Item = [f64; 8]>,
     unit: bool,
     rows: &mut [[f64; 14]],
     c: f64,
@@ -224,7 +240,7 @@ fn linearise_into(
     let rot = RotationPairs::of(&e.rotation);
     let (cx, cy, cz) = (e.center.x, e.center.y, e.center.z);
     let mut behind = 0usize;
-    for (p, row) in pts.iter().zip(rows.iter_mut()) {
+    for (p, row) in pts.zip(rows.iter_mut()) {
         // The x and y parts (of the camera point, of the two Jacobian
         // rows) as SIMD pairs: each lane computes exactly the scalar
         // expression, operation for operation.
@@ -236,7 +252,7 @@ fn linearise_into(
         let partials = rot.partials(zxy, zz, f, g);
         PointJacobian::of(c, f, g, partials).write((p[3], p[4]), row);
         if !unit {
-            whiten(p, row);
+            whiten(&p, row);
         }
     }
     if behind > 0 {
@@ -271,36 +287,56 @@ impl Linearised {
         &mut self,
         obs: &[Observation],
         status: &[Status],
-        check: bool,
+        mut check: bool,
     ) -> Result<(), GeometryError> {
         self.pts.clear();
         self.pending = None;
         self.unit_weights = true;
-        for (k, (o, s)) in obs.iter().zip(status).enumerate() {
-            if *s != Status::Used {
-                continue;
+        self.direct = false;
+        if status.len() == obs.len() && status.iter().all(|s| *s == Status::Used) {
+            // Every observation: of unit weight, they are the points.
+            let mut unit = true;
+            for (k, o) in obs.iter().enumerate() {
+                let u = o.unit_weight();
+                if check && !o.usable(u) {
+                    return Err(GeometryError::NonFinite { index: k });
+                }
+                unit &= u;
             }
-            let unit = o.unit_weight();
-            if check && !o.usable(unit) {
-                return Err(GeometryError::NonFinite { index: k });
+            check = false;
+            self.direct = unit;
+        }
+        if self.direct {
+            self.n = obs.len();
+            // Room for a later set of these that is not (a snooped
+            // point, a weight): no allocation once warm.
+            self.pts.reserve(obs.len());
+        } else {
+            for (k, (o, s)) in obs.iter().zip(status).enumerate() {
+                if *s != Status::Used {
+                    continue;
+                }
+                let unit = o.unit_weight();
+                if check && !o.usable(unit) {
+                    return Err(GeometryError::NonFinite { index: k });
+                }
+                let w = &o.weight;
+                let u = if unit {
+                    [1.0, 0.0, 1.0]
+                } else {
+                    self.unit_weights = false;
+                    let u00 = w[(0, 0)].sqrt();
+                    let u01 = w[(0, 1)] / u00;
+                    [u00, u01, (w[(1, 1)] - u01 * u01).max(0.0).sqrt()]
+                };
+                self.pts.push(point(o, u));
             }
-            let w = &o.weight;
-            let (u00, u01, u11) = if unit {
-                (1.0, 0.0, 1.0)
-            } else {
-                self.unit_weights = false;
-                let u00 = w[(0, 0)].sqrt();
-                let u01 = w[(0, 1)] / u00;
-                (u00, u01, (w[(1, 1)] - u01 * u01).max(0.0).sqrt())
-            };
-            self.pts.push([
-                o.object.x, o.object.y, o.object.z, o.image.x, o.image.y, u00, u01, u11,
-            ]);
+            self.n = self.pts.len();
         }
         // `evaluate` overwrites every row of the loaded points: the rows
         // only grow (a set of fewer points uses the first rows; growing
         // them again would zero them again each frame).
-        let n = self.pts.len();
+        let n = self.n;
         if self.rows.len() < n {
             self.rows.resize(n, [0.0; 14]);
             self.trial.resize(n, [0.0; 14]);
@@ -308,22 +344,46 @@ impl Linearised {
         Ok(())
     }
 
+    /// Linearises the loaded points of `obs` at `e` into `rows`.
+    fn linearise(
+        &self,
+        obs: &[Observation],
+        rows: &mut [[f64; 14]],
+        c: f64,
+        e: &Exterior,
+    ) -> Result<(), GeometryError> {
+        if self.direct {
+            let pts = obs.iter().map(|o| point(o, [1.0, 0.0, 1.0]));
+            linearise_into(pts, true, rows, c, e)
+        } else {
+            linearise_into(self.pts.iter().copied(), self.unit_weights, rows, c, e)
+        }
+    }
+
     /// Number of points loaded.
     pub fn len(&self) -> usize {
-        self.pts.len()
+        self.n
     }
 
     /// Whether no point is loaded.
     pub fn is_empty(&self) -> bool {
-        self.pts.is_empty()
+        self.n == 0
     }
 
-    /// Linearises at `e` (principal distance `c`) and forms the normal equations.
-    pub fn evaluate(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
+    /// Linearises at `e` (principal distance `c`) and forms the normal
+    /// equations; `obs` are the observations last loaded.
+    pub fn evaluate(
+        &mut self,
+        c: f64,
+        e: &Exterior,
+        obs: &[Observation],
+    ) -> Result<Normals, GeometryError> {
         self.pending = None;
-        let rows = &mut self.rows[..self.pts.len()];
-        linearise_into(&self.pts, self.unit_weights, rows, c, e)?;
-        Ok(normals_of(rows))
+        let mut rows = std::mem::take(&mut self.rows);
+        let done = self.linearise(obs, &mut rows[..self.n], c, e);
+        self.rows = rows;
+        done?;
+        Ok(normals_of(&self.rows[..self.n]))
     }
 
     /// [`Linearised::evaluate`] at the pose `first` was formed at: each
@@ -334,39 +394,54 @@ impl Linearised {
         &mut self,
         c: f64,
         e: &Exterior,
+        obs: &[Observation],
         first: &[PointJacobian],
     ) -> Result<Normals, GeometryError> {
         self.pending = None;
-        let n = self.pts.len();
+        let n = self.n;
         if first.len() != n {
-            return self.evaluate(c, e);
+            return self.evaluate(c, e, obs);
         }
         let rows = &mut self.rows[..n];
-        for ((p, row), j) in self.pts.iter().zip(rows.iter_mut()).zip(first) {
-            j.write((p[3], p[4]), row);
-            if !self.unit_weights {
-                whiten(p, row);
+        if self.direct {
+            for ((o, row), j) in obs.iter().zip(rows.iter_mut()).zip(first) {
+                j.write((o.image.x, o.image.y), row);
+            }
+        } else {
+            for ((p, row), j) in self.pts.iter().zip(rows.iter_mut()).zip(first) {
+                j.write((p[3], p[4]), row);
+                if !self.unit_weights {
+                    whiten(p, row);
+                }
             }
         }
         if cfg!(debug_assertions) {
-            let check = &mut self.trial[..n];
-            let same = linearise_into(&self.pts, self.unit_weights, check, c, e).is_ok()
-                && rows
+            let mut check = std::mem::take(&mut self.trial);
+            let same = self.linearise(obs, &mut check[..n], c, e).is_ok()
+                && self.rows[..n]
                     .iter()
                     .flatten()
-                    .zip(check.iter().flatten())
+                    .zip(check[..n].iter().flatten())
                     .all(|(a, b)| a.to_bits() == b.to_bits());
+            self.trial = check;
             assert!(same, "a PointJacobian not formed at this pose");
         }
-        Ok(normals_of(rows))
+        Ok(normals_of(&self.rows[..n]))
     }
 
     /// Like [`Linearised::evaluate`] for a candidate, into separate rows that
     /// [`Linearised::accept_trial`] makes current.
-    pub fn evaluate_trial(&mut self, c: f64, e: &Exterior) -> Result<Normals, GeometryError> {
-        let rows = &mut self.trial[..self.pts.len()];
-        linearise_into(&self.pts, self.unit_weights, rows, c, e)?;
-        Ok(normals_of(rows))
+    pub fn evaluate_trial(
+        &mut self,
+        c: f64,
+        e: &Exterior,
+        obs: &[Observation],
+    ) -> Result<Normals, GeometryError> {
+        let mut trial = std::mem::take(&mut self.trial);
+        let done = self.linearise(obs, &mut trial[..self.n], c, e);
+        self.trial = trial;
+        done?;
+        Ok(normals_of(&self.trial[..self.n]))
     }
 
     /// Makes the rows of the last trial the current ones.
@@ -436,7 +511,7 @@ impl Linearised {
         let floor = f64x2::splat(1e-12);
         let mut cost = f64x2::ZERO;
         let mut worst: Option<(usize, f64)> = None;
-        for (k, r) in self.rows[..self.pts.len()].iter_mut().enumerate() {
+        for (k, r) in self.rows[..self.n].iter_mut().enumerate() {
             let a: [f64x2; 6] = std::array::from_fn(|i| f64x2::new([r[2 * i], r[2 * i + 1]]));
             let mut v = f64x2::new([r[12], r[13]]);
             if SHIFT {
@@ -471,7 +546,7 @@ impl Linearised {
     /// form in `q = N⁻¹` and one square root per row (the reference).
     pub fn worst_standardised_plain(&self, q: &Matrix6<f64>, sigma: f64) -> Option<(usize, f64)> {
         let mut worst: Option<(usize, f64)> = None;
-        for k in 0..self.pts.len() {
+        for k in 0..self.n {
             let (ax, ay, vx, vy) = self.row(k);
             let (qx, qy) = ((ax.transpose() * q * ax)[0], (ay.transpose() * q * ay)[0]);
             let w = (vx.abs() / (1.0 - qx).max(1e-12).sqrt())
@@ -537,7 +612,7 @@ mod tests {
             let mut lin = Linearised::default();
             lin.load(&obs, &vec![Status::Used; obs.len()], true)
                 .unwrap();
-            let nm = lin.evaluate(12.0, &e).unwrap();
+            let nm = lin.evaluate(12.0, &e, &obs).unwrap();
             let ch = nm.n.cholesky().unwrap();
             let l_inv = ch.l().solve_lower_triangular(&Matrix6::identity()).unwrap();
             let (cost, fast) = lin.worst_standardised(&l_inv);
@@ -612,7 +687,7 @@ mod tests {
         let mut lin = Linearised::default();
         lin.load(&obs, &vec![Status::Used; obs.len()], true)
             .unwrap();
-        let nm = lin.evaluate(12.0, &e).unwrap();
+        let nm = lin.evaluate(12.0, &e, &obs).unwrap();
         // The plain shift, as a pass of its own.
         let d: [f64x2; 6] = std::array::from_fn(|k| f64x2::splat(delta[k]));
         let mut want_cost = f64x2::ZERO;
@@ -642,7 +717,7 @@ mod tests {
         // Applied once; dropped by forming the rows again.
         assert_eq!(lin.worst_standardised(&l_inv).0, None);
         lin.shift_later(&delta);
-        lin.evaluate(12.0, &e).unwrap();
+        lin.evaluate(12.0, &e, &obs).unwrap();
         assert_eq!(lin.worst_standardised(&l_inv).0, None);
     }
 
@@ -702,8 +777,8 @@ mod tests {
             let (mut plain, mut from) = (Linearised::default(), Linearised::default());
             plain.load(&obs, &status, true).unwrap();
             from.load(&obs, &status, true).unwrap();
-            let want = plain.evaluate(12.0, &e).unwrap();
-            let got = from.evaluate_from(12.0, &e, &rows).unwrap();
+            let want = plain.evaluate(12.0, &e, &obs).unwrap();
+            let got = from.evaluate_from(12.0, &e, &obs, &rows).unwrap();
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(
                 bits(want.n.as_slice()),
@@ -737,7 +812,7 @@ mod tests {
         assert!(e.to_camera(&o.object).z < 0.0);
         let mut lin = Linearised::default();
         lin.load(&[o], &[Status::Used], true).unwrap();
-        lin.evaluate(12.0, &e).unwrap();
+        lin.evaluate(12.0, &e, &[o]).unwrap();
         let (ax, ay, _, _) = lin.row(0);
         // The general analytic derivative R0 · dcayley/da_k at zero.
         let d = cayley_derivatives(0.0, 0.0, 0.0);

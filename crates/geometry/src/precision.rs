@@ -81,7 +81,7 @@ pub fn normal_matrix(
         .collect();
     let mut lin = Linearised::default();
     lin.load(&obs, &vec![Status::Used; obs.len()], false)?;
-    Ok(lin.evaluate(c, e)?.n)
+    Ok(lin.evaluate(c, e, &obs)?.n)
 }
 
 /// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.

@@ -364,9 +364,9 @@ impl Resection {
             });
         }
         let mut current = if first.is_empty() {
-            self.lin.evaluate(c, e)?
+            self.lin.evaluate(c, e, obs)?
         } else {
-            self.lin.evaluate_from(c, e, first)?
+            self.lin.evaluate_from(c, e, obs, first)?
         };
         while it < self.options.max_iterations {
             it += 1;
@@ -402,7 +402,7 @@ impl Resection {
             }
             // The normal equations at the candidate carry its cost: one pass
             // serves both the acceptance test and the next step.
-            match self.lin.evaluate_trial(c, &candidate) {
+            match self.lin.evaluate_trial(c, &candidate, obs) {
                 Ok(next) if next.cost <= current.cost * (1.0 + 1e-12) => {
                     *e = candidate;
                     self.lin.accept_trial();
