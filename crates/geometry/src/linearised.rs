@@ -630,6 +630,53 @@ mod tests {
         }
     }
 
+    /// Observations read where they are (all used, unit weights) give the
+    /// rows and normal equations of the same points copied into the
+    /// workspace (another observation not used makes it copy them), and a
+    /// refinement's checks fail alike.
+    #[test]
+    fn observations_read_in_place_are_the_copied_points() {
+        let e = Exterior::new(cayley(-0.1, 0.05, 0.2), Vector3::new(10.0, 20.0, 1100.0));
+        let mut rng = crate::rng::SplitMix64::new(12);
+        let obs: Vec<Observation> = (0..30)
+            .map(|k| {
+                let object = Vector3::new(300.0 * rng.normal(), 300.0 * rng.normal(), 0.0);
+                Observation {
+                    id: k,
+                    object,
+                    image: e.project_ideal(12.0, &object).unwrap()
+                        + Vector2::new(rng.normal(), rng.normal()) * 1e-3,
+                    weight: nalgebra::Matrix2::identity(),
+                }
+            })
+            .collect();
+        let mut more = vec![obs[3]];
+        more.extend_from_slice(&obs);
+        let mut status = vec![Status::Used; more.len()];
+        status[0] = Status::Outlier;
+        let (mut direct, mut copied) = (Linearised::default(), Linearised::default());
+        direct
+            .load(&obs, &vec![Status::Used; obs.len()], true)
+            .unwrap();
+        copied.load(&more, &status, true).unwrap();
+        assert!(direct.direct && !copied.direct);
+        let a = direct.evaluate(12.0, &e, &obs).unwrap();
+        let b = copied.evaluate(12.0, &e, &more).unwrap();
+        let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(a.n.as_slice()), bits(b.n.as_slice()));
+        assert_eq!((a.cost.to_bits(), a.count), (b.cost.to_bits(), b.count));
+        assert_eq!(
+            bits(direct.rows[..30].as_flattened()),
+            bits(copied.rows[..30].as_flattened())
+        );
+        let mut bad = obs.clone();
+        bad[4].image.y = f64::INFINITY;
+        assert!(matches!(
+            direct.load(&bad, &vec![Status::Used; obs.len()], true),
+            Err(GeometryError::NonFinite { index: 4 })
+        ));
+    }
+
     /// The sweeps' normal equations, two points a turn, are the plain sums
     /// over the points in order (each entry's x rows in one lane, y rows in
     /// the other, the lanes added last): odd and even counts, none.
