@@ -23,9 +23,11 @@
 use crate::{Identified, Locator, PoseStatus, Window};
 use photopose_field::{Target, TargetKind};
 use photopose_frame::ImageView;
+use photopose_geometry::linearised::PointJacobian;
 use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
-    Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3, Vector3,
+    Camera, DistortSeed, Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport,
+    Rotation3, Vector3,
 };
 use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
 
@@ -169,6 +171,82 @@ pub fn spread_order(targets: &[Target], kind: TargetKind) -> Vec<usize> {
     order
 }
 
+/// What places a tracked frame's windows: the projector of the predicted
+/// pose and the gates' terms.
+struct Projection {
+    projector: UncertainProjector,
+    gate_min_px: f64,
+    gate_sigmas: f64,
+    gate_spacing_ratio: f64,
+    /// The share of the predicted motion added to every gate, px.
+    gate_extra: f64,
+    edge_margin_px: f64,
+}
+
+impl Projection {
+    /// The window of every field target that lands on the sensor, in field
+    /// order, and its rows of the refinement's first pass.
+    ///
+    /// A function of its own, the camera and these terms given by
+    /// reference: what derives from them alone (the sensor's centre, the
+    /// lens's zero test) is formed once, not after every store into the
+    /// buffers (out of line: inlined, its arguments' promise not to alias
+    /// would be lost).
+    #[inline(never)]
+    fn windows(
+        &self,
+        camera: &Camera,
+        targets: &[Target],
+        spacing: &[f64],
+        seeds: &mut [Option<DistortSeed>],
+        windows: &mut Vec<Window>,
+        jacobians: &mut Vec<PointJacobian>,
+    ) {
+        windows.clear();
+        jacobians.clear();
+        let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+        let projector = &self.projector;
+        for (fi, t) in targets.iter().enumerate() {
+            // The covariance only of a target that lands on the sensor.
+            let Some((z, ideal)) = projector.project_point(&t.position) else {
+                continue;
+            };
+            let Some(measured) = camera.distort_seeded(ideal, &mut seeds[fi]) else {
+                continue;
+            };
+            let p = camera.image_to_pixel(measured);
+            if !camera.contains_pixel(p, self.edge_margin_px) {
+                continue;
+            }
+            // With the covariance, the rows of the refinement's first pass
+            // (it starts from this pose): formed from the same partials.
+            let (covariance, jacobian) = projector.covariance_and_jacobian_at(&z);
+            let sigma_px = crate::largest_sigma(&covariance) / px;
+            // `R (P − C)` of the projection, not computed again.
+            let depth = z.z.abs();
+            let scale = c / (depth * px);
+            let spacing = spacing[fi] * scale;
+            let gate = (self.gate_min_px + self.gate_sigmas * sigma_px + self.gate_extra)
+                .min(self.gate_spacing_ratio * spacing);
+            let expected = Expected {
+                col: p.x,
+                row: p.y,
+                gate_px: gate,
+                radius_px: t.radius * scale,
+                coded: t.kind == TargetKind::Coded,
+                read_code: false,
+            };
+            windows.push(Window {
+                field_index: fi,
+                expected,
+                ideal,
+                camera: z,
+            });
+            jacobians.push(jacobian);
+        }
+    }
+}
+
 impl Locator {
     /// Locates `image` from `prior` (tracking mode). `Ok` with a pose, or
     /// why the frame must be located whole. Allocates nothing once warm.
@@ -185,57 +263,28 @@ impl Locator {
         self.coarse = None;
         self.pose = None;
         let c = self.camera.interior.c;
-        let px = self.camera.sensor.pixel_size;
         let e = &prior.exterior;
-        let gate_extra = options.motion_gate * prior.motion_px;
         let mut confirmed = 0usize;
         // First every target's window; then the measurements, each asking
         // for the pixels of the window `PREFETCH_AHEAD` targets on, so that
         // the frame's lines come from memory while the targets before them
         // are measured.
-        self.windows.clear();
-        self.jacobians.clear();
-        let projector = UncertainProjector::new(c, e, &prior.covariance);
-        for (fi, t) in self.field.targets().iter().enumerate() {
-            // The covariance only of a target that lands on the sensor.
-            let Some((camera, ideal)) = projector.project_point(&t.position) else {
-                continue;
-            };
-            let Some(measured) = self.camera.distort_seeded(ideal, &mut self.seeds[fi]) else {
-                continue;
-            };
-            let p = self.camera.image_to_pixel(measured);
-            if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
-                continue;
-            }
-            // With the covariance, the rows of the refinement's first pass
-            // (it starts from this pose): formed from the same partials.
-            let (covariance, jacobian) = projector.covariance_and_jacobian_at(&camera);
-            let sigma_px = crate::largest_sigma(&covariance) / px;
-            // `R (P − C)` of the projection, not computed again.
-            let depth = camera.z.abs();
-            let scale = c / (depth * px);
-            let spacing = self.spacing[fi] * scale;
-            let gate =
-                (self.options.gate_min_px + self.options.gate_sigmas * sigma_px + gate_extra)
-                    .min(self.options.gate_spacing_ratio * spacing);
-            let coded = t.kind == TargetKind::Coded;
-            let expected = Expected {
-                col: p.x,
-                row: p.y,
-                gate_px: gate,
-                radius_px: t.radius * scale,
-                coded,
-                read_code: false,
-            };
-            self.windows.push(Window {
-                field_index: fi,
-                expected,
-                ideal,
-                camera,
-            });
-            self.jacobians.push(jacobian);
-        }
+        let projection = Projection {
+            projector: UncertainProjector::new(c, e, &prior.covariance),
+            gate_min_px: self.options.gate_min_px,
+            gate_sigmas: self.options.gate_sigmas,
+            gate_spacing_ratio: self.options.gate_spacing_ratio,
+            gate_extra: options.motion_gate * prior.motion_px,
+            edge_margin_px: self.options.edge_margin_px,
+        };
+        projection.windows(
+            &self.camera,
+            self.field.targets(),
+            &self.spacing,
+            &mut self.seeds,
+            &mut self.windows,
+            &mut self.jacobians,
+        );
         // The coded targets to read: the first `verify_codes` of the spread
         // order that land on the sensor (the windows are in field order).
         let mut marked = 0;
