@@ -29,7 +29,7 @@ use photopose_geometry::{
     Camera, DistortSeed, Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport,
     Rotation3, Vector3,
 };
-use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
+use photopose_vision::{Expected, ThresholdResult, WindowMeasurer, WindowOutcome};
 
 /// Targets ahead of the one measured whose windows are asked for from
 /// memory (the bench's tracked frame: 405 µs with all windows touched
@@ -247,6 +247,91 @@ impl Projection {
     }
 }
 
+/// Where a tracked frame's measurements go: the windows and rows of the
+/// targets found move to the front, in order (the first windows and rows
+/// then belong to the observations; nothing moves while every target is
+/// found), and each found target is identified and observed.
+struct Found<'a> {
+    windows: &'a mut Vec<Window>,
+    jacobians: &'a mut Vec<PointJacobian>,
+    identified: &'a mut Vec<Identified>,
+    obs: &'a mut Vec<Observation>,
+}
+
+/// Measures every window of `found` in `image` with `threshold`, asking
+/// for the pixels of the window `PREFETCH_AHEAD` targets on while one is
+/// measured, so that the frame's lines come from memory while the targets
+/// before them are measured. The coded targets whose rings are read must
+/// give their own ids: how many did (another id: a mismatch). Observations
+/// of saturated targets are weighted by `1 / saturated_factor²`.
+///
+/// A function of its own (out of line), the camera given by reference:
+/// what derives from it alone is formed once, not after every call into
+/// the measurer.
+#[inline(never)]
+fn measure(
+    camera: &Camera,
+    targets: &[Target],
+    saturated_factor: f64,
+    measurer: &mut WindowMeasurer,
+    (image, threshold): (&ImageView<'_>, &ThresholdResult),
+    found: Found<'_>,
+) -> Result<usize, TrackLost> {
+    let Found {
+        windows,
+        jacobians,
+        identified,
+        obs,
+    } = found;
+    for w in windows.iter().take(PREFETCH_AHEAD) {
+        measurer.prefetch(image, &w.expected);
+    }
+    let (mut confirmed, mut kept) = (0, 0);
+    for wi in 0..windows.len() {
+        if let Some(ahead) = windows.get(wi + PREFETCH_AHEAD) {
+            measurer.prefetch(image, &ahead.expected);
+        }
+        let w = &windows[wi];
+        let t = &targets[w.field_index];
+        let WindowOutcome::Found(m) = measurer.measure(image, threshold, &w.expected) else {
+            continue;
+        };
+        if let Some(code) = m.code {
+            match code.id() {
+                Some(id) if id == t.id => confirmed += 1,
+                Some(_) => return Err(TrackLost::CodeMismatch),
+                None => {}
+            }
+        }
+        if kept != wi {
+            windows[kept] = windows[wi];
+            jacobians[kept] = jacobians[wi];
+        }
+        kept += 1;
+        identified.push(Identified {
+            id: t.id,
+            kind: t.kind,
+            col: m.col,
+            row: m.row,
+            blob_col: m.col,
+            blob_row: m.row,
+            detection: usize::MAX,
+            used: true,
+            saturated: m.saturated,
+            peak: m.peak,
+        });
+        let mut o = Observation::from_pixel(camera, t.id, t.position, m.col, m.row);
+        let f = saturated_factor;
+        if m.saturated && f.is_finite() && f > 0.0 {
+            o.weight = Matrix2::identity() / (f * f);
+        }
+        obs.push(o);
+    }
+    windows.truncate(kept);
+    jacobians.truncate(kept);
+    Ok(confirmed)
+}
+
 impl Locator {
     /// Locates `image` from `prior` (tracking mode). `Ok` with a pose, or
     /// why the frame must be located whole. Allocates nothing once warm.
@@ -264,7 +349,6 @@ impl Locator {
         self.pose = None;
         let c = self.camera.interior.c;
         let e = &prior.exterior;
-        let mut confirmed = 0usize;
         // First every target's window; then the measurements, each asking
         // for the pixels of the window `PREFETCH_AHEAD` targets on, so that
         // the frame's lines come from memory while the targets before them
@@ -297,57 +381,23 @@ impl Locator {
                 marked += 1;
             }
         }
-        for w in self.windows.iter().take(PREFETCH_AHEAD) {
-            self.window.prefetch(&image, &w.expected);
-        }
-        // The windows of the targets found move to the front, in order:
-        // the first `found` windows and rows then belong to the
-        // observations (nothing moves while every target is found).
-        let mut found = 0;
-        for wi in 0..self.windows.len() {
-            if let Some(ahead) = self.windows.get(wi + PREFETCH_AHEAD) {
-                self.window.prefetch(&image, &ahead.expected);
-            }
-            let w = &self.windows[wi];
-            let t = &self.field.targets()[w.field_index];
-            let WindowOutcome::Found(m) =
-                self.window.measure(&image, &prior.threshold, &w.expected)
-            else {
-                continue;
-            };
-            if let Some(code) = m.code {
-                match code.id() {
-                    Some(id) if id == t.id => confirmed += 1,
-                    Some(_) => return Err(TrackLost::CodeMismatch),
-                    None => {}
-                }
-            }
-            if found != wi {
-                self.windows[found] = self.windows[wi];
-                self.jacobians[found] = self.jacobians[wi];
-            }
-            found += 1;
-            self.identified.push(Identified {
-                id: t.id,
-                kind: t.kind,
-                col: m.col,
-                row: m.row,
-                blob_col: m.col,
-                blob_row: m.row,
-                detection: usize::MAX,
-                used: true,
-                saturated: m.saturated,
-                peak: m.peak,
-            });
-            let mut o = Observation::from_pixel(&self.camera, t.id, t.position, m.col, m.row);
-            let f = self.options.saturated_sigma_factor;
-            if m.saturated && f.is_finite() && f > 0.0 {
-                o.weight = Matrix2::identity() / (f * f);
-            }
-            self.obs.push(o);
-        }
-        self.windows.truncate(found);
-        self.jacobians.truncate(found);
+        let found = Found {
+            windows: &mut self.windows,
+            jacobians: &mut self.jacobians,
+            identified: &mut self.identified,
+            obs: &mut self.obs,
+        };
+        let sought = (&image, &prior.threshold);
+        let targets = self.field.targets();
+        let factor = self.options.saturated_sigma_factor;
+        let confirmed = measure(
+            &self.camera,
+            targets,
+            factor,
+            &mut self.window,
+            sought,
+            found,
+        )?;
         let found = self.obs.len();
         if found < options.min_targets.max(self.options.min_coded.max(4)) {
             self.status = PoseStatus::TooFewTargets { coded: confirmed };
