@@ -514,13 +514,8 @@ mod tests {
         assert!(locator.windows.len() > 100);
         let e = &prior.exterior;
         let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
-        let mut state = 0x5eed_u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = photopose_geometry::rng::SplitMix64::new(0x5eed);
+        let mut next = move || rng.unit() - 0.5;
         let (mut jumps, mut stays, mut proved) = (0, 0, 0);
         for k in 0..4000 {
             // From no change at all to a few pixels, in rotation and
