@@ -8,6 +8,7 @@
 
 use crate::error::GeometryError;
 use nalgebra::{Matrix2, Vector2};
+use wide::{f64x2, CmpEq};
 
 /// The image sensor: size in pixels and pixel pitch.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,8 +87,18 @@ const SEED_REACH_SQ: f64 = 1e-2;
 /// Square of the error, mm, at which [`Camera::distort_seeded`] stops.
 const CHORD_TOL_SQ: f64 = 1e-28;
 
+/// Whether both coordinates are finite, as `is_finite` of each says it, in
+/// fewer instructions: `0 · x` is zero for a finite `x` and NaN for an
+/// infinity or NaN.
+#[inline(always)]
+fn finite(p: Vector2<f64>) -> bool {
+    let zero = f64x2::ZERO;
+    (f64x2::new([p.x, p.y]) * zero).cmp_eq(zero).move_mask() == 3
+}
+
 impl Distortion {
     /// Whether all parameters are zero (an ideal lens).
+    #[inline]
     pub fn is_zero(&self) -> bool {
         *self == Distortion::default()
     }
@@ -302,6 +313,9 @@ impl Camera {
     /// 5.01 M → 3.49 M instructions per 50 frames without seeds, → 2.44 M with
     /// them). Falls back to [`Camera::distort`] (and forgets the seed) when
     /// the chord does not settle.
+    // Inline (and `is_zero` with it): called per projected target from
+    // another crate (tracking: 0.18 M of 2.44 M instructions).
+    #[inline]
     pub fn distort_seeded(
         &self,
         ideal: Vector2<f64>,
@@ -329,7 +343,7 @@ impl Camera {
                 // |s|⁴ < 1e-28 mm² · |s_prev|² (no square root).
                 let s2 = step.norm_squared();
                 if s2 * s2 < CHORD_TOL_SQ * previous || s2 < CHORD_TOL_SQ {
-                    if !(p.x.is_finite() && p.y.is_finite()) {
+                    if !finite(p) {
                         break;
                     }
                     let j_inv = if n < 2 {
@@ -500,6 +514,27 @@ mod tests {
         let far = Vector2::new(40.0, 30.0);
         assert_eq!(cam.distort_seeded(far, &mut seed), cam.distort(far));
         assert_eq!(seed, None);
+    }
+
+    #[test]
+    fn finite_is_is_finite_of_both() {
+        let values = [
+            0.0,
+            -0.0,
+            1.5,
+            -1e308,
+            f64::MAX,
+            f64::MIN_POSITIVE / 4.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for &x in &values {
+            for &y in &values {
+                let want = x.is_finite() && y.is_finite();
+                assert_eq!(finite(Vector2::new(x, y)), want, "{x} {y}");
+            }
+        }
     }
 
     #[test]

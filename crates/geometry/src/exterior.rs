@@ -85,6 +85,58 @@ impl Exterior {
         ideal_of_camera_point(c, &self.to_camera(p))
     }
 
+    /// An upper bound, mm, on how far [`Exterior::project_ideal`] moves the
+    /// ideal image point of any object point within `radius` of `centre`
+    /// from this pose to `other` (principal distance `c`), as computed:
+    /// the rounding of both projections and of this bound included. `None`
+    /// when it proves nothing (such a point may lie behind either camera,
+    /// or a value is not finite).
+    ///
+    /// One bound for a whole plate instead of a projection per target: a
+    /// check that every target stayed within a few pixels needs to project
+    /// them only when the bound does not already prove it. With `u = P − C`
+    /// of this pose, `|u| ≤ D = |centre − C| + radius`, the camera points
+    /// move by `δ = z' − z = (R' − R) u + R' (C − C')`, at most
+    /// `Δ = ‖R' − R‖ D + |R' (C − C')|`; the image point
+    /// `−c (z_x, z_y) / z_z` moves by `c |δ| |z| / (|z'_z| |z_z|)` at most,
+    /// with `|z| ≤ ‖R‖ D` and depths `|z_z| ≥ h`, `|z'_z| ≥ h − Δ`
+    /// (`h` from the depth of `centre` less `radius`). No orthonormality of
+    /// either rotation is assumed (Frobenius norms throughout).
+    pub fn shift_bound(
+        &self,
+        other: &Exterior,
+        c: f64,
+        centre: &Vector3<f64>,
+        radius: f64,
+    ) -> Option<f64> {
+        // Relative slack far above the few units of rounding of every
+        // product and sum involved (1e-16 each).
+        const SLACK: f64 = 1e-12;
+        let (r0, r1) = (&self.rotation, &other.rotation);
+        let (n0, n1) = (r0.norm(), r1.norm());
+        let reach = (centre - self.center).norm();
+        let d = (reach + radius) * (1.0 + SLACK);
+        let moved = (other.center - self.center).norm();
+        // What computing R (P − C) may be off by, per pose (a few units of
+        // rounding of ‖R‖ |P − C|; 1e-14 is ten times that).
+        let eta = 1e-14 * (n0 + n1) * (d + moved);
+        let delta = ((r1 - r0).norm() * d + n1 * moved) * (1.0 + SLACK) + 2.0 * eta;
+        // Depth of the centre along this camera's axis less the radius
+        // (the third row's length bounds its reach), less the rounding.
+        let axis = r0.row(2);
+        let depth = -(axis * (centre - self.center))[0];
+        let h = depth - axis.norm() * radius - SLACK * (depth.abs() + axis.norm() * radius) - eta;
+        let z = n0 * d + eta;
+        let near = h - delta;
+        if !(near > 0.0 && c > 0.0) {
+            return None;
+        }
+        // The image points themselves are rounded by a few units of their
+        // size (at most c |z| / h).
+        let bound = (c * delta * z / (near * h) + 1e-15 * c * z / near) * (1.0 + SLACK);
+        bound.is_finite().then_some(bound)
+    }
+
     /// Pixel position at which `camera` sees the object point `p`.
     #[inline]
     pub fn project_pixel(&self, camera: &Camera, p: &Vector3<f64>) -> Option<Vector2<f64>> {
@@ -104,6 +156,73 @@ pub fn ideal_of_camera_point(c: f64, q: &Vector3<f64>) -> Option<Vector2<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Matrix6;
+
+    /// No point of the ball moves further than the bound says, as
+    /// `project_ideal` and `UncertainProjector::project_point` compute the
+    /// two image points: poses a rounding apart, a little and far apart,
+    /// rotations not quite orthonormal, points on the ball's surface.
+    #[test]
+    fn no_point_of_the_ball_moves_further_than_the_shift_bound() {
+        use crate::precision::UncertainProjector;
+        use crate::rng::SplitMix64;
+        use crate::rotation::cayley;
+        let mut rng = SplitMix64::new(23);
+        let (mut proved, mut tightest) = (0, 0.0f64);
+        for case in 0..3000 {
+            let radius = 20.0 + 600.0 * rng.unit();
+            let centre = Vector3::new(rng.normal(), rng.normal(), 0.1 * rng.normal()) * 100.0;
+            let distance = 300.0 + 3000.0 * rng.unit();
+            let eye = centre
+                + Vector3::new(rng.normal(), rng.normal(), 0.0) * 0.3 * distance
+                + Vector3::new(0.0, 0.0, distance);
+            let up = Vector3::new(rng.normal(), rng.normal(), 0.0);
+            let Some(mut e0) = Exterior::look_at(eye, centre, up) else {
+                continue;
+            };
+            // Turns from none to a hundredth of a radian, moves from none to
+            // 5 mm; every fifth case one unit of rounding or a rotation a
+            // little off orthonormal.
+            let scale = [0.0, 1e-7, 1e-5, 1e-3, 1e-2][case % 5];
+            let turn = cayley(
+                scale * rng.normal(),
+                scale * rng.normal(),
+                scale * rng.normal(),
+            );
+            let mut e1 = Exterior::new(
+                e0.rotation * turn,
+                e0.center + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 500.0 * scale,
+            );
+            match case % 20 {
+                3 => e1.rotation[(1, 2)] = f64::from_bits(e1.rotation[(1, 2)].to_bits() + 1),
+                7 => e1.rotation += Matrix3::from_fn(|_, _| 1e-9 * rng.normal()),
+                11 => e0.rotation += Matrix3::from_fn(|_, _| 1e-9 * rng.normal()),
+                _ => {}
+            }
+            let c = 8.0 + 10.0 * rng.unit();
+            let Some(bound) = e0.shift_bound(&e1, c, &centre, radius) else {
+                continue;
+            };
+            proved += 1;
+            let projector = UncertainProjector::new(c, &e0, &Matrix6::zeros());
+            for k in 0..40 {
+                let dir = Vector3::new(rng.normal(), rng.normal(), rng.normal()).normalize();
+                let reach = if k % 2 == 0 { 1.0 } else { rng.unit().cbrt() };
+                let p = centre + dir * radius * reach;
+                let (Some(a), Some(b)) = (e0.project_ideal(c, &p), e1.project_ideal(c, &p)) else {
+                    panic!("case {case}: a point of the ball is behind a camera");
+                };
+                let (_, seen) = projector.project_point(&p).expect("in front");
+                for shift in [(b - a).norm(), (b - seen).norm()] {
+                    assert!(shift <= bound, "case {case}: {shift} > {bound}");
+                    tightest = tightest.max(shift / bound);
+                }
+            }
+        }
+        // The bound proves most cases and is not loose beyond use.
+        assert!(proved > 2500, "{proved}");
+        assert!(tightest > 0.1, "{tightest}");
+    }
 
     #[test]
     fn deviation_is_the_centre_offset_and_the_small_rotation() {

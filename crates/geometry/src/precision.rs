@@ -5,7 +5,7 @@
 use crate::camera::Camera;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
-use crate::linearised::Linearised;
+use crate::linearised::{Linearised, PointJacobian, RotationPairs};
 use crate::observation::{Observation, Status};
 use nalgebra::{Matrix2, Matrix6, Vector2, Vector3, Vector6};
 use wide::f64x2;
@@ -80,8 +80,8 @@ pub fn normal_matrix(
         })
         .collect();
     let mut lin = Linearised::default();
-    lin.load(&obs, &vec![Status::Used; obs.len()]);
-    Ok(lin.evaluate(c, e)?.n)
+    lin.load(&obs, &vec![Status::Used; obs.len()], false)?;
+    Ok(lin.evaluate(c, e, &obs)?.n)
 }
 
 /// Covariance of `(C, ω)` from the covariance of `(C, a, b, c)`: `ω = 2 (a, b, c)`.
@@ -164,34 +164,28 @@ pub fn uncertain_projection(
 ///
 /// The products `J Σ Jᵀ` are written out in SIMD pairs (the two rows of
 /// `J`): the same operations in the same order as nalgebra's (each sum from
-/// its first term on), so the same bits in fewer instructions.
+/// its first term on), so the same bits in fewer instructions. `J`'s
+/// columns are the adjustment's ([`Linearised`]'s, the rotations by
+/// `ω = 2 (a, b, c)`): [`UncertainProjector::covariance_and_jacobian_at`]
+/// gives the adjustment's rows at this pose with them.
 #[derive(Debug, Clone, Copy)]
 pub struct UncertainProjector {
     c: f64,
     exterior: Exterior,
     /// `Σ_km` in both lanes, at `6 m + k`.
     sigma: [f64x2; 36],
-    /// Per column `k` of `R`: `(−r0, −r1)`, `−r2` twice, `(r1, r2)`,
-    /// `(r2, r0)`.
-    dc: [f64x2; 3],
-    dcz: [f64x2; 3],
-    yz: [f64x2; 3],
-    zx: [f64x2; 3],
+    rotation: RotationPairs,
 }
 
 impl UncertainProjector {
     /// A projector for `exterior` with covariance `covariance` of
     /// `(Xc, Yc, Zc, ωX, ωY, ωZ)` and principal distance `c`.
     pub fn new(c: f64, exterior: &Exterior, covariance: &Matrix6<f64>) -> Self {
-        let r = &exterior.rotation;
         UncertainProjector {
             c,
             exterior: *exterior,
             sigma: std::array::from_fn(|i| f64x2::splat(covariance[(i % 6, i / 6)])),
-            dc: std::array::from_fn(|k| f64x2::new([-r[(0, k)], -r[(1, k)]])),
-            dcz: std::array::from_fn(|k| f64x2::splat(-r[(2, k)])),
-            yz: std::array::from_fn(|k| f64x2::new([r[(1, k)], r[(2, k)]])),
-            zx: std::array::from_fn(|k| f64x2::new([r[(2, k)], r[(0, k)]])),
+            rotation: RotationPairs::of(&exterior.rotation),
         }
     }
 
@@ -227,24 +221,47 @@ impl UncertainProjector {
     /// (`z.z < 0`, from [`UncertainProjector::project_point`]), mm².
     #[inline]
     pub fn covariance_at(&self, z: &Vector3<f64>) -> Matrix2<f64> {
-        let (c, r) = (self.c, &self.exterior.rotation);
+        let (j, _) = self.jacobian_at::<false>(z);
+        self.covariance_of(&j)
+    }
+
+    /// [`UncertainProjector::covariance_at`], and the rows of the
+    /// resection's first pass from this projector's pose for the object
+    /// point `P` with `z = R (P − C)` (the same bits as
+    /// [`Linearised::evaluate`] there: [`Linearised::evaluate_from`]),
+    /// from the partials the two share.
+    #[inline]
+    pub fn covariance_and_jacobian_at(&self, z: &Vector3<f64>) -> (Matrix2<f64>, PointJacobian) {
+        let (j, rows) = self.jacobian_at::<true>(z);
+        (self.covariance_of(&j), rows.expect("asked for"))
+    }
+
+    /// `J` at `z` as SIMD pairs (its two rows) and, if `ROWS`, the
+    /// resection's rows there.
+    #[inline(always)]
+    fn jacobian_at<const ROWS: bool>(
+        &self,
+        z: &Vector3<f64>,
+    ) -> ([f64x2; 6], Option<PointJacobian>) {
+        let c = self.c;
         let inv = 1.0 / z.z;
         let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
         // Column k of J as one SIMD pair: its two rows are the same
         // operations on x and on y (each lane computes exactly what a
         // scalar would).
         let (g, fv) = (f64x2::new([gx, gy]), f64x2::splat(f));
-        let (zzx, zyz) = (f64x2::new([z.z, z.x]), f64x2::new([z.y, z.z]));
-        let mut j = [f64x2::ZERO; 6];
-        for k in 0..3 {
-            let (a0, a1) = (r[(0, k)], r[(1, k)]);
-            // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by
-            // ω_k: R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
-            j[k] = fv * (self.dc[k] - g * self.dcz[k]);
-            let dw = self.yz[k] * zzx - self.zx[k] * zyz;
-            let dwz = a0 * z.y - a1 * z.x;
-            j[3 + k] = fv * (dw - g * f64x2::splat(dwz));
-        }
+        let partials = self.rotation.partials(f64x2::new([z.x, z.y]), z.z, fv, g);
+        let (centre, w_xy, w_z) = partials;
+        // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by
+        // ω_k: R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
+        let turn = |k: usize| fv * (w_xy[k] - g * f64x2::splat(w_z[k]));
+        let j = [centre[0], centre[1], centre[2], turn(0), turn(1), turn(2)];
+        (j, ROWS.then(|| PointJacobian::of(c, fv, g, partials)))
+    }
+
+    /// `J Σ Jᵀ` of `J`'s two rows as the SIMD pairs of its columns.
+    #[inline(always)]
+    fn covariance_of(&self, j: &[f64x2; 6]) -> Matrix2<f64> {
         // Columns of J Σ, each pair summed from its first term on as
         // nalgebra sums, then (J Σ) Jᵀ: the diagonal pairs each column
         // with itself, the off-diagonal with it swapped.

@@ -16,11 +16,11 @@ use crate::camera::Camera;
 use crate::closed_form;
 use crate::error::GeometryError;
 use crate::exterior::Exterior;
-use crate::linearised::{Linearised, Normals};
+use crate::linearised::{Linearised, Normals, PointJacobian};
 use crate::precision::{std_center, std_rotation_deg, to_omega};
 use crate::rng::SplitMix64;
 use crate::rotation::cayley;
-use nalgebra::{Matrix2, Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3};
+use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3};
 
 pub use crate::observation::{Observation, Status};
 
@@ -176,7 +176,7 @@ impl Resection {
         let mut e = start;
         let mut adjusted = None;
         for _ in 0..3 {
-            let result = self.adjust(obs, &mut e)?;
+            let result = self.adjust(obs, &mut e, &[], false)?;
             let mut changed = false;
             for (k, o) in obs.iter().enumerate() {
                 let ok = e
@@ -214,9 +214,29 @@ impl Resection {
         obs: &[Observation],
         start: Exterior,
     ) -> Result<ResectionReport, GeometryError> {
+        self.refine_from(obs, start, &[])
+    }
+
+    /// [`Resection::refine`] whose first pass takes the rows at `start`
+    /// from `jacobians` (`jacobians[k]` of `obs[k]`, formed at `start` by
+    /// [`crate::precision::UncertainProjector::covariance_and_jacobian_at`]
+    /// while projecting the targets, as tracking does anyway) instead of
+    /// forming them again: the same result, bit for bit. Without them
+    /// (`jacobians` empty) it is [`Resection::refine`].
+    ///
+    /// The input is checked as [`Resection::solve`] checks it, while the
+    /// first adjustment loads it (every observation is used at first).
+    pub fn refine_from(
+        &mut self,
+        obs: &[Observation],
+        start: Exterior,
+        jacobians: &[PointJacobian],
+    ) -> Result<ResectionReport, GeometryError> {
         self.reset(obs.len());
-        check_input(obs)?;
-        self.snoop(obs, start, None)
+        check_count(obs)?;
+        let mut e = start;
+        let adjusted = self.adjust(obs, &mut e, jacobians, true)?;
+        self.snoop(obs, e, Some(adjusted))
     }
 
     fn check_consensus(&self, total: usize, _hypotheses: usize) -> Result<(), GeometryError> {
@@ -319,24 +339,35 @@ impl Resection {
 
     /// Levenberg–Marquardt over the used observations, updating `e`.
     /// Returns the iterations and the normal equations at the solution; the
-    /// workspace `lin` then holds the Jacobian and residuals at `e`.
+    /// workspace `lin` then holds the Jacobian and residuals at `e` (after a
+    /// last tiny step, the residuals and the cost are those before it, the
+    /// step pending in `lin`: [`Linearised::shift_later`]).
+    /// `first`: the rows at `e` of every used observation, or none;
+    /// `check`: whether to check the used observations as
+    /// [`check_input`] does (those of a first adjustment).
     fn adjust(
         &mut self,
         obs: &[Observation],
         e: &mut Exterior,
+        first: &[PointJacobian],
+        check: bool,
     ) -> Result<(usize, Normals), GeometryError> {
         let c = self.c;
         let scale = e.center.norm().max(1.0);
         let mut lambda = 1e-6;
         let mut it = 0;
-        self.lin.load(obs, &self.status);
+        self.lin.load(obs, &self.status, check)?;
         if self.lin.len() < 4 {
             return Err(GeometryError::TooFewPoints {
                 got: self.lin.len(),
                 need: 4,
             });
         }
-        let mut current = self.lin.evaluate(c, e)?;
+        let mut current = if first.is_empty() {
+            self.lin.evaluate(c, e, obs)?
+        } else {
+            self.lin.evaluate_from(c, e, obs, first)?
+        };
         while it < self.options.max_iterations {
             it += 1;
             let mut a = current.n;
@@ -364,12 +395,14 @@ impl Resection {
                 && delta.fixed_rows::<3>(3).norm() <= 1e-6;
             if tiny && lambda <= 1e-6 {
                 *e = candidate;
-                current.cost = self.lin.shift(&delta);
+                // The residuals and their cost move in the next pass that
+                // reads them (the data snooping's).
+                self.lin.shift_later(&delta);
                 return Ok((it, current));
             }
             // The normal equations at the candidate carry its cost: one pass
             // serves both the acceptance test and the next step.
-            match self.lin.evaluate_trial(c, &candidate) {
+            match self.lin.evaluate_trial(c, &candidate, obs) {
                 Ok(next) if next.cost <= current.cost * (1.0 + 1e-12) => {
                     *e = candidate;
                     self.lin.accept_trial();
@@ -408,9 +441,9 @@ impl Resection {
         let max_snooped = (self.options.max_snooped_ratio * n_total as f64).floor() as usize;
         let mut snooped = 0;
         loop {
-            let (iterations, nm) = match adjusted.take() {
+            let (iterations, mut nm) = match adjusted.take() {
                 Some(done) => done,
-                None => self.adjust(obs, &mut e)?,
+                None => self.adjust(obs, &mut e, &[], false)?,
             };
             let redundancy = 2 * nm.count - 6;
             if redundancy == 0 {
@@ -426,14 +459,18 @@ impl Resection {
                 .l()
                 .solve_lower_triangular(&Matrix6::identity())
                 .ok_or(GeometryError::Singular)?;
+            // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)),
+            // in the pass that moves the residuals by a last small step.
+            let (shifted, worst) = self.lin.worst_standardised(&l_inv);
+            if let Some(cost) = shifted {
+                nm.cost = cost;
+            }
             let sigma0 = (nm.cost / redundancy as f64).sqrt();
             let sigma_test = sigma0.max(self.options.sigma_floor_px * self.pixel_size);
-            // Data snooping: standardised residuals w = v / (σ sqrt(q_vv)).
-            let worst = self
-                .lin
-                .worst_standardised(&l_inv, sigma_test)
+            let worst = worst
+                .map(|(i, w2)| (i, w2.sqrt() / sigma_test))
                 .filter(|(_, w)| *w > self.options.snooping_critical)
-                .map(|(i, w)| (self.lin.idx[i], w));
+                .map(|(i, w)| (nth_used(&self.status, i), w));
             match worst {
                 Some((k, _)) if snooped < max_snooped && nm.count > 4 => {
                     self.status[k] = Status::Snooped;
@@ -463,26 +500,34 @@ impl Resection {
     }
 }
 
+/// The index of the `i`-th used observation (the `i`-th point the
+/// workspace loaded): looked up only for a point data snooping removes.
+fn nth_used(status: &[Status], i: usize) -> usize {
+    status
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| **s == Status::Used)
+        .nth(i)
+        .map(|(k, _)| k)
+        .expect("a loaded point is a used observation")
+}
+
 /// Rejects inputs that no method can use.
 fn check_input(obs: &[Observation]) -> Result<(), GeometryError> {
+    check_count(obs)?;
+    match obs.iter().position(|o| !o.usable(o.unit_weight())) {
+        Some(index) => Err(GeometryError::NonFinite { index }),
+        None => Ok(()),
+    }
+}
+
+/// Rejects fewer than four observations.
+fn check_count(obs: &[Observation]) -> Result<(), GeometryError> {
     if obs.len() < 4 {
         return Err(GeometryError::TooFewPoints {
             got: obs.len(),
             need: 4,
         });
-    }
-    for (index, o) in obs.iter().enumerate() {
-        // A NaN or infinity anywhere makes the sum non-finite.
-        let finite = (o.object.x + o.object.y + o.object.z + o.image.x + o.image.y).is_finite();
-        let w = &o.weight;
-        let weighted = *w == Matrix2::identity()
-            || (w.iter().all(|v| v.is_finite())
-                && (w[(0, 1)] - w[(1, 0)]).abs() <= 1e-12 * w.abs().max()
-                && w[(0, 0)] > 0.0
-                && w.determinant() > 0.0);
-        if !(finite && weighted) {
-            return Err(GeometryError::NonFinite { index });
-        }
     }
     Ok(())
 }

@@ -234,6 +234,40 @@ fn unusable_inputs_are_errors_not_answers() {
         rs.solve(&nan),
         Err(GeometryError::NonFinite { index: 5 })
     ));
+    // The refinement checks its input as the solve does, the first
+    // unusable observation named: a NaN, an infinite object point, a
+    // weight that is not positive definite, an asymmetric one.
+    assert!(matches!(
+        rs.refine(&obs[..3], truth),
+        Err(GeometryError::TooFewPoints { got: 3, need: 4 })
+    ));
+    for (k, spoil) in [
+        |o: &mut Observation| o.image.x = f64::NAN,
+        |o: &mut Observation| o.object.z = f64::INFINITY,
+        |o: &mut Observation| o.weight = photopose_geometry::Matrix2::new(1.0, 0.0, 0.0, -1.0),
+        |o: &mut Observation| o.weight = photopose_geometry::Matrix2::new(1.0, 0.5, 0.0, 1.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut bad = obs.clone();
+        spoil(&mut bad[7 + k]);
+        spoil(&mut bad[20]);
+        let want = 7 + k;
+        assert!(matches!(
+            rs.refine(&bad, truth),
+            Err(GeometryError::NonFinite { index }) if index == want
+        ));
+        assert!(matches!(
+            rs.solve(&bad),
+            Err(GeometryError::NonFinite { index }) if index == want
+        ));
+    }
+    // Weights that are fine, not the identity: still a pose.
+    let mut weighted = obs.clone();
+    weighted[3].weight = photopose_geometry::Matrix2::new(2.0, 0.5, 0.5, 1.0);
+    weighted[4].weight = photopose_geometry::Matrix2::new(1.0, -0.0, 0.0, 1.0);
+    assert!(rs.refine(&weighted, truth).is_ok());
     // Random image positions: no pose explains them.
     let mut noise = obs.clone();
     for o in &mut noise {
@@ -294,4 +328,59 @@ fn uniform_weights_change_nothing_but_sigma0() {
         rs.solve(&bad),
         Err(GeometryError::NonFinite { index: 3 })
     ));
+}
+
+/// A refinement whose first pass copies the rows formed while projecting
+/// ([`Resection::refine_from`]) gives the plain refinement's report bit for
+/// bit: several attitudes, saturated (weighted) points, a gross error that
+/// data snooping removes, a prediction a little and a lot off.
+#[test]
+fn refining_from_projected_rows_is_refining() {
+    use photopose_geometry::precision::UncertainProjector;
+    use photopose_geometry::{Matrix2, Matrix6};
+    let cam = camera();
+    let c = cam.interior.c;
+    let mut rng = SplitMix64::new(19);
+    let (mut plain, mut from) = (
+        Resection::new(&cam, ResectionOptions::default()),
+        Resection::new(&cam, ResectionOptions::default()),
+    );
+    let mut snooped = 0;
+    for (name, truth) in poses() {
+        for (trial, off) in [0.0, 0.3, 5.0].into_iter().enumerate() {
+            let mut obs = observe(&cam, &truth, 0.05, &mut rng);
+            if trial == 1 {
+                obs[3].image.x += 0.01;
+                for o in obs.iter_mut().step_by(7) {
+                    o.weight = Matrix2::identity() * 0.25;
+                }
+            }
+            let start = Exterior::new(
+                truth.rotation,
+                truth.center + Vector3::new(off, -off, 0.5 * off),
+            );
+            let projector = UncertainProjector::new(c, &start, &(Matrix6::identity() * 1e-4));
+            let jacobians: Vec<_> = obs
+                .iter()
+                .map(|o| {
+                    let (z, _) = projector.project_point(&o.object).expect("in front");
+                    projector.covariance_and_jacobian_at(&z).1
+                })
+                .collect();
+            let want = plain.refine(&obs, start).unwrap();
+            let got = from.refine_from(&obs, start, &jacobians).unwrap();
+            let bits = |r: &photopose_geometry::ResectionReport| {
+                let mut v: Vec<u64> = r.exterior.rotation.iter().map(|x| x.to_bits()).collect();
+                v.extend(r.exterior.center.iter().map(|x| x.to_bits()));
+                v.extend(r.covariance.iter().map(|x| x.to_bits()));
+                v.extend([r.sigma0.to_bits(), r.rms_px.to_bits()]);
+                v
+            };
+            assert_eq!(bits(&want), bits(&got), "{name} {off}");
+            assert_eq!(want, got);
+            assert_eq!(plain.rejected_ids(), from.rejected_ids());
+            snooped += want.n_rejected;
+        }
+    }
+    assert!(snooped >= 5, "{snooped} snooped");
 }

@@ -20,14 +20,16 @@
 //! [`Motion`] predicts the pose of a later frame from the two latest poses
 //! (constant velocity per frame).
 
-use crate::{Identified, Locator, PoseStatus, Projected, Window};
+use crate::{Identified, Locator, PoseStatus, Window};
 use photopose_field::{Target, TargetKind};
 use photopose_frame::ImageView;
+use photopose_geometry::linearised::PointJacobian;
 use photopose_geometry::precision::UncertainProjector;
 use photopose_geometry::{
-    Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport, Rotation3, Vector3,
+    Camera, DistortSeed, Exterior, Matrix2, Matrix3, Matrix6, Observation, ResectionReport,
+    Rotation3, Vector3,
 };
-use photopose_vision::{Expected, ThresholdResult, WindowOutcome};
+use photopose_vision::{Expected, ThresholdResult, WindowMeasurer, WindowOutcome};
 
 /// Targets ahead of the one measured whose windows are asked for from
 /// memory (the bench's tracked frame: 405 µs with all windows touched
@@ -169,6 +171,167 @@ pub fn spread_order(targets: &[Target], kind: TargetKind) -> Vec<usize> {
     order
 }
 
+/// What places a tracked frame's windows: the projector of the predicted
+/// pose and the gates' terms.
+struct Projection {
+    projector: UncertainProjector,
+    gate_min_px: f64,
+    gate_sigmas: f64,
+    gate_spacing_ratio: f64,
+    /// The share of the predicted motion added to every gate, px.
+    gate_extra: f64,
+    edge_margin_px: f64,
+}
+
+impl Projection {
+    /// The window of every field target that lands on the sensor, in field
+    /// order, and its rows of the refinement's first pass.
+    ///
+    /// A function of its own, the camera and these terms given by
+    /// reference: what derives from them alone (the sensor's centre, the
+    /// lens's zero test) is formed once, not after every store into the
+    /// buffers (out of line: inlined, its arguments' promise not to alias
+    /// would be lost).
+    #[inline(never)]
+    fn windows(
+        &self,
+        camera: &Camera,
+        targets: &[Target],
+        spacing: &[f64],
+        seeds: &mut [Option<DistortSeed>],
+        windows: &mut Vec<Window>,
+        jacobians: &mut Vec<PointJacobian>,
+    ) {
+        windows.clear();
+        jacobians.clear();
+        let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+        let projector = &self.projector;
+        for (fi, t) in targets.iter().enumerate() {
+            // The covariance only of a target that lands on the sensor.
+            let Some((z, ideal)) = projector.project_point(&t.position) else {
+                continue;
+            };
+            let Some(measured) = camera.distort_seeded(ideal, &mut seeds[fi]) else {
+                continue;
+            };
+            let p = camera.image_to_pixel(measured);
+            if !camera.contains_pixel(p, self.edge_margin_px) {
+                continue;
+            }
+            // With the covariance, the rows of the refinement's first pass
+            // (it starts from this pose): formed from the same partials.
+            let (covariance, jacobian) = projector.covariance_and_jacobian_at(&z);
+            let sigma_px = crate::largest_sigma(&covariance) / px;
+            // `R (P − C)` of the projection, not computed again.
+            let depth = z.z.abs();
+            let scale = c / (depth * px);
+            let spacing = spacing[fi] * scale;
+            let gate = (self.gate_min_px + self.gate_sigmas * sigma_px + self.gate_extra)
+                .min(self.gate_spacing_ratio * spacing);
+            let expected = Expected {
+                col: p.x,
+                row: p.y,
+                gate_px: gate,
+                radius_px: t.radius * scale,
+                coded: t.kind == TargetKind::Coded,
+                read_code: false,
+            };
+            windows.push(Window {
+                field_index: fi,
+                expected,
+                ideal,
+                camera: z,
+            });
+            jacobians.push(jacobian);
+        }
+    }
+}
+
+/// Where a tracked frame's measurements go: the windows and rows of the
+/// targets found move to the front, in order (the first windows and rows
+/// then belong to the observations; nothing moves while every target is
+/// found), and each found target is identified and observed.
+struct Found<'a> {
+    windows: &'a mut Vec<Window>,
+    jacobians: &'a mut Vec<PointJacobian>,
+    identified: &'a mut Vec<Identified>,
+    obs: &'a mut Vec<Observation>,
+}
+
+/// Measures every window of `found` in `image` with `threshold`, asking
+/// for the pixels of the window `PREFETCH_AHEAD` targets on while one is
+/// measured, so that the frame's lines come from memory while the targets
+/// before them are measured. The coded targets whose rings are read must
+/// give their own ids: how many did (another id: a mismatch). Observations
+/// of saturated targets are weighted by `1 / saturated_factor²`.
+///
+/// A function of its own (out of line), the camera given by reference:
+/// what derives from it alone is formed once, not after every call into
+/// the measurer.
+#[inline(never)]
+fn measure(
+    camera: &Camera,
+    targets: &[Target],
+    saturated_factor: f64,
+    measurer: &mut WindowMeasurer,
+    (image, threshold): (&ImageView<'_>, &ThresholdResult),
+    found: Found<'_>,
+) -> Result<usize, TrackLost> {
+    let Found {
+        windows,
+        jacobians,
+        identified,
+        obs,
+    } = found;
+    for w in windows.iter().take(PREFETCH_AHEAD) {
+        measurer.prefetch(image, &w.expected);
+    }
+    let (mut confirmed, mut kept) = (0, 0);
+    for wi in 0..windows.len() {
+        if let Some(ahead) = windows.get(wi + PREFETCH_AHEAD) {
+            measurer.prefetch(image, &ahead.expected);
+        }
+        let w = &windows[wi];
+        let t = &targets[w.field_index];
+        let WindowOutcome::Found(m) = measurer.measure(image, threshold, &w.expected) else {
+            continue;
+        };
+        if let Some(code) = m.code {
+            match code.id() {
+                Some(id) if id == t.id => confirmed += 1,
+                Some(_) => return Err(TrackLost::CodeMismatch),
+                None => {}
+            }
+        }
+        if kept != wi {
+            windows[kept] = windows[wi];
+            jacobians[kept] = jacobians[wi];
+        }
+        kept += 1;
+        identified.push(Identified {
+            id: t.id,
+            kind: t.kind,
+            col: m.col,
+            row: m.row,
+            blob_col: m.col,
+            blob_row: m.row,
+            detection: usize::MAX,
+            used: true,
+            saturated: m.saturated,
+            peak: m.peak,
+        });
+        let mut o = Observation::from_pixel(camera, t.id, t.position, m.col, m.row);
+        let f = saturated_factor;
+        if m.saturated && f.is_finite() && f > 0.0 {
+            o.weight = Matrix2::identity() / (f * f);
+        }
+        obs.push(o);
+    }
+    windows.truncate(kept);
+    jacobians.truncate(kept);
+    Ok(confirmed)
+}
+
 impl Locator {
     /// Locates `image` from `prior` (tracking mode). `Ok` with a pose, or
     /// why the frame must be located whole. Allocates nothing once warm.
@@ -185,53 +348,27 @@ impl Locator {
         self.coarse = None;
         self.pose = None;
         let c = self.camera.interior.c;
-        let px = self.camera.sensor.pixel_size;
         let e = &prior.exterior;
-        let gate_extra = options.motion_gate * prior.motion_px;
-        let mut confirmed = 0usize;
         // First every target's window; then the measurements, each asking
         // for the pixels of the window `PREFETCH_AHEAD` targets on, so that
         // the frame's lines come from memory while the targets before them
         // are measured.
-        self.windows.clear();
-        let projector = UncertainProjector::new(c, e, &prior.covariance);
-        for (fi, t) in self.field.targets().iter().enumerate() {
-            // The covariance only of a target that lands on the sensor.
-            let Some((camera, ideal)) = projector.project_point(&t.position) else {
-                continue;
-            };
-            let Some(measured) = self.camera.distort_seeded(ideal, &mut self.seeds[fi]) else {
-                continue;
-            };
-            let p = self.camera.image_to_pixel(measured);
-            if !self.camera.contains_pixel(p, self.options.edge_margin_px) {
-                continue;
-            }
-            let sigma_px = crate::largest_sigma(&projector.covariance_at(&camera)) / px;
-            // `R (P − C)` of the projection, not computed again.
-            let depth = camera.z.abs();
-            let scale = c / (depth * px);
-            let spacing = self.spacing[fi] * scale;
-            let gate =
-                (self.options.gate_min_px + self.options.gate_sigmas * sigma_px + gate_extra)
-                    .min(self.options.gate_spacing_ratio * spacing);
-            let coded = t.kind == TargetKind::Coded;
-            let expected = Expected {
-                col: p.x,
-                row: p.y,
-                gate_px: gate,
-                radius_px: t.radius * scale,
-                coded,
-                read_code: false,
-            };
-            self.windows.push(Window {
-                field_index: fi,
-                expected,
-                spacing,
-                ideal,
-                camera,
-            });
-        }
+        let projection = Projection {
+            projector: UncertainProjector::new(c, e, &prior.covariance),
+            gate_min_px: self.options.gate_min_px,
+            gate_sigmas: self.options.gate_sigmas,
+            gate_spacing_ratio: self.options.gate_spacing_ratio,
+            gate_extra: options.motion_gate * prior.motion_px,
+            edge_margin_px: self.options.edge_margin_px,
+        };
+        projection.windows(
+            &self.camera,
+            self.field.targets(),
+            &self.spacing,
+            &mut self.seeds,
+            &mut self.windows,
+            &mut self.jacobians,
+        );
         // The coded targets to read: the first `verify_codes` of the spread
         // order that land on the sensor (the windows are in field order).
         let mut marked = 0;
@@ -244,61 +381,23 @@ impl Locator {
                 marked += 1;
             }
         }
-        for w in self.windows.iter().take(PREFETCH_AHEAD) {
-            self.window.prefetch(&image, &w.expected);
-        }
-        for (wi, w) in self.windows.iter().enumerate() {
-            let Window {
-                field_index: fi,
-                expected,
-                spacing,
-                ideal,
-                camera,
-            } = *w;
-            if let Some(ahead) = self.windows.get(wi + PREFETCH_AHEAD) {
-                self.window.prefetch(&image, &ahead.expected);
-            }
-            let t = &self.field.targets()[fi];
-            let gate = expected.gate_px;
-            let WindowOutcome::Found(m) = self.window.measure(&image, &prior.threshold, &expected)
-            else {
-                continue;
-            };
-            if let Some(code) = m.code {
-                match code.id() {
-                    Some(id) if id == t.id => confirmed += 1,
-                    Some(_) => return Err(TrackLost::CodeMismatch),
-                    None => {}
-                }
-            }
-            self.projected.push(Projected {
-                field_index: fi,
-                col: expected.col,
-                row: expected.row,
-                ideal,
-                camera,
-                sigma_px: gate,
-                spacing,
-            });
-            self.identified.push(Identified {
-                id: t.id,
-                kind: t.kind,
-                col: m.col,
-                row: m.row,
-                blob_col: m.col,
-                blob_row: m.row,
-                detection: usize::MAX,
-                used: true,
-                saturated: m.saturated,
-                peak: m.peak,
-            });
-            let mut o = Observation::from_pixel(&self.camera, t.id, t.position, m.col, m.row);
-            let f = self.options.saturated_sigma_factor;
-            if m.saturated && f.is_finite() && f > 0.0 {
-                o.weight = Matrix2::identity() / (f * f);
-            }
-            self.obs.push(o);
-        }
+        let found = Found {
+            windows: &mut self.windows,
+            jacobians: &mut self.jacobians,
+            identified: &mut self.identified,
+            obs: &mut self.obs,
+        };
+        let sought = (&image, &prior.threshold);
+        let targets = self.field.targets();
+        let factor = self.options.saturated_sigma_factor;
+        let confirmed = measure(
+            &self.camera,
+            targets,
+            factor,
+            &mut self.window,
+            sought,
+            found,
+        )?;
         let found = self.obs.len();
         if found < options.min_targets.max(self.options.min_coded.max(4)) {
             self.status = PoseStatus::TooFewTargets { coded: confirmed };
@@ -310,35 +409,63 @@ impl Locator {
         if self.options.eccentricity {
             self.correct_eccentricity_tracked(e);
         }
-        let report = match self.resection.refine(&self.obs, *e) {
+        let report = match self.resection.refine_from(&self.obs, *e, &self.jacobians) {
             Ok(r) => r,
             Err(_) => return Err(TrackLost::NoPose),
         };
-        // Every target of the refined pose must lie within its gate of the
-        // prediction: a pose that moved a grid step is a wrong match. The
-        // shift is measured in ideal image coordinates: the lens distortion
-        // changes a shift of a few pixels by a small fraction of it, and
-        // the gates are far from a grid step.
-        for pr in &self.projected {
-            let t = &self.field.targets()[pr.field_index];
-            let Some(q) = report.exterior.project_ideal(c, &t.position) else {
-                return Err(TrackLost::Jump);
-            };
-            let shift = (q - pr.ideal).norm() / px;
-            if shift.is_nan()
-                || shift > options.max_shift_ratio * pr.sigma_px.max(self.options.gate_min_px)
-            {
-                return Err(TrackLost::Jump);
-            }
+        if self.jumped(e, &report.exterior, options.max_shift_ratio) {
+            return Err(TrackLost::Jump);
         }
+        // Every target was identified as used.
         let rejected = self.resection.rejected_ids();
-        for t in &mut self.identified {
-            t.used = !rejected.contains(&t.id);
+        if !rejected.is_empty() {
+            for t in &mut self.identified {
+                t.used = !rejected.contains(&t.id);
+            }
         }
         self.rejected.extend_from_slice(rejected);
         self.pose = Some(report);
         self.status = PoseStatus::Ok;
         Ok(self.pose.as_ref().expect("just set"))
+    }
+}
+
+impl Locator {
+    /// Whether the refined pose `refined` projects a tracked target outside
+    /// its gate of the prediction made with `prior`: a pose that moved a
+    /// grid step is a wrong match. The shift is measured in ideal image
+    /// coordinates: the lens distortion changes a shift of a few pixels by
+    /// a small fraction of it, and the gates are far from a grid step.
+    ///
+    /// Every gate is at least `max_shift_ratio · gate_min_px` wide, so a
+    /// bound on the shift of every point of the plate
+    /// ([`photopose_geometry::Exterior::shift_bound`]) below that proves
+    /// the answer without projecting a target; only otherwise is each one
+    /// projected ([`Locator::jumped_plain`], the same answer).
+    fn jumped(&self, prior: &Exterior, refined: &Exterior, max_shift_ratio: f64) -> bool {
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        let narrowest = max_shift_ratio * self.options.gate_min_px;
+        let bound = prior.shift_bound(refined, c, &self.plate_centre, self.plate_radius);
+        if bound.is_some_and(|b| b / px < narrowest) {
+            return false;
+        }
+        self.jumped_plain(refined, max_shift_ratio)
+    }
+
+    /// [`Locator::jumped`] target by target.
+    fn jumped_plain(&self, refined: &Exterior, max_shift_ratio: f64) -> bool {
+        let c = self.camera.interior.c;
+        let px = self.camera.sensor.pixel_size;
+        self.windows.iter().any(|w| {
+            let t = &self.field.targets()[w.field_index];
+            let Some(q) = refined.project_ideal(c, &t.position) else {
+                return true;
+            };
+            let shift = (q - w.ideal).norm() / px;
+            let gate = w.expected.gate_px;
+            shift.is_nan() || shift > max_shift_ratio * gate.max(self.options.gate_min_px)
+        })
     }
 }
 
@@ -356,6 +483,63 @@ mod tests {
             }
         }
         d
+    }
+
+    /// The jump check through the plate's shift bound answers as the check
+    /// target by target does, for refined poses from a rounding to several
+    /// pixels away from the prediction (both answers occur, and the bound
+    /// decides some of them).
+    #[test]
+    fn the_bounded_jump_check_answers_as_the_plain_one() {
+        use photopose_geometry::{rotation::cayley, Camera};
+        use photopose_render::{RenderOptions, Renderer};
+        let camera = Camera::reference();
+        let field = default_plate();
+        let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
+        let mut locator = Locator::new(camera, field, crate::LocateOptions::default()).unwrap();
+        let truth = Exterior::from_kuka_pose([30.0, -20.0, 1000.0, 20.0, 5.0, -3.0]);
+        let mut img = renderer.new_image();
+        renderer.render(&truth, &mut img).unwrap();
+        let whole = locator.locate(img.view()).unwrap();
+        let pose = *whole.pose.unwrap();
+        let prior = Prior {
+            exterior: pose.exterior,
+            covariance: pose.covariance,
+            motion_px: 0.0,
+            threshold: whole.detections.threshold,
+        };
+        locator
+            .track(img.view(), &prior, &TrackOptions::default())
+            .unwrap();
+        assert!(locator.windows.len() > 100);
+        let e = &prior.exterior;
+        let (c, px) = (camera.interior.c, camera.sensor.pixel_size);
+        let mut rng = photopose_geometry::rng::SplitMix64::new(0x5eed);
+        let mut next = move || rng.unit() - 0.5;
+        let (mut jumps, mut stays, mut proved) = (0, 0, 0);
+        for k in 0..4000 {
+            // From no change at all to a few pixels, in rotation and
+            // position; ratios around one.
+            let scale = 10f64.powf(-9.0 + 7.0 * (k as f64 / 4000.0));
+            let refined = Exterior::new(
+                e.rotation * cayley(scale * next(), scale * next(), scale * next()),
+                e.center + Vector3::new(next(), next(), next()) * 1000.0 * scale,
+            );
+            let ratio = [1.0, 0.5, 2.0, 0.0, -1.0, f64::NAN][k % 6];
+            let plain = locator.jumped_plain(&refined, ratio);
+            assert_eq!(locator.jumped(e, &refined, ratio), plain, "case {k}");
+            let bound = e.shift_bound(&refined, c, &locator.plate_centre, locator.plate_radius);
+            proved += bound.is_some_and(|b| b / px < ratio * 1.5) as usize;
+            if plain {
+                jumps += 1;
+            } else {
+                stays += 1;
+            }
+        }
+        assert!(
+            jumps > 300 && stays > 1000 && proved > 1000,
+            "{jumps} {stays} {proved}"
+        );
     }
 
     #[test]
