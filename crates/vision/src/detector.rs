@@ -774,11 +774,11 @@ pub(crate) fn blob_tests<P: Pixel>(
     let half = (cxx + cyy) / 2.0;
     let d = ((cxx - cyy) * (cxx - cyy) / 4.0 + cxy * cxy).sqrt();
     let (l1, l2) = ((half + d).max(0.0), (half - d).max(0.0));
-    // (`!(l2 > 0)` also holds for a NaN moment: `max` gave 0. The ratio
+    // (A NaN moment gives `l2 = 0`: `max` returns the number. The ratio
     // times its magnitude keeps its sign: a negative one rejects every
     // blob, as `a / b >` it did.)
     let ratio = o.max_axis_ratio;
-    if !(l2 > 0.0) || l1 > ratio * ratio.abs() * l2 {
+    if l2 <= 0.0 || l1 > ratio * ratio.abs() * l2 {
         return Err(RejectReason::Elongated);
     }
     let ab = 4.0 * std::f64::consts::PI * (l1 * l2).sqrt();
