@@ -189,7 +189,9 @@ impl SeedLabeller {
         if self.valid & rows != rows {
             return false;
         }
-        self.taken[r0..=r1].iter().all(|&t| t & cols == cols)
+        // (`r0..r1 + 1`, not `r0..=r1`: an inclusive range's index is a
+        // call of its own, not inlined.)
+        self.taken[r0..r1 + 1].iter().all(|&t| t & cols == cols)
     }
 
     /// Mask path: the pixels of window row `r` (below the window's
