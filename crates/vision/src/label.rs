@@ -307,6 +307,10 @@ pub(crate) struct SmallMoments {
 /// about a blob's origin column.
 pub(crate) type RowSums = [f64x2; 3];
 
+/// The power sums of [`POW_SUMS`] at the run ends of a window's columns
+/// about a blob's origin ([`SmallMoments::ends`]).
+pub(crate) type RunEnds = [[f64; 8]; SMALL_SIDE + 1];
+
 impl SmallMoments {
     pub(crate) const ZERO: Self = SmallMoments {
         c0: [f64x2::ZERO; 3],
@@ -316,26 +320,37 @@ impl SmallMoments {
         c4: f64x2::ZERO,
     };
 
-    /// The sums of the run of columns `a..e` (about the origin, within
-    /// `±SMALL_SIDE`) alone (never −0: a difference of exact integers).
+    /// The table of [`SmallMoments::run`] for a blob whose origin is
+    /// column `origin` of its window (at most `SMALL_SIDE`): entry `x` the
+    /// power sums below `x − origin`. Why: formed once per blob, a run's
+    /// ends index it as the window's columns (no subtraction of the
+    /// origin per end, no bounds check per run).
     #[inline(always)]
-    pub(crate) fn run(a: i64, e: i64) -> RowSums {
-        debug_assert!(a.abs() <= SMALL_SIDE as i64 && e.abs() <= SMALL_SIDE as i64);
-        // (The index masked to the table's 256 entries: no bounds check.)
-        let (pa, pe) = (
-            &POW_SUMS[(a + POW_HALF as i64) as usize & 255],
-            &POW_SUMS[(e + POW_HALF as i64) as usize & 255],
-        );
+    pub(crate) fn ends(origin: usize) -> &'static RunEnds {
+        debug_assert!(origin <= SMALL_SIDE);
+        let first = POW_HALF - origin.min(SMALL_SIDE);
+        match POW_SUMS[first..first + SMALL_SIDE + 1].try_into() {
+            Ok(t) => t,
+            Err(_) => unreachable!("SMALL_SIDE + 1 entries"),
+        }
+    }
+
+    /// The sums of the run of window columns `a..e` (`a < e ≤
+    /// SMALL_SIDE`) alone, about the origin of `ends`
+    /// ([`SmallMoments::ends`]; never −0: a difference of exact integers).
+    #[inline(always)]
+    pub(crate) fn run(ends: &RunEnds, a: usize, e: usize) -> RowSums {
+        let (pa, pe) = (&ends[a], &ends[e]);
         [0, 1, 2].map(|k| {
             f64x2::new([pe[2 * k], pe[2 * k + 1]]) - f64x2::new([pa[2 * k], pa[2 * k + 1]])
         })
     }
 
-    /// Adds the run of columns `a..e` (about the origin, within
-    /// `±SMALL_SIDE`) to a row's sums.
+    /// Adds the run of window columns `a..e` (as [`SmallMoments::run`])
+    /// to a row's sums.
     #[inline(always)]
-    pub(crate) fn add_run(row: &mut RowSums, a: i64, e: i64) {
-        for (sum, v) in row.iter_mut().zip(Self::run(a, e)) {
+    pub(crate) fn add_run(row: &mut RowSums, ends: &RunEnds, a: usize, e: usize) {
+        for (sum, v) in row.iter_mut().zip(Self::run(ends, a, e)) {
             *sum += v;
         }
     }

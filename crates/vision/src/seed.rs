@@ -424,7 +424,7 @@ impl SeedLabeller {
         };
         // The moments summed exactly a row at a time (`SmallMoments`: the
         // values `Blob::add_run` gives, bit for bit).
-        let origin = self.grown[lo].trailing_zeros() as i64;
+        let origin = self.grown[lo].trailing_zeros() as usize;
         let (sums, cols, runs) = if self.blobs.is_empty() {
             self.take_rows::<true>(lo, hi, origin)
         } else {
@@ -468,7 +468,7 @@ impl SeedLabeller {
             saturated,
             m,
             m4,
-            origin_col: (self.col0 as i64 + origin) as u32,
+            origin_col: (self.col0 + origin) as u32,
         };
         self.blobs.push(b);
         Ok(Some(self.blobs.len() - 1))
@@ -529,9 +529,10 @@ impl SeedLabeller {
         &mut self,
         lo: usize,
         hi: usize,
-        origin: i64,
+        origin: usize,
     ) -> (SmallMoments, u64, usize) {
         let mut sums = SmallMoments::ZERO;
+        let ends = SmallMoments::ends(origin);
         let (mut cols, mut runs) = (0u64, hi - lo + 1);
         let first = self.n_rows;
         let rows = self.grown[lo..=hi].iter().zip(&mut self.taken[lo..=hi]);
@@ -541,8 +542,8 @@ impl SeedLabeller {
             let past = g.wrapping_add(g & g.wrapping_neg());
             if g & past == 0 {
                 // One run (the rule): its ends straight from the mask.
-                let (start, end) = (g.trailing_zeros() as i64, past.trailing_zeros() as i64);
-                sums.add_row_up(&SmallMoments::run(start - origin, end - origin));
+                let (start, end) = (g.trailing_zeros() as usize, past.trailing_zeros() as usize);
+                sums.add_row_up(&SmallMoments::run(ends, start, end));
             } else {
                 let mut row: RowSums = [f64x2::ZERO; 3];
                 let mut m = g;
@@ -551,7 +552,7 @@ impl SeedLabeller {
                     let start = m.trailing_zeros() as usize;
                     let end = start + (!(m >> start)).trailing_zeros() as usize;
                     runs += 1;
-                    SmallMoments::add_run(&mut row, start as i64 - origin, end as i64 - origin);
+                    SmallMoments::add_run(&mut row, ends, start, end);
                     m &= !(u64::MAX >> (MASK_SIDE - end));
                 }
                 sums.add_row_up(&row);
