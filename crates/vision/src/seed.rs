@@ -228,6 +228,9 @@ impl SeedLabeller {
     /// blob in [`SeedLabeller::blobs`] (an earlier one if it holds the
     /// pixel already), `Ok(None)` if the pixel is background or outside
     /// the window. Pixels at or above `saturation` count as saturated.
+    /// (Inlined: a window's one grow goes straight to its path, the
+    /// masks' or the runs', each out of line.)
+    #[inline(always)]
     pub fn grow<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
@@ -241,8 +244,23 @@ impl SeedLabeller {
             return Ok(None);
         }
         if self.masked {
-            return self.grow_masked(plane, threshold, saturation, col, row);
+            self.grow_masked(plane, threshold, saturation, col, row)
+        } else {
+            self.grow_runs(plane, threshold, saturation, col, row)
         }
+    }
+
+    /// [`SeedLabeller::grow`] run by run (a window wider or taller than
+    /// [`MASK_SIDE`], position inside it).
+    #[inline(never)]
+    fn grow_runs<P: ShortRow>(
+        &mut self,
+        plane: &Plane<'_, P>,
+        threshold: Threshold,
+        saturation: u32,
+        col: usize,
+        row: usize,
+    ) -> Result<Option<usize>, SeedOverflow> {
         if !threshold.is_foreground(plane.row(row)[col - plane.col0].value()) {
             return Ok(None);
         }
@@ -356,6 +374,7 @@ impl SeedLabeller {
 
     /// [`SeedLabeller::grow`] on row masks (a window of at most
     /// [`MASK_SIDE`] pixels each way, position inside it).
+    #[inline(never)]
     fn grow_masked<P: ShortRow>(
         &mut self,
         plane: &Plane<'_, P>,
