@@ -743,6 +743,7 @@ fn suppress_ring_parts(
 
 /// Stage 3: the tests on a blob's binary statistics (area, distance from
 /// the window's edge, saturation, elongation, fill of its ellipse).
+#[inline(always)]
 pub(crate) fn blob_tests<P: Pixel>(
     plane: &Plane<'_, P>,
     blob: &Blob,
