@@ -22,12 +22,12 @@ use crate::code::{CodeParams, Gap, RingTables};
 use crate::detector::{blob_tests, centroid, coded_centre, coded_centroid, read_ring};
 use crate::label::Blob;
 use crate::measure;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, round_i64, ROUND};
+use crate::num::{ceil_i64, floor_i64, near_f64x2, round_i64, ROUND};
 use crate::pixel::{Pixel, Plane, ShortRow};
 use crate::seed::SeedLabeller;
 use crate::{CodeStatus, DetectorOptions, RejectReason, ThresholdResult, Uncertainty};
 use photopose_frame::{ImageView, ViewPixels};
-use wide::{f64x2, CmpGt, CmpLt};
+use wide::{f64x2, i64x2, CmpGt, CmpLt};
 
 /// Runs the blobs grown in a core window may have (a dot and the parts of
 /// a ring or of a neighbour that reach into the gate).
@@ -379,9 +379,8 @@ const LIMIT: f64 = (1u64 << 30) as f64;
 #[inline(always)]
 fn square_near(at: f64x2, half: f64) -> [i64; 4] {
     let half = f64x2::splat(half);
-    let lo = low_i32x2(near_f64x2(floor2(at - half)));
-    let hi = low_i32x2(near_f64x2(ceil2(at + half)));
-    [lo[0], lo[1], hi[0], hi[1]].map(i64::from)
+    let (lo, hi) = (floor2(at - half), ceil2(at + half));
+    [lo[0], lo[1], hi[0], hi[1]]
 }
 
 /// The box `[first column, first row, last column, last row]` (full-frame
@@ -447,13 +446,12 @@ impl Bounds {
         debug_assert!(core >= 0.0 && (0.0..=outer).contains(&reach));
         let at = f64x2::new([col, row]);
         let k = f64x2::splat;
-        let ints = |x: f64x2| low_i32x2(near_f64x2(x)).map(i64::from);
-        let (lo, hi) = (ints(ceil2(at - k(reach))), ints(floor2(at + k(reach))));
+        let (lo, hi) = (ceil2(at - k(reach)), floor2(at + k(reach)));
         Bounds {
             outer: square_near(at, outer),
             core: square_near(at, core),
             gate: [lo[0], lo[1], hi[0], hi[1]],
-            nearest: ints(floor2(at + k(0.5))),
+            nearest: floor2(at + k(0.5)),
         }
     }
 
@@ -482,18 +480,34 @@ impl Bounds {
     }
 }
 
-/// `floor` of both lanes, `|x| ≤ 2³¹` (an integer's `f64`).
+/// `floor` of both lanes as integers, `|x| ≤ 2³¹` (an integer's `f64`;
+/// the value modulo 2³² beyond `i32`): the nearest integer's low bits
+/// (`near_f64x2`) less one where it lies above `x`. Why: the compare's
+/// lane of ones is −1 as an integer, so the correction is one integer
+/// addition, not a float step and a second rounding to read the integer.
 #[inline(always)]
-fn floor2(x: f64x2) -> f64x2 {
-    let n = near_f64x2(x) - f64x2::splat(ROUND);
-    n - (n.cmp_gt(x) & f64x2::splat(1.0))
+fn floor2(x: f64x2) -> [i64; 2] {
+    let r = near_f64x2(x);
+    low_bits(bits(r) + bits((r - f64x2::splat(ROUND)).cmp_gt(x)))
 }
 
-/// `ceil` of both lanes, `|x| ≤ 2³¹` (an integer's `f64`).
+/// `ceil` of both lanes as integers, as [`floor2`].
 #[inline(always)]
-fn ceil2(x: f64x2) -> f64x2 {
-    let n = near_f64x2(x) - f64x2::splat(ROUND);
-    n + (n.cmp_lt(x) & f64x2::splat(1.0))
+fn ceil2(x: f64x2) -> [i64; 2] {
+    let r = near_f64x2(x);
+    low_bits(bits(r) - bits((r - f64x2::splat(ROUND)).cmp_lt(x)))
+}
+
+/// The lanes' bits as integers.
+#[inline(always)]
+fn bits(x: f64x2) -> i64x2 {
+    i64x2::from(x.to_array().map(|x| x.to_bits() as i64))
+}
+
+/// The low 32 bits of both lanes, signed.
+#[inline(always)]
+fn low_bits(x: i64x2) -> [i64; 2] {
+    x.to_array().map(|x| i64::from(x as i32))
 }
 
 #[cfg(test)]
