@@ -511,10 +511,13 @@ impl SeedLabeller {
         // for both rows next to it; `stray`: the row's foreground pixels
         // outside the blob.)
         let (mut k, mut rg, mut stray) = (r, reach(g), f ^ g);
+        // (The height is at most `MASK_SIDE`: said once, no bounds check
+        // of `grown` per row.)
+        let height = plane.height.min(MASK_SIDE);
         loop {
             // (Past either end of the window: at least `height`.)
             let n = k.wrapping_add(step);
-            if n >= plane.height {
+            if n >= height {
                 return k;
             }
             let (f, p) = P::read_row(plane, reading, n);
