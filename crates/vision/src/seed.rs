@@ -118,10 +118,6 @@ impl SeedLabeller {
     /// more rows than the capacity (given at [`SeedLabeller::new`]) makes
     /// the row table grow once.
     pub fn start<P>(&mut self, plane: &Plane<'_, P>) {
-        self.runs.clear();
-        self.next.clear();
-        self.owner.clear();
-        self.stack.clear();
         self.blobs.clear();
         self.row0 = plane.row0;
         self.col0 = plane.col0;
@@ -134,6 +130,11 @@ impl SeedLabeller {
             self.n_rows = 0;
             self.n_runs = 0;
         } else {
+            // (The run path's lists: the mask path uses none of them.)
+            self.runs.clear();
+            self.next.clear();
+            self.owner.clear();
+            self.stack.clear();
             self.head.clear();
             self.head.resize(plane.height, NONE);
         }
