@@ -527,18 +527,19 @@ impl SeedLabeller {
                 return k;
             }
             // A row of one run (the rule) is the blob's whole, no filling.
-            let (add, others) = if single_run(f) {
-                (f, 0)
+            // (Its other pixels noted only then: none in a row of one run.)
+            let add = if single_run(f) {
+                f
             } else {
                 let add = fill_runs(f, touch);
-                (add, f ^ add)
+                pass.others |= f ^ add;
+                add
             };
             pass.peak = P::fold(pass.peak, p);
-            pass.others |= others;
             let ra = reach(add);
             pass.missed |= ra & stray;
             self.grown[n] = add;
-            (k, rg, stray) = (n, ra, others);
+            (k, rg, stray) = (n, ra, f ^ add);
         }
     }
 
