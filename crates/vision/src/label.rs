@@ -1276,6 +1276,33 @@ mod tests {
         assert_eq!(pow_sums(-2)[2], -17.0); // −(1 + 16): telescoped
     }
 
+    /// A run's sums read from the table about a blob's origin
+    /// (`SmallMoments::ends`, indexed by window columns) are the sums
+    /// `Blob::add_run` forms about the origin, bit for bit: every origin
+    /// of a 64-pixel window and every run in it, both ends included.
+    #[test]
+    fn a_runs_sums_about_the_origin_are_those_of_add_run() {
+        for origin in 0..=SMALL_SIDE {
+            let ends = SmallMoments::ends(origin);
+            for a in 0..SMALL_SIDE {
+                for e in a + 1..=SMALL_SIDE {
+                    let [p0, p1, p2] = SmallMoments::run(ends, a, e).map(|v| v.to_array());
+                    let (a0, e0) = (a as i64 - origin as i64, e as i64 - origin as i64);
+                    let (pa, pe) = (pow_sums(a0), pow_sums(e0));
+                    let n = (e - a) as f64;
+                    let sx = (a0 as f64 + e0 as f64 - 1.0) * n / 2.0;
+                    let want = [n, sx, pe[0] - pa[0], pe[1] - pa[1], pe[2] - pa[2], 0.0];
+                    let got = [p0[0], p0[1], p1[0], p1[1], p2[0], p2[1]];
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "{origin} {a} {e}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn capacity_is_reported() {
         let data = [200u8, 0, 200, 0, 200, 0];

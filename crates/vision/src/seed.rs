@@ -1149,4 +1149,31 @@ mod tests {
             assert_eq!(s.masked, masked, "{w} × {h}");
         }
     }
+
+    /// One labeller over windows of both paths in turn (a window grown on
+    /// masks leaves the run path's lists as they were): each window's
+    /// blobs are those a fresh labeller grows.
+    #[test]
+    fn windows_of_either_path_in_turn_grow_as_fresh_ones() {
+        let (w, h) = (70usize, 8usize);
+        let data: Vec<u8> = (0..w * h)
+            .map(|i| if (i % w + i / w) % 5 < 2 { 200 } else { 10 })
+            .collect();
+        let t = Threshold::global(100);
+        let mut s = SeedLabeller::new(10_000, 1_000, h);
+        for area in [(0, 0, 70, 8), (3, 0, 20, 8), (0, 1, 66, 6), (5, 2, 64, 5)] {
+            let plane = window(&data, w, area);
+            let mut fresh = SeedLabeller::new(10_000, 1_000, h);
+            s.start(&plane);
+            fresh.start(&plane);
+            for row in area.1..area.1 + area.3 {
+                s.grow_span(&plane, t, 250, row, 0, w).expect("capacity");
+                fresh
+                    .grow_span(&plane, t, 250, row, 0, w)
+                    .expect("capacity");
+            }
+            assert!(!s.blobs().is_empty());
+            assert_eq!(s.blobs(), fresh.blobs(), "{area:?}");
+        }
+    }
 }
