@@ -250,13 +250,8 @@ impl UncertainProjector {
         // operations on x and on y (each lane computes exactly what a
         // scalar would).
         let (g, fv) = (f64x2::new([gx, gy]), f64x2::splat(f));
-        let partials = self.rotation.partials(f64x2::new([z.x, z.y]), z.z, fv, g);
-        let (centre, w_xy, w_z) = partials;
-        // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by
-        // ω_k: R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
-        let turn = |k: usize| fv * (w_xy[k] - g * f64x2::splat(w_z[k]));
-        let j = [centre[0], centre[1], centre[2], turn(0), turn(1), turn(2)];
-        (j, ROWS.then(|| PointJacobian::of(c, fv, g, partials)))
+        let j = self.rotation.jacobian(f64x2::new([z.x, z.y]), z.z, fv, g);
+        (j, ROWS.then(|| PointJacobian::of(c, g, &j)))
     }
 
     /// `J Σ Jᵀ` of `J`'s two rows as the SIMD pairs of its columns.
