@@ -138,29 +138,27 @@ impl RotationPairs {
 
     /// The partials of the ideal image point `−c (x, y) / z` at the camera
     /// point `(zxy, zz)`, with `f = −c / zz` and `g = zxy / zz` in both
-    /// lanes: per axis `k` the centre's column `dZ/dC_k = −R e_k` of both
-    /// rows, `f (g r2 − (r0, r1))`, and of `(R e_k) × Z`, which a rotation
-    /// about axis `k` moves the point along, the x and y pair and the z.
-    /// The resection's rotation columns are `f (2 w_xy − g · 2 w_z)`, the
-    /// projected covariance's `f (w_xy − g w_z)` (rotations by `ω`, twice
-    /// the Cayley increment).
+    /// lanes, as `J`'s six columns of both rows: per axis `k` the centre's
+    /// `dZ/dC_k = −R e_k`, `f (g r2 − (r0, r1))`, then the rotation's by
+    /// `ω_k` about the field axis `k` (`R(ω) = R (I + [ω]ₓ)` moves the
+    /// point along `(R e_k) × Z`), `f (w_xy − g w_z)` of that cross
+    /// product's x and y pair and z. The projected covariance's `J`; the
+    /// resection's rows take the rotation columns twice
+    /// ([`PointJacobian::of`]: rotations by `ω = 2 (a, b, c)`).
     #[inline(always)]
-    pub(crate) fn partials(
-        &self,
-        zxy: f64x2,
-        zz: f64,
-        f: f64x2,
-        g: f64x2,
-    ) -> ([f64x2; 3], [f64x2; 3], [f64; 3]) {
+    pub(crate) fn jacobian(&self, zxy: f64x2, zz: f64, f: f64x2, g: f64x2) -> [f64x2; 6] {
         let rr = &self.rr;
         let [zx, zy] = zxy.to_array();
         // (r1, r2) · (zz, zx) − (r2, r0) · (zy, zz): the x and y of
         // (R e_k) × Z.
         let (zzx, zyz) = (f64x2::new([zz, zx]), f64x2::new([zy, zz]));
-        let centre = std::array::from_fn(|k| f * (g * f64x2::splat(rr[2][k]) - self.rxy[k]));
-        let w_xy = std::array::from_fn(|k| self.ryz[k] * zzx - self.rzx[k] * zyz);
-        let w_z = std::array::from_fn(|k| rr[0][k] * zy - rr[1][k] * zx);
-        (centre, w_xy, w_z)
+        let centre = |k: usize| f * (g * f64x2::splat(rr[2][k]) - self.rxy[k]);
+        let turn = |k: usize| {
+            let w_xy = self.ryz[k] * zzx - self.rzx[k] * zyz;
+            let w_z = rr[0][k] * zy - rr[1][k] * zx;
+            f * (w_xy - g * f64x2::splat(w_z))
+        };
+        [centre(0), centre(1), centre(2), turn(0), turn(1), turn(2)]
     }
 }
 
@@ -177,20 +175,20 @@ pub struct PointJacobian {
 }
 
 impl PointJacobian {
-    /// From the partials of [`RotationPairs::partials`] (principal
-    /// distance `c`): the resection's columns.
+    /// From `J` of [`RotationPairs::jacobian`] at the point and `g`
+    /// (principal distance `c`): the resection's columns, the rotation's
+    /// by the Cayley increment `a_k = ω_k / 2` twice `J`'s.
+    ///
+    /// Twice `f (w_xy − g w_z)` is, bit for bit, the former
+    /// `f (2 w_xy − g · 2 w_z)`: doubling is exact and commutes with
+    /// every rounding short of an overflow or a subnormal intermediate
+    /// (products near 1e-308; the points' are near 1). One sum instead of
+    /// the rotation's columns formed a second time
+    /// (`doubled_rotation_columns_are_the_former_ones`).
     #[inline(always)]
-    pub(crate) fn of(
-        c: f64,
-        f: f64x2,
-        g: f64x2,
-        (centre, w_xy, w_z): ([f64x2; 3], [f64x2; 3], [f64; 3]),
-    ) -> Self {
-        let two = f64x2::splat(2.0);
-        // Rotation increment k: dZ = 2 (R e_k) × Z.
-        let turn = |k: usize| f * (two * w_xy[k] - g * f64x2::splat(2.0 * w_z[k]));
+    pub(crate) fn of(c: f64, g: f64x2, j: &[f64x2; 6]) -> Self {
         PointJacobian {
-            a: [centre[0], centre[1], centre[2], turn(0), turn(1), turn(2)],
+            a: [j[0], j[1], j[2], j[3] + j[3], j[4] + j[4], j[5] + j[5]],
             cg: f64x2::splat(c) * g,
         }
     }
@@ -249,8 +247,7 @@ fn linearise_into(
         let inv = 1.0 / zz;
         let g = zxy * f64x2::splat(inv);
         let f = f64x2::splat(-c * inv);
-        let partials = rot.partials(zxy, zz, f, g);
-        PointJacobian::of(c, f, g, partials).write((p[3], p[4]), row);
+        PointJacobian::of(c, g, &rot.jacobian(zxy, zz, f, g)).write((p[3], p[4]), row);
         if !unit {
             whiten(&p, row);
         }
@@ -842,6 +839,51 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The resection's rotation columns as twice the covariance's `J`
+    /// equal the former form `f (2 w_xy − g · 2 w_z)` bit for bit, over
+    /// random poses and points, near and far, also with zeros in the
+    /// rotation (axis-aligned cameras).
+    #[test]
+    fn doubled_rotation_columns_are_the_former_ones() {
+        let mut rng = crate::rng::SplitMix64::new(77);
+        let mut seen = 0;
+        for case in 0..20000 {
+            let r = if case % 7 == 0 {
+                Matrix3::identity()
+            } else {
+                cayley(rng.normal(), rng.normal(), rng.normal())
+            };
+            let rot = RotationPairs::of(&r);
+            let scale = 10f64.powf(rng.normal() * 3.0);
+            let u = [
+                scale * rng.normal(),
+                scale * rng.normal(),
+                -scale * rng.unit() - 1e-3,
+            ];
+            let (zxy, zz) = rot.apply(u);
+            if zz >= 0.0 {
+                continue;
+            }
+            seen += 1;
+            let c = 12.0;
+            let inv = 1.0 / zz;
+            let (g, f) = (zxy * f64x2::splat(inv), f64x2::splat(-c * inv));
+            let got = PointJacobian::of(c, g, &rot.jacobian(zxy, zz, f, g));
+            let rr = &rot.rr;
+            let [zx, zy] = zxy.to_array();
+            let (zzx, zyz) = (f64x2::new([zz, zx]), f64x2::new([zy, zz]));
+            let two = f64x2::splat(2.0);
+            for (k, (r0, r1)) in rr[0].iter().zip(&rr[1]).enumerate() {
+                let w_xy = rot.ryz[k] * zzx - rot.rzx[k] * zyz;
+                let w_z = r0 * zy - r1 * zx;
+                let former = f * (two * w_xy - g * f64x2::splat(2.0 * w_z));
+                let bits = |v: f64x2| v.to_array().map(f64::to_bits);
+                assert_eq!(bits(former), bits(got.a[3 + k]), "case {case} k {k}");
+            }
+        }
+        assert!(seen > 10000, "{seen}");
     }
 
     #[test]

@@ -221,8 +221,7 @@ impl UncertainProjector {
     /// (`z.z < 0`, from [`UncertainProjector::project_point`]), mm².
     #[inline]
     pub fn covariance_at(&self, z: &Vector3<f64>) -> Matrix2<f64> {
-        let (j, _) = self.jacobian_at::<false>(z);
-        self.covariance_of(&j)
+        self.covariance_of(&self.jacobian_at(z).0)
     }
 
     /// [`UncertainProjector::covariance_at`], and the rows of the
@@ -232,17 +231,14 @@ impl UncertainProjector {
     /// from the partials the two share.
     #[inline]
     pub fn covariance_and_jacobian_at(&self, z: &Vector3<f64>) -> (Matrix2<f64>, PointJacobian) {
-        let (j, rows) = self.jacobian_at::<true>(z);
-        (self.covariance_of(&j), rows.expect("asked for"))
+        let (j, g) = self.jacobian_at(z);
+        (self.covariance_of(&j), PointJacobian::of(self.c, g, &j))
     }
 
-    /// `J` at `z` as SIMD pairs (its two rows) and, if `ROWS`, the
-    /// resection's rows there.
+    /// `J` at `z` as SIMD pairs (its two rows), and `g = (x, y) / z` of
+    /// the point.
     #[inline(always)]
-    fn jacobian_at<const ROWS: bool>(
-        &self,
-        z: &Vector3<f64>,
-    ) -> ([f64x2; 6], Option<PointJacobian>) {
+    fn jacobian_at(&self, z: &Vector3<f64>) -> ([f64x2; 6], f64x2) {
         let c = self.c;
         let inv = 1.0 / z.z;
         let (gx, gy, f) = (z.x * inv, z.y * inv, -c * inv);
@@ -250,13 +246,8 @@ impl UncertainProjector {
         // operations on x and on y (each lane computes exactly what a
         // scalar would).
         let (g, fv) = (f64x2::new([gx, gy]), f64x2::splat(f));
-        let partials = self.rotation.partials(f64x2::new([z.x, z.y]), z.z, fv, g);
-        let (centre, w_xy, w_z) = partials;
-        // Centre: dZ/dC_k = -R e_k; rotation about the field axis k by
-        // ω_k: R(ω) = R (I + [ω]ₓ) so dZ/dω_k = (R e_k) × Z.
-        let turn = |k: usize| fv * (w_xy[k] - g * f64x2::splat(w_z[k]));
-        let j = [centre[0], centre[1], centre[2], turn(0), turn(1), turn(2)];
-        (j, ROWS.then(|| PointJacobian::of(c, fv, g, partials)))
+        let j = self.rotation.jacobian(f64x2::new([z.x, z.y]), z.z, fv, g);
+        (j, g)
     }
 
     /// `J Σ Jᵀ` of `J`'s two rows as the SIMD pairs of its columns.

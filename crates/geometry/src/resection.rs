@@ -477,9 +477,13 @@ impl Resection {
                     snooped += 1;
                 }
                 _ => {
-                    for (o, s) in obs.iter().zip(&self.status) {
-                        if *s != Status::Used {
-                            self.rejected.push(o.id);
+                    // Every observation used (the points loaded are all of
+                    // them): none to look for.
+                    if nm.count < n_total {
+                        for (o, s) in obs.iter().zip(&self.status) {
+                            if *s != Status::Used {
+                                self.rejected.push(o.id);
+                            }
                         }
                     }
                     let covariance = to_omega(&q) * (sigma0 * sigma0);
