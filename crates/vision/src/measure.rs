@@ -793,8 +793,8 @@ struct Lanes<const B: usize, const LESS: bool = false> {
     /// The counts' running sums `(Σ n, Σ D n, Σ D (D + 1)/2 n, Σ 2 l,
     /// Σ D 2 l)` (see above).
     n: [i64; 5],
-    /// With `LESS`, the background taken off every pixel (16-bit lanes).
-    background: i16x8,
+    /// With `LESS`, the background taken off every pixel (bytes).
+    background: u8x16,
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -823,7 +823,7 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             b1: i32x4::ZERO,
             b2: i32x4::ZERO,
             n: [0; 5],
-            background: i16x8::splat(background as i16),
+            background: u8x16::splat(background),
         }
     }
 }
@@ -908,23 +908,29 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             let v = lanes16(&data[at + 16 * i..at + 16 * i + 16]) & m;
             let mut half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
             if LESS {
-                // (The mask's lanes as 255: `& b` is `b` in them, 0 else.)
-                half[0] -= i16x8::from_u8x16_low(m) & self.background;
-                half[1] -= i16x8::from_u8x16_high(m) & self.background;
+                // (The mask's lanes as 255: `& b` is `b` in them, 0 else;
+                // taken in bytes, then widened like the pixels.)
+                let b = m & self.background;
+                half[0] -= i16x8::from_u8x16_low(b);
+                half[1] -= i16x8::from_u8x16_high(b);
             } else {
                 // (`0xff` is −1: one more pixel.)
                 *cnt -= m;
             }
-            for h in 0..2 {
-                col[h] += half[h];
-                let l = if i == 0 {
-                    LANE[h]
-                } else {
-                    LANE[h] + i16x8::splat(16 * i as i16)
-                };
-                pw += half[h].dot(ones);
-                qw += half[h].dot(l);
-            }
+            col[0] += half[0];
+            col[1] += half[1];
+            // `Σ_l w` and `Σ_l l w` of the sixteen lanes from the sum of
+            // the halves (lanes `l` and `l + 8` together, at most 510 in
+            // magnitude): `l w` as `(l mod 8)` times both plus 8 times the
+            // upper half (three products, not four).
+            let both = half[0] + half[1];
+            let l = if i == 0 {
+                LANE[0]
+            } else {
+                LANE[0] + i16x8::splat(16 * i as i16)
+            };
+            pw += both.dot(ones);
+            qw += both.dot(l) + half[1].dot(i16x8::splat(8));
         }
         self.a1 += pw;
         self.a2 += self.a1;
