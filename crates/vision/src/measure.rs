@@ -616,26 +616,25 @@ trait Moments<P: Pixel> {
     fn sums(self) -> ([f64; 6], [f64; 6]);
 }
 
-/// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, 0)` moved to the origin
-/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`,
-/// of two sets of sums at once (lanes): exact while every sum, product
-/// and result is an integer below `2⁵³` in magnitude.
+/// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, j)` moved to the origin
+/// `(−dk, j)`, i.e. with `k + dk` in place of `k` (the rows are counted
+/// from the origin's already), of two sets of sums at once (lanes): exact
+/// while every sum, product and result is an integer below `2⁵³` in
+/// magnitude.
 #[inline(always)]
-fn moved(s: [f64x2; 6], dk: f64, dj: f64) -> [f64x2; 6] {
-    let (k, j) = (f64x2::splat(dk), f64x2::splat(dj));
-    let (k2, j2) = (f64x2::splat(2.0 * dk), f64x2::splat(2.0 * dj));
-    let (kk, jj, kj) = (
+fn moved(s: [f64x2; 6], dk: f64) -> [f64x2; 6] {
+    let (k, k2, kk) = (
+        f64x2::splat(dk),
+        f64x2::splat(2.0 * dk),
         f64x2::splat(dk * dk),
-        f64x2::splat(dj * dj),
-        f64x2::splat(dk * dj),
     );
     [
         s[0],
         s[1] + k * s[0],
         s[2] + k2 * s[1] + kk * s[0],
-        s[3] + j * s[0],
-        s[4] + j2 * s[3] + jj * s[0],
-        s[5] + j * s[1] + k * s[3] + kj * s[0],
+        s[3],
+        s[4],
+        s[5] + k * s[3],
     ]
 }
 
@@ -981,8 +980,9 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
         let d = pair(a2, n[1]);
         let d2 = pair(2.0 * a3 - a2, 2.0 * n[2] - n[1]);
         let dl = pair(b2, 0.5 * n[4]);
-        // `j = T − D`.
-        let t = f64x2::splat((self.next - self.r0) as f64);
+        // `j = T − D` from the origin's row (`T` the rows taken plus the
+        // first's `j`: no moving in `j` at the end).
+        let t = f64x2::splat((self.next as i64 - self.j0) as f64);
         let sums = [
             s[0],
             s[1],
@@ -991,10 +991,9 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             t * t * s[0] - f64x2::splat(2.0) * t * d + d2,
             t * s[1] - dl,
         ];
-        // From lane and row to the origin.
+        // From lane to the origin's column.
         let dk = (self.p as i64 - self.k0) as f64;
-        let dj = (self.r0 as i64 - self.j0) as f64;
-        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj);
+        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk);
         let [m0, m1, m2, m3, m4, m5] = [
             m0.to_array(),
             m1.to_array(),
