@@ -28,7 +28,9 @@
 //! instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND};
+use crate::num::{
+    ceil_i64, floor_i64, low_i32x2, max_or_f64x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND,
+};
 use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
 use wide::{f64x2, i16x8, i32x4, u8x16, CmpGe, CmpLe};
@@ -1110,10 +1112,10 @@ impl Conic {
         let inv = f64x2::splat(self.inv_qxx);
         let ends = |s: f64| {
             let disc = base + f64x2::splat(self.qxx * s);
-            // (No root, or NaN: `h = −1` gives `lo > hi`.)
-            let h = disc
-                .cmp_ge(f64x2::ZERO)
-                .blend(disc.sqrt() * inv, f64x2::splat(-1.0));
+            // (No root, or NaN: `h = −1` gives `lo > hi`. The square root
+            // of a negative `disc` is NaN, and `inv > 0`: one `max`, no
+            // comparison and blend.)
+            let h = max_or_f64x2(disc.sqrt() * inv, f64x2::splat(-1.0));
             let lo = near_f64x2(mid - h + f64x2::splat(0.5));
             let hi = near_f64x2(mid + h - f64x2::splat(0.5));
             (lo, hi)
