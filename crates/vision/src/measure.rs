@@ -230,15 +230,35 @@ impl Counts<'_> {
     fn add_rows(&mut self, data: &[u8], mut start: usize, stride: usize, masks: &[u64]) {
         // (The pixels counted here: no store per row.)
         let mut taken = 0;
-        for &m in masks {
+        let mut take = |px: &[u8; 32], m: u64| {
             let bits = m as u32;
             if bits != 0 {
-                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
-                    unreachable!("32 pixels")
-                };
                 taken += self.add_lanes(px, bits);
             }
-            start += stride;
+        };
+        let block = start
+            .checked_add(masks.len() * stride)
+            .and_then(|end| data.get(start..end));
+        match block {
+            // Whole strides of rows (all but a block that ends the data):
+            // no bounds check a row.
+            Some(block) if stride >= 32 => {
+                for (row, &m) in block.chunks_exact(stride).zip(masks) {
+                    let Some(px) = row.first_chunk::<32>() else {
+                        unreachable!("32 pixels")
+                    };
+                    take(px, m);
+                }
+            }
+            _ => {
+                for &m in masks {
+                    let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
+                        unreachable!("32 pixels")
+                    };
+                    take(px, m);
+                    start += stride;
+                }
+            }
         }
         self.total += taken;
     }
@@ -1749,6 +1769,51 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The ring's rows picked by bit masks: blocks with whole strides
+    /// after them and blocks that end the data (the row by row branch),
+    /// strides too short for the fast branch, against the pixels counted
+    /// one at a time.
+    #[test]
+    fn ring_rows_are_counted_by_their_masks() {
+        let mut rng = Rng::new(43);
+        for case in 0..400 {
+            let stride = 32 + (rng.next_u64() % 9) as usize;
+            let rows = 1 + (rng.next_u64() % 32) as usize;
+            let start = (rng.next_u64() % 40) as usize;
+            // The last row's 32 pixels end the data, or a stride or more
+            // follows.
+            let tail = [0, stride - 32, stride - 31, stride + 5][case % 4];
+            let len = start + (rows - 1) * stride + 32 + tail;
+            let data: Vec<u8> = (0..len).map(|_| (rng.next_u64() % 256) as u8).collect();
+            let masks: Vec<u64> = (0..rows)
+                .map(|_| match rng.next_u64() % 4 {
+                    0 => rng.next_u64() & !0xffff_ffff,
+                    1 => u64::MAX,
+                    _ => rng.next_u64(),
+                })
+                .collect();
+            let mut count = [0u8; 256];
+            let mut ring = Counts {
+                count: &mut count,
+                total: 0,
+            };
+            ring.add_rows(&data, start, stride, &masks);
+            let total = ring.total;
+            let mut want = [0u8; 256];
+            let mut n = 0;
+            for (i, m) in masks.iter().enumerate() {
+                for b in 0..32 {
+                    if m >> b & 1 == 1 {
+                        let v = data[start + i * stride + b];
+                        want[v as usize] = want[v as usize].wrapping_add(1);
+                        n += 1;
+                    }
+                }
+            }
+            assert_eq!((count, total), (want, n), "{case}");
         }
     }
 
