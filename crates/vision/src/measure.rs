@@ -896,14 +896,31 @@ impl<const LESS: bool> Lanes<1, LESS> {
         stride: usize,
         records: &[u64],
     ) -> ([f64; 6], [f64; 6]) {
-        for &r in records {
+        let mut take = |row: &[u8], at: usize, r: u64| {
             let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
             // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
             // `2 Σ l = (63 − ge − gt) n`.
             let n = ge as i64 - gt as i64;
             let counts = (n, (63 - (ge + gt) as i64) * n);
-            self.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
-            at += stride;
+            self.take(row, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+        };
+        let block = at
+            .checked_add(records.len() * stride)
+            .and_then(|end| data.get(at..end));
+        match block {
+            // Whole strides of rows (as `Counts::add_rows`): no bounds
+            // check a row.
+            Some(block) if stride >= 16 => {
+                for (row, &r) in block.chunks_exact(stride).zip(records) {
+                    take(row, 0, r);
+                }
+            }
+            _ => {
+                for &r in records {
+                    take(data, at, r);
+                    at += stride;
+                }
+            }
         }
         self.sums()
     }
@@ -1636,18 +1653,24 @@ mod tests {
                 .collect();
             let at = r0 * width + p;
             let want = Moments::<u8>::sums(plain);
-            let with_counts = Lanes::<1>::new(p, r0, origin, 0);
-            assert_eq!(
-                with_counts.take_records(&data, at, width, &records),
-                want,
-                "{case}"
-            );
-            let b = (rng.next_u64() % 256) as u8;
-            let less = Lanes::<1, true>::new(p, r0, origin, b);
-            let (g, n) = less.take_records(&data, at, width, &records);
-            assert_eq!(n, [0.0; 6], "{case}");
-            for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
-                assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+            // The rows ending the data (row by row but for `p = 0`), and
+            // with a row after them (whole strides).
+            let mut longer = data.clone();
+            longer.extend_from_slice(&data[..width]);
+            for data in [&data, &longer] {
+                let with_counts = Lanes::<1>::new(p, r0, origin, 0);
+                assert_eq!(
+                    with_counts.take_records(data, at, width, &records),
+                    want,
+                    "{case}"
+                );
+                let b = (rng.next_u64() % 256) as u8;
+                let less = Lanes::<1, true>::new(p, r0, origin, b);
+                let (g, n) = less.take_records(data, at, width, &records);
+                assert_eq!(n, [0.0; 6], "{case}");
+                for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
+                    assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+                }
             }
         }
     }
