@@ -233,7 +233,7 @@ impl Counts<'_> {
         let mut take = |px: &[u8; 32], m: u64| {
             let bits = m as u32;
             if bits != 0 {
-                taken += self.add_lanes(px, bits);
+                self.add_lanes(px, bits, &mut taken);
             }
         };
         let block = start
@@ -264,25 +264,26 @@ impl Counts<'_> {
     }
 
     /// Takes the pixels `px[i]` of the bits `i` set in `bits` (not 0) but
-    /// for `total`: returns how many.
+    /// for `total`: adds how many to `n`.
     #[inline(always)]
-    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) -> usize {
+    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32, n: &mut usize) {
         debug_assert!(bits != 0);
-        let mut n = 0;
-        // (Two at a time: one count of them per two.)
+        // (Two at a time: one count of them per two, into the caller's
+        // count as it goes: no count of its own to start and add a row.)
         loop {
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
             bits &= bits - 1;
             if bits == 0 {
-                return n + 1;
+                *n += 1;
+                return;
             }
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
-            n += 2;
+            *n += 2;
             bits &= bits - 1;
             if bits == 0 {
-                return n;
+                return;
             }
         }
     }
