@@ -543,31 +543,21 @@ impl Window {
         let to_ring = f64x2::splat((cw - cr) as f64 + ROUND);
         let hole_cols =
             [self.box_cols.0 - cw, self.box_cols.1 + 1 - cw].map(|c| f64x2::splat(c as f64));
-        // Each row's record, two rows at a time straight from their spans:
-        // the ring's bit mask in the low 32 bits, above it the window's
-        // mask offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed
-        // as integers below 2⁴⁶ (exact), the bits then from the float plus
-        // 2⁵².
-        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
         let rows = r1 - r0 + 1;
         let mut records = [0u64; 32];
-        for (record, ([oa, ob, _, _, a, b], hole)) in records[..2 * rows.div_ceil(2)]
-            .chunks_exact_mut(2)
-            .zip(self.pair_spans().from(r0))
-        {
-            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
-            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
-            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
-            let hi = (b - window_past).fast_max(lo);
-            // The ring: the outer span less the hole (inside it when not
-            // empty; its lanes `cw − cr` up from the window's, at most 32).
-            let hole = (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
-                - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
-            .fast_max(f64x2::ZERO)
-                & hole;
-            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
-            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
-            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        let lanes = RecordLanes {
+            ring: (ring_at, ring_past),
+            window: (window_at, window_past),
+            to_ring,
+            hole_cols,
+        };
+        let records_of = &mut records[..2 * rows.div_ceil(2)];
+        // A window inside the box proper (a whole margin's: the same
+        // columns) has its lanes inside the hole's: no clipping to them.
+        if wc0 >= self.box_cols.0 && wc1 <= self.box_cols.1 {
+            lanes.fill::<false>(self, r0, records_of);
+        } else {
+            lanes.fill::<true>(self, r0, records_of);
         }
         let (data, stride) = (plane.data, plane.stride);
         ring.add_rows(
@@ -605,6 +595,56 @@ impl Window {
             }
         };
         Some((sums, background))
+    }
+}
+
+/// Where [`Window::sums_8bit`]'s records put a row's spans: the ring's
+/// lanes from `ring.0` (its span's first end as `n + ROUND` less it, the
+/// last's less `ring.1`), the window's from `window.0` (as plain integers,
+/// the last end less `window.1`), the hole's columns `hole_cols` in the
+/// window's lanes and `to_ring` from them to the ring's (as `n + ROUND`).
+struct RecordLanes {
+    ring: (f64x2, f64x2),
+    window: (f64x2, f64x2),
+    to_ring: f64x2,
+    hole_cols: [f64x2; 2],
+}
+
+impl RecordLanes {
+    /// Each row's record of `w`'s rows from `r0` on into `records` (an
+    /// even number), two rows at a time straight from their spans: the
+    /// ring's bit mask in the low 32 bits, above it the window's mask
+    /// offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed as
+    /// integers below 2⁴⁶ (exact), the bits then from the float plus 2⁵².
+    /// `CLIP`: the window's lanes clipped to the hole's columns (not
+    /// needed, and the same, where the window lies inside them).
+    #[inline(always)]
+    fn fill<const CLIP: bool>(&self, w: &Window, r0: usize, records: &mut [u64]) {
+        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
+        let ((ring_at, ring_past), (window_at, window_past)) = (self.ring, self.window);
+        let (to_ring, hole_cols) = (self.to_ring, self.hole_cols);
+        for (record, ([oa, ob, _, _, a, b], hole)) in
+            records.chunks_exact_mut(2).zip(w.pair_spans().from(r0))
+        {
+            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
+            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
+            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
+            let hi = (b - window_past).fast_max(lo);
+            // The ring: the outer span less the hole (inside it when not
+            // empty; its lanes `cw − cr` up from the window's, at most 32).
+            // Unclipped, `lo ≤ hi` inside the hole's columns (or equal):
+            // no negative run.
+            let hole = if CLIP {
+                (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
+                    - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
+                .fast_max(f64x2::ZERO)
+            } else {
+                pow2_f64x2(hi + to_ring) - pow2_f64x2(lo + to_ring)
+            } & hole;
+            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
+            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
+            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        }
     }
 }
 
