@@ -28,7 +28,9 @@
 //! instead of kept in a buffer.
 
 use crate::label::Blob;
-use crate::num::{ceil_i64, floor_i64, low_i32x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND};
+use crate::num::{
+    ceil_i64, floor_i64, low_i32x2, max_or_f64x2, near_f64x2, pow2_f64x2, round_i64x2, ROUND,
+};
 use crate::pixel::{lanes16, lanes_from16, run16, scalar_moment_sums, Pixel, Plane};
 use crate::threshold::Threshold;
 use wide::{f64x2, i16x8, i32x4, u8x16, CmpGe, CmpLe};
@@ -228,39 +230,60 @@ impl Counts<'_> {
     fn add_rows(&mut self, data: &[u8], mut start: usize, stride: usize, masks: &[u64]) {
         // (The pixels counted here: no store per row.)
         let mut taken = 0;
-        for &m in masks {
+        let mut take = |px: &[u8; 32], m: u64| {
             let bits = m as u32;
             if bits != 0 {
-                let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
-                    unreachable!("32 pixels")
-                };
-                taken += self.add_lanes(px, bits);
+                self.add_lanes(px, bits, &mut taken);
             }
-            start += stride;
+        };
+        let block = start
+            .checked_add(masks.len() * stride)
+            .and_then(|end| data.get(start..end));
+        match block {
+            // Whole strides of rows (all but a block that ends the data):
+            // no bounds check a row.
+            Some(block) if stride >= 32 => {
+                for (row, &m) in block.chunks_exact(stride).zip(masks) {
+                    let Some(px) = row.first_chunk::<32>() else {
+                        unreachable!("32 pixels")
+                    };
+                    take(px, m);
+                }
+            }
+            _ => {
+                for &m in masks {
+                    let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
+                        unreachable!("32 pixels")
+                    };
+                    take(px, m);
+                    start += stride;
+                }
+            }
         }
         self.total += taken;
     }
 
     /// Takes the pixels `px[i]` of the bits `i` set in `bits` (not 0) but
-    /// for `total`: returns how many.
+    /// for `total`: adds how many to `n`.
     #[inline(always)]
-    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32) -> usize {
+    fn add_lanes(&mut self, px: &[u8; 32], mut bits: u32, n: &mut usize) {
         debug_assert!(bits != 0);
-        let mut n = 0;
-        // (Two at a time: one count of them per two.)
+        // (Two at a time: one count of them per two, into the caller's
+        // count as it goes: no count of its own to start and add a row.)
         loop {
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
             bits &= bits - 1;
             if bits == 0 {
-                return n + 1;
+                *n += 1;
+                return;
             }
             let c = &mut self.count[px[(bits.trailing_zeros() & 31) as usize] as usize];
             *c = c.wrapping_add(1);
-            n += 2;
+            *n += 2;
             bits &= bits - 1;
             if bits == 0 {
-                return n;
+                return;
             }
         }
     }
@@ -520,31 +543,21 @@ impl Window {
         let to_ring = f64x2::splat((cw - cr) as f64 + ROUND);
         let hole_cols =
             [self.box_cols.0 - cw, self.box_cols.1 + 1 - cw].map(|c| f64x2::splat(c as f64));
-        // Each row's record, two rows at a time straight from their spans:
-        // the ring's bit mask in the low 32 bits, above it the window's
-        // mask offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed
-        // as integers below 2⁴⁶ (exact), the bits then from the float plus
-        // 2⁵².
-        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
         let rows = r1 - r0 + 1;
         let mut records = [0u64; 32];
-        for (record, ([oa, ob, _, _, a, b], hole)) in records[..2 * rows.div_ceil(2)]
-            .chunks_exact_mut(2)
-            .zip(self.pair_spans().from(r0))
-        {
-            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
-            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
-            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
-            let hi = (b - window_past).fast_max(lo);
-            // The ring: the outer span less the hole (inside it when not
-            // empty; its lanes `cw − cr` up from the window's, at most 32).
-            let hole = (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
-                - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
-            .fast_max(f64x2::ZERO)
-                & hole;
-            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
-            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
-            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        let lanes = RecordLanes {
+            ring: (ring_at, ring_past),
+            window: (window_at, window_past),
+            to_ring,
+            hole_cols,
+        };
+        let records_of = &mut records[..2 * rows.div_ceil(2)];
+        // A window inside the box proper (a whole margin's: the same
+        // columns) has its lanes inside the hole's: no clipping to them.
+        if wc0 >= self.box_cols.0 && wc1 <= self.box_cols.1 {
+            lanes.fill::<false>(self, r0, records_of);
+        } else {
+            lanes.fill::<true>(self, r0, records_of);
         }
         let (data, stride) = (plane.data, plane.stride);
         ring.add_rows(
@@ -585,6 +598,56 @@ impl Window {
     }
 }
 
+/// Where [`Window::sums_8bit`]'s records put a row's spans: the ring's
+/// lanes from `ring.0` (its span's first end as `n + ROUND` less it, the
+/// last's less `ring.1`), the window's from `window.0` (as plain integers,
+/// the last end less `window.1`), the hole's columns `hole_cols` in the
+/// window's lanes and `to_ring` from them to the ring's (as `n + ROUND`).
+struct RecordLanes {
+    ring: (f64x2, f64x2),
+    window: (f64x2, f64x2),
+    to_ring: f64x2,
+    hole_cols: [f64x2; 2],
+}
+
+impl RecordLanes {
+    /// Each row's record of `w`'s rows from `r0` on into `records` (an
+    /// even number), two rows at a time straight from their spans: the
+    /// ring's bit mask in the low 32 bits, above it the window's mask
+    /// offsets `32 − lo` and `32 − hi` (see `lanes_from16`), summed as
+    /// integers below 2⁴⁶ (exact), the bits then from the float plus 2⁵².
+    /// `CLIP`: the window's lanes clipped to the hole's columns (not
+    /// needed, and the same, where the window lies inside them).
+    #[inline(always)]
+    fn fill<const CLIP: bool>(&self, w: &Window, r0: usize, records: &mut [u64]) {
+        let above = f64x2::splat(32.0 * TWO_32 + 32.0 * 256.0 * TWO_32 + TWO_52);
+        let ((ring_at, ring_past), (window_at, window_past)) = (self.ring, self.window);
+        let (to_ring, hole_cols) = (self.to_ring, self.hole_cols);
+        for (record, ([oa, ob, _, _, a, b], hole)) in
+            records.chunks_exact_mut(2).zip(w.pair_spans().from(r0))
+        {
+            // The window's lanes `lo..hi` (an empty span as `lo = hi`;
+            // `0 ≤ a − first_col − pw` and `b − first_col − pw ≤ 15`).
+            let lo = (a - window_at).fast_min(f64x2::splat(16.0));
+            let hi = (b - window_past).fast_max(lo);
+            // The ring: the outer span less the hole (inside it when not
+            // empty; its lanes `cw − cr` up from the window's, at most 32).
+            // Unclipped, `lo ≤ hi` inside the hole's columns (or equal):
+            // no negative run.
+            let hole = if CLIP {
+                (pow2_f64x2(hi.fast_min(hole_cols[1]) + to_ring)
+                    - pow2_f64x2(lo.fast_max(hole_cols[0]) + to_ring))
+                .fast_max(f64x2::ZERO)
+            } else {
+                pow2_f64x2(hi + to_ring) - pow2_f64x2(lo + to_ring)
+            } & hole;
+            let ring = run_bits(oa - ring_at, ob - ring_past) - hole;
+            let r = (ring + above) - lo * f64x2::splat(TWO_32) - hi * f64x2::splat(256.0 * TWO_32);
+            record.copy_from_slice(&r.to_array().map(f64::to_bits));
+        }
+    }
+}
+
 /// `2⁵²`: adding it to an integer-valued `x` with `0 ≤ x < 2⁵²` leaves `x`
 /// in the low bits of the mantissa.
 const TWO_52: f64 = 4_503_599_627_370_496.0;
@@ -616,26 +679,25 @@ trait Moments<P: Pixel> {
     fn sums(self) -> ([f64; 6], [f64; 6]);
 }
 
-/// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, 0)` moved to the origin
-/// `(−dk, −dj)`, i.e. with `k + dk` and `j + dj` in place of `k` and `j`,
-/// of two sets of sums at once (lanes): exact while every sum, product
-/// and result is an integer below `2⁵³` in magnitude.
+/// Sums `(Σ1, Σk, Σk², Σj, Σj², Σk j)` about `(0, j)` moved to the origin
+/// `(−dk, j)`, i.e. with `k + dk` in place of `k` (the rows are counted
+/// from the origin's already), of two sets of sums at once (lanes): exact
+/// while every sum, product and result is an integer below `2⁵³` in
+/// magnitude.
 #[inline(always)]
-fn moved(s: [f64x2; 6], dk: f64, dj: f64) -> [f64x2; 6] {
-    let (k, j) = (f64x2::splat(dk), f64x2::splat(dj));
-    let (k2, j2) = (f64x2::splat(2.0 * dk), f64x2::splat(2.0 * dj));
-    let (kk, jj, kj) = (
+fn moved(s: [f64x2; 6], dk: f64) -> [f64x2; 6] {
+    let (k, k2, kk) = (
+        f64x2::splat(dk),
+        f64x2::splat(2.0 * dk),
         f64x2::splat(dk * dk),
-        f64x2::splat(dj * dj),
-        f64x2::splat(dk * dj),
     );
     [
         s[0],
         s[1] + k * s[0],
         s[2] + k2 * s[1] + kk * s[0],
-        s[3] + j * s[0],
-        s[4] + j2 * s[3] + jj * s[0],
-        s[5] + j * s[1] + k * s[3] + kj * s[0],
+        s[3],
+        s[4],
+        s[5] + k * s[3],
     ]
 }
 
@@ -793,8 +855,8 @@ struct Lanes<const B: usize, const LESS: bool = false> {
     /// The counts' running sums `(Σ n, Σ D n, Σ D (D + 1)/2 n, Σ 2 l,
     /// Σ D 2 l)` (see above).
     n: [i64; 5],
-    /// With `LESS`, the background taken off every pixel (16-bit lanes).
-    background: i16x8,
+    /// With `LESS`, the background taken off every pixel (bytes).
+    background: u8x16,
 }
 
 /// Lanes `0..8` and `8..16` of a block.
@@ -823,7 +885,7 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             b1: i32x4::ZERO,
             b2: i32x4::ZERO,
             n: [0; 5],
-            background: i16x8::splat(background as i16),
+            background: u8x16::splat(background),
         }
     }
 }
@@ -875,14 +937,31 @@ impl<const LESS: bool> Lanes<1, LESS> {
         stride: usize,
         records: &[u64],
     ) -> ([f64; 6], [f64; 6]) {
-        for &r in records {
+        let mut take = |row: &[u8], at: usize, r: u64| {
             let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
             // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
             // `2 Σ l = (63 − ge − gt) n`.
             let n = ge as i64 - gt as i64;
             let counts = (n, (63 - (ge + gt) as i64) * n);
-            self.take(data, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
-            at += stride;
+            self.take(row, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+        };
+        let block = at
+            .checked_add(records.len() * stride)
+            .and_then(|end| data.get(at..end));
+        match block {
+            // Whole strides of rows (as `Counts::add_rows`): no bounds
+            // check a row.
+            Some(block) if stride >= 16 => {
+                for (row, &r) in block.chunks_exact(stride).zip(records) {
+                    take(row, 0, r);
+                }
+            }
+            _ => {
+                for &r in records {
+                    take(data, at, r);
+                    at += stride;
+                }
+            }
         }
         self.sums()
     }
@@ -908,23 +987,29 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             let v = lanes16(&data[at + 16 * i..at + 16 * i + 16]) & m;
             let mut half = [i16x8::from_u8x16_low(v), i16x8::from_u8x16_high(v)];
             if LESS {
-                // (The mask's lanes as 255: `& b` is `b` in them, 0 else.)
-                half[0] -= i16x8::from_u8x16_low(m) & self.background;
-                half[1] -= i16x8::from_u8x16_high(m) & self.background;
+                // (The mask's lanes as 255: `& b` is `b` in them, 0 else;
+                // taken in bytes, then widened like the pixels.)
+                let b = m & self.background;
+                half[0] -= i16x8::from_u8x16_low(b);
+                half[1] -= i16x8::from_u8x16_high(b);
             } else {
                 // (`0xff` is −1: one more pixel.)
                 *cnt -= m;
             }
-            for h in 0..2 {
-                col[h] += half[h];
-                let l = if i == 0 {
-                    LANE[h]
-                } else {
-                    LANE[h] + i16x8::splat(16 * i as i16)
-                };
-                pw += half[h].dot(ones);
-                qw += half[h].dot(l);
-            }
+            col[0] += half[0];
+            col[1] += half[1];
+            // `Σ_l w` and `Σ_l l w` of the sixteen lanes from the sum of
+            // the halves (lanes `l` and `l + 8` together, at most 510 in
+            // magnitude): `l w` as `(l mod 8)` times both plus 8 times the
+            // upper half (three products, not four).
+            let both = half[0] + half[1];
+            let l = if i == 0 {
+                LANE[0]
+            } else {
+                LANE[0] + i16x8::splat(16 * i as i16)
+            };
+            pw += both.dot(ones);
+            qw += both.dot(l) + half[1].dot(i16x8::splat(8));
         }
         self.a1 += pw;
         self.a2 += self.a1;
@@ -975,8 +1060,9 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
         let d = pair(a2, n[1]);
         let d2 = pair(2.0 * a3 - a2, 2.0 * n[2] - n[1]);
         let dl = pair(b2, 0.5 * n[4]);
-        // `j = T − D`.
-        let t = f64x2::splat((self.next - self.r0) as f64);
+        // `j = T − D` from the origin's row (`T` the rows taken plus the
+        // first's `j`: no moving in `j` at the end).
+        let t = f64x2::splat((self.next as i64 - self.j0) as f64);
         let sums = [
             s[0],
             s[1],
@@ -985,10 +1071,9 @@ impl<const B: usize, const LESS: bool> Lanes<B, LESS> {
             t * t * s[0] - f64x2::splat(2.0) * t * d + d2,
             t * s[1] - dl,
         ];
-        // From lane and row to the origin.
+        // From lane to the origin's column.
         let dk = (self.p as i64 - self.k0) as f64;
-        let dj = (self.r0 as i64 - self.j0) as f64;
-        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk, dj);
+        let [m0, m1, m2, m3, m4, m5] = moved(sums, dk);
         let [m0, m1, m2, m3, m4, m5] = [
             m0.to_array(),
             m1.to_array(),
@@ -1105,10 +1190,10 @@ impl Conic {
         let inv = f64x2::splat(self.inv_qxx);
         let ends = |s: f64| {
             let disc = base + f64x2::splat(self.qxx * s);
-            // (No root, or NaN: `h = −1` gives `lo > hi`.)
-            let h = disc
-                .cmp_ge(f64x2::ZERO)
-                .blend(disc.sqrt() * inv, f64x2::splat(-1.0));
+            // (No root, or NaN: `h = −1` gives `lo > hi`. The square root
+            // of a negative `disc` is NaN, and `inv > 0`: one `max`, no
+            // comparison and blend.)
+            let h = max_or_f64x2(disc.sqrt() * inv, f64x2::splat(-1.0));
             let lo = near_f64x2(mid - h + f64x2::splat(0.5));
             let hi = near_f64x2(mid + h - f64x2::splat(0.5));
             (lo, hi)
@@ -1609,18 +1694,24 @@ mod tests {
                 .collect();
             let at = r0 * width + p;
             let want = Moments::<u8>::sums(plain);
-            let with_counts = Lanes::<1>::new(p, r0, origin, 0);
-            assert_eq!(
-                with_counts.take_records(&data, at, width, &records),
-                want,
-                "{case}"
-            );
-            let b = (rng.next_u64() % 256) as u8;
-            let less = Lanes::<1, true>::new(p, r0, origin, b);
-            let (g, n) = less.take_records(&data, at, width, &records);
-            assert_eq!(n, [0.0; 6], "{case}");
-            for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
-                assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+            // The rows ending the data (row by row but for `p = 0`), and
+            // with a row after them (whole strides).
+            let mut longer = data.clone();
+            longer.extend_from_slice(&data[..width]);
+            for data in [&data, &longer] {
+                let with_counts = Lanes::<1>::new(p, r0, origin, 0);
+                assert_eq!(
+                    with_counts.take_records(data, at, width, &records),
+                    want,
+                    "{case}"
+                );
+                let b = (rng.next_u64() % 256) as u8;
+                let less = Lanes::<1, true>::new(p, r0, origin, b);
+                let (g, n) = less.take_records(data, at, width, &records);
+                assert_eq!(n, [0.0; 6], "{case}");
+                for (i, (g, (w, n))) in g.iter().zip(want.0.iter().zip(want.1)).enumerate() {
+                    assert_eq!(*g, w - b as f64 * n, "{case} {i}");
+                }
             }
         }
     }
@@ -1742,6 +1833,51 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The ring's rows picked by bit masks: blocks with whole strides
+    /// after them and blocks that end the data (the row by row branch),
+    /// strides too short for the fast branch, against the pixels counted
+    /// one at a time.
+    #[test]
+    fn ring_rows_are_counted_by_their_masks() {
+        let mut rng = Rng::new(43);
+        for case in 0..400 {
+            let stride = 32 + (rng.next_u64() % 9) as usize;
+            let rows = 1 + (rng.next_u64() % 32) as usize;
+            let start = (rng.next_u64() % 40) as usize;
+            // The last row's 32 pixels end the data, or a stride or more
+            // follows.
+            let tail = [0, stride - 32, stride - 31, stride + 5][case % 4];
+            let len = start + (rows - 1) * stride + 32 + tail;
+            let data: Vec<u8> = (0..len).map(|_| (rng.next_u64() % 256) as u8).collect();
+            let masks: Vec<u64> = (0..rows)
+                .map(|_| match rng.next_u64() % 4 {
+                    0 => rng.next_u64() & !0xffff_ffff,
+                    1 => u64::MAX,
+                    _ => rng.next_u64(),
+                })
+                .collect();
+            let mut count = [0u8; 256];
+            let mut ring = Counts {
+                count: &mut count,
+                total: 0,
+            };
+            ring.add_rows(&data, start, stride, &masks);
+            let total = ring.total;
+            let mut want = [0u8; 256];
+            let mut n = 0;
+            for (i, m) in masks.iter().enumerate() {
+                for b in 0..32 {
+                    if m >> b & 1 == 1 {
+                        let v = data[start + i * stride + b];
+                        want[v as usize] = want[v as usize].wrapping_add(1);
+                        n += 1;
+                    }
+                }
+            }
+            assert_eq!((count, total), (want, n), "{case}");
         }
     }
 

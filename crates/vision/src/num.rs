@@ -17,6 +17,21 @@ pub(crate) fn near_f64x2(x: f64x2) -> f64x2 {
     x + f64x2::splat(ROUND)
 }
 
+/// The larger of `a` and `b` in each lane, `b` where `a` is NaN: one
+/// `maxpd` with SSE2 (which takes its second operand when either is
+/// NaN), a comparison and a blend elsewhere.
+#[inline(always)]
+pub(crate) fn max_or_f64x2(a: f64x2, b: f64x2) -> f64x2 {
+    #[cfg(target_feature = "sse2")]
+    {
+        a.fast_max(b)
+    }
+    #[cfg(not(target_feature = "sse2"))]
+    {
+        wide::CmpGe::cmp_ge(a, b).blend(a, b)
+    }
+}
+
 /// The integers `n` of `n + ROUND` (see [`near_f64x2`]).
 #[inline(always)]
 pub(crate) fn low_i32x2(r: f64x2) -> [i32; 2] {
@@ -81,6 +96,24 @@ mod tests {
         for e in (-1022..=1023).step_by(7).chain([-1022, 0, 32, 1023]) {
             let got = pow2_f64x2(f64x2::new([e as f64, -1.0]) + f64x2::splat(ROUND));
             assert_eq!(got.to_array(), [2f64.powi(e), 0.5], "{e}");
+        }
+    }
+
+    /// The larger of two lanes, the second where the first is NaN.
+    #[test]
+    fn max_or_takes_the_second_for_nan() {
+        let cases = [
+            (1.0, -1.0, 1.0),
+            (-0.0, -1.0, -0.0),
+            (-2.0, -1.0, -1.0),
+            (f64::NAN, -1.0, -1.0),
+            (-f64::NAN, -1.0, -1.0),
+            (f64::INFINITY, -1.0, f64::INFINITY),
+        ];
+        for (a, b, want) in cases {
+            let got = max_or_f64x2(f64x2::new([a, 0.5]), f64x2::new([b, 0.25])).to_array();
+            assert_eq!(got[0].to_bits(), want.to_bits(), "{a} {b}");
+            assert_eq!(got[1], 0.5);
         }
     }
 
