@@ -1373,6 +1373,11 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
     margin: impl Margin,
     w: W,
 ) -> Option<Measurement> {
+    // The blob's own fourth moment first: a chain of a division, a square
+    // root and a division that depends on nothing below, so the processor
+    // overlaps it with the window's sums instead of waiting for it at the
+    // end (tracking: 4.8 % of the time for 2.9 % of the instructions there).
+    let kurtosis = blob.kurtosis();
     let (grow, max_scale) = (margin.grow(), margin.max_scale());
     let (bx, by) = blob.centre();
     let (cxx, cyy, cxy) = blob.covariance();
@@ -1503,7 +1508,6 @@ pub fn measure_weighted<P: Pixel, W: Weight>(
         return None;
     }
     let (mx, my) = (sx / sw, sy / sw);
-    let kurtosis = blob.kurtosis();
     Some(Measurement {
         col: cc as f64 + mx,
         row: rr as f64 + my,
