@@ -36,9 +36,7 @@ impl Observation {
             weight: Matrix2::identity(),
         }
     }
-}
 
-impl Observation {
     /// Whether the weight is the identity (compared as `==` does: both
     /// pairs of entries at once).
     #[inline(always)]

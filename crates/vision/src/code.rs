@@ -810,7 +810,7 @@ pub fn read<P: Pixel>(
     accepted: &CodeSet,
     tables: &RingTables,
 ) -> Reading {
-    read_with::<P, true>(plane, f, None, params, accepted, tables)
+    read_centred(plane, f, None, params, accepted, tables)
 }
 
 /// [`read`] with the grey value at the dot's centre given where it is

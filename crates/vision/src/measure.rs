@@ -227,7 +227,7 @@ impl Counts<'_> {
     /// `masks[i]`. (A function of its own: its registers apart from those
     /// of the window's sums around it.)
     #[inline(never)]
-    fn add_rows(&mut self, data: &[u8], mut start: usize, stride: usize, masks: &[u64]) {
+    fn add_rows(&mut self, data: &[u8], start: usize, stride: usize, masks: &[u64]) {
         // (The pixels counted here: no store per row.)
         let mut taken = 0;
         let mut take = |px: &[u8; 32], m: u64| {
@@ -236,30 +236,12 @@ impl Counts<'_> {
                 self.add_lanes(px, bits, &mut taken);
             }
         };
-        let block = start
-            .checked_add(masks.len() * stride)
-            .and_then(|end| data.get(start..end));
-        match block {
-            // Whole strides of rows (all but a block that ends the data):
-            // no bounds check a row.
-            Some(block) if stride >= 32 => {
-                for (row, &m) in block.chunks_exact(stride).zip(masks) {
-                    let Some(px) = row.first_chunk::<32>() else {
-                        unreachable!("32 pixels")
-                    };
-                    take(px, m);
-                }
-            }
-            _ => {
-                for &m in masks {
-                    let Ok(px) = <&[u8; 32]>::try_from(&data[start..][..32]) else {
-                        unreachable!("32 pixels")
-                    };
-                    take(px, m);
-                    start += stride;
-                }
-            }
-        }
+        each_row(data, start, stride, 32, masks, |row, &m| {
+            let Some(px) = row.first_chunk::<32>() else {
+                unreachable!("32 pixels")
+            };
+            take(px, m);
+        });
         self.total += taken;
     }
 
@@ -284,6 +266,40 @@ impl Counts<'_> {
             bits &= bits - 1;
             if bits == 0 {
                 return;
+            }
+        }
+    }
+}
+
+/// Calls `f` with each row of a block of `data` and its item, row `i`
+/// (of `items.len()`) starting at `data[start + i stride]` and given from
+/// there on (at least `width` elements are read from it). Why: where a
+/// whole stride follows the block's last row, the block splits into whole
+/// strides with one bounds check for all of them; only a block that ends
+/// the data goes row by row, each row checked.
+#[inline(always)]
+fn each_row<'d, T>(
+    data: &'d [u8],
+    start: usize,
+    stride: usize,
+    width: usize,
+    items: &[T],
+    mut f: impl FnMut(&'d [u8], &T),
+) {
+    let block = start
+        .checked_add(items.len() * stride)
+        .and_then(|end| data.get(start..end));
+    match block {
+        Some(block) if stride >= width => {
+            for (row, item) in block.chunks_exact(stride).zip(items) {
+                f(row, item);
+            }
+        }
+        _ => {
+            let mut at = start;
+            for item in items {
+                f(&data[at..], item);
+                at += stride;
             }
         }
     }
@@ -933,36 +949,18 @@ impl<const LESS: bool> Lanes<1, LESS> {
     fn take_records(
         mut self,
         data: &[u8],
-        mut at: usize,
+        at: usize,
         stride: usize,
         records: &[u64],
     ) -> ([f64; 6], [f64; 6]) {
-        let mut take = |row: &[u8], at: usize, r: u64| {
+        each_row(data, at, stride, 16, records, |row, &r| {
             let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
             // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
             // `2 Σ l = (63 − ge − gt) n`.
             let n = ge as i64 - gt as i64;
             let counts = (n, (63 - (ge + gt) as i64) * n);
-            self.take(row, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
-        };
-        let block = at
-            .checked_add(records.len() * stride)
-            .and_then(|end| data.get(at..end));
-        match block {
-            // Whole strides of rows (as `Counts::add_rows`): no bounds
-            // check a row.
-            Some(block) if stride >= 16 => {
-                for (row, &r) in block.chunks_exact(stride).zip(records) {
-                    take(row, 0, r);
-                }
-            }
-            _ => {
-                for &r in records {
-                    take(data, at, r);
-                    at += stride;
-                }
-            }
-        }
+            self.take(row, 0, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+        });
         self.sums()
     }
 }

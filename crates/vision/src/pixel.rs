@@ -1054,11 +1054,8 @@ mod tests {
         let (w, h) = (301usize, 260usize);
         let d16: Vec<u16> = (0..w * h).map(|i| ((i * 7919) % 65536) as u16).collect();
         let d8: Vec<u8> = (0..w * h).map(|i| ((i * 7919) % 256) as u8).collect();
-        let mut x = 11u64;
-        let mut next = move || {
-            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            x >> 11
-        };
+        let mut rng = crate::testutil::Rng::new(11);
+        let mut next = move || rng.next_u64() >> 11;
         fn check<P: Pixel>(win: &Plane<P>, cells: &Cells<P>, a: (f64, f64), b: (f64, f64)) {
             let v = cells.bilinear_x2(f64x2::new([a.0, b.0]), f64x2::new([a.1, b.1]));
             let [va, vb] = v.to_array();
@@ -1142,11 +1139,8 @@ mod tests {
     #[test]
     fn cells_bound_their_values() {
         let (w, h) = (300usize, 240usize);
-        let mut x = 5u64;
-        let mut next = move || {
-            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-            x >> 11
-        };
+        let mut rng = crate::testutil::Rng::new(5);
+        let mut next = move || rng.next_u64() >> 11;
         let d8: Vec<u8> = (0..w * h)
             .map(|_| match next() % 4 {
                 0 => 255,
