@@ -236,8 +236,8 @@ impl Counts<'_> {
                 self.add_lanes(px, bits, &mut taken);
             }
         };
-        each_row(data, start, stride, 32, masks, |row, &m| {
-            let Some(px) = row.first_chunk::<32>() else {
+        each_row(data, start, stride, 32, masks, |row, at, &m| {
+            let Ok(px) = <&[u8; 32]>::try_from(&row[at..][..32]) else {
                 unreachable!("32 pixels")
             };
             take(px, m);
@@ -272,8 +272,9 @@ impl Counts<'_> {
 }
 
 /// Calls `f` with each row of a block of `data` and its item, row `i`
-/// (of `items.len()`) starting at `data[start + i stride]` and given from
-/// there on (at least `width` elements are read from it). Why: where a
+/// (of `items.len()`) starting at `data[start + i stride]`, given as a
+/// slice and the row's first index in it (at least `width` elements are
+/// read from there). Why: where a
 /// whole stride follows the block's last row, the block splits into whole
 /// strides with one bounds check for all of them; only a block that ends
 /// the data goes row by row, each row checked.
@@ -284,7 +285,7 @@ fn each_row<'d, T>(
     stride: usize,
     width: usize,
     items: &[T],
-    mut f: impl FnMut(&'d [u8], &T),
+    mut f: impl FnMut(&'d [u8], usize, &T),
 ) {
     let block = start
         .checked_add(items.len() * stride)
@@ -292,13 +293,13 @@ fn each_row<'d, T>(
     match block {
         Some(block) if stride >= width => {
             for (row, item) in block.chunks_exact(stride).zip(items) {
-                f(row, item);
+                f(row, 0, item);
             }
         }
         _ => {
             let mut at = start;
             for item in items {
-                f(&data[at..], item);
+                f(data, at, item);
                 at += stride;
             }
         }
@@ -953,13 +954,13 @@ impl<const LESS: bool> Lanes<1, LESS> {
         stride: usize,
         records: &[u64],
     ) -> ([f64; 6], [f64; 6]) {
-        each_row(data, at, stride, 16, records, |row, &r| {
+        each_row(data, at, stride, 16, records, |row, at, &r| {
             let (ge, gt) = ((r >> 32) as usize & 63, (r >> 40) as usize & 63);
             // The lanes `32 − ge..32 − gt`: `n = ge − gt`,
             // `2 Σ l = (63 − ge − gt) n`.
             let n = ge as i64 - gt as i64;
             let counts = (n, (63 - (ge + gt) as i64) * n);
-            self.take(row, 0, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
+            self.take(row, at, |_| lanes_from16(ge) & !lanes_from16(gt), counts);
         });
         self.sums()
     }
