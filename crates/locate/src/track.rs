@@ -235,6 +235,7 @@ impl Projection {
                 radius_px: t.radius * scale,
                 coded: t.kind == TargetKind::Coded,
                 read_code: false,
+                id: (t.kind == TargetKind::Coded).then_some(t.id),
             };
             windows.push(Window {
                 field_index: fi,

@@ -72,21 +72,37 @@ fn a_prediction_a_grid_step_off_is_refused() {
     let camera = photopose_formats::default_camera();
     let field = default_plate();
     let mut renderer = Renderer::new(camera, &field, RenderOptions::default()).unwrap();
-    let mut locator = Locator::new(camera, field, LocateOptions::default()).unwrap();
+    let mut locator = Locator::new(camera, field.clone(), LocateOptions::default()).unwrap();
     let truth = poses()[0];
     let mut img = renderer.new_image();
     renderer.render(&truth, &mut img).unwrap();
     let whole = locator.locate(img.view()).unwrap();
     let full = *whole.pose.unwrap();
     let threshold = whole.detections.threshold;
-    // Off by the plate's grid pitch and by fractions of it, along both axes.
-    for (dx, dy) in [
-        (20.0, 0.0),
-        (0.0, 20.0),
-        (-20.0, 20.0),
-        (10.0, 0.0),
-        (7.0, -7.0),
-    ] {
+    // The plate's grid pitch: the distance from a target to its nearest
+    // neighbour.
+    let t = field.targets();
+    let pitch = t
+        .iter()
+        .enumerate()
+        .flat_map(|(i, a)| t[i + 1..].iter().map(move |b| (a.position - b.position).norm()))
+        .fold(f64::INFINITY, f64::min);
+    assert!((pitch - 32.0).abs() < 1e-9, "{pitch}");
+    // Off by a grid step along and across the rows: every window catches
+    // a neighbour, and the coded targets' rings refuse the prediction
+    // (another id, or none confirmed).
+    for (dx, dy) in [(pitch, 0.0), (0.0, pitch), (-pitch, pitch), (0.0, -2.0 * pitch)] {
+        let prior = Prior {
+            exterior: shifted(&full.exterior, Vector3::new(dx, dy, 0.0)),
+            covariance: full.covariance,
+            motion_px: 0.0,
+            threshold,
+        };
+        let outcome = locator.track(img.view(), &prior, &TrackOptions::default());
+        assert_eq!(outcome.err(), Some(TrackLost::CodeMismatch), "({dx}, {dy})");
+    }
+    // Off by fractions of it: refused, or accepted only as the true pose.
+    for (dx, dy) in [(10.0, 0.0), (7.0, -7.0), (0.5 * pitch, 0.0)] {
         let prior = Prior {
             exterior: shifted(&full.exterior, Vector3::new(dx, dy, 0.0)),
             covariance: full.covariance,
@@ -97,7 +113,6 @@ fn a_prediction_a_grid_step_off_is_refused() {
             Err(TrackLost::TooFewTargets { .. } | TrackLost::CodeMismatch | TrackLost::Jump) => {}
             Err(other) => panic!("({dx}, {dy}): {other:?}"),
             Ok(r) => {
-                // Accepted only if it is the true pose.
                 let d = (r.exterior.center - full.exterior.center).norm();
                 assert!(d < 0.05, "({dx}, {dy}): a pose {d} mm off was accepted");
             }

@@ -26,6 +26,7 @@
 //!    of the canonical value; ids that the field does not carry as coded
 //!    targets are not accepted.
 
+use crate::num::{ceil_i64, floor_i64};
 use crate::pixel::{Cells, Pixel, Plane};
 use photopose_field::{codes, Field, TargetKind};
 use wide::{f64x2, CmpGe, CmpGt, CmpLe, CmpLt};
@@ -802,6 +803,179 @@ fn classify(
     }
 }
 
+/// The grey levels a reading starts from (see [`levels`]).
+struct Levels {
+    /// The dot's level: the mean of its centre and eight points at 0.3 r.
+    bright: f64,
+    /// The gap's level: the mean of its samples at 1.5 r.
+    dark: f64,
+    /// The gap's largest sample.
+    gap_max: f64,
+}
+
+/// The dot's and the gap's levels of the ring in `f` (the value at the
+/// dot's centre given where it is known); `None` if a sample lies outside
+/// the image.
+#[inline(always)]
+fn levels<P: Pixel, const FAST: bool>(
+    plane: &Sampler<'_, '_, P, FAST>,
+    f: &RingFrame,
+    centre: Option<f64>,
+    tables: &RingTables,
+) -> Option<Levels> {
+    let mut bright = centre.or_else(|| plane.at(f.col, f.row))?;
+    if let Some(cells) = &plane.cells {
+        circle(cells, f, tables.bright_x2.iter().copied(), |_, v| {
+            let [a, b] = v.to_array();
+            bright += a;
+            bright += b;
+        });
+    } else {
+        for &cs in &tables.bright {
+            let (x, y) = f.point_cs(0.3, cs);
+            bright += plane.at(x, y)?;
+        }
+    }
+    bright /= 9.0;
+    let (dark, gap_max) = zone(plane, f, ZONE_RADII[0], &tables.gap_x2, tables)?;
+    Some(Levels {
+        bright,
+        dark,
+        gap_max,
+    })
+}
+
+/// The sector boundary nearest plate angle 0 (within ±15°, radians) from
+/// the 12th harmonic of the transitions' strength around the ring's
+/// middle; `None` where the transitions are too weak (`total` below
+/// `min_contrast`) or show no 30° pattern.
+#[inline(always)]
+fn phase_of(ring: &Middle, min_contrast: f64) -> Option<f64> {
+    let (re, im, total) = harmonic(ring);
+    if total < min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
+        return None;
+    }
+    Some(im.atan2(re) / 12.0)
+}
+
+/// The bits of the 12 sectors from the ring's middle alone, the boundary
+/// at `boundary_deg` (within ±15°), in reading order (sector 0 most
+/// significant, as [`classify`] gives them): every sample `EDGE_CLEARANCE`
+/// or more from its sector's boundaries (four or five at 5° steps) must
+/// lie `margin` clear of the threshold `thr`, all of a sector's on one
+/// side; `None` otherwise.
+///
+/// Sector `q` holds the samples `j` from `⌈(b + 3°) / 5°⌉ + 6q` to
+/// `⌊(b + 27°) / 5°⌋ + 6q`; sector `q + 6` those 36 on, the other lane of
+/// the same elements ([`HALF`]): two sectors to a lane pair, their least
+/// and largest samples against the two bounds. (Element `j` lies in
+/// −2 … 38: past either end of the half turn it is element `j ∓ 36` with
+/// its lanes crossed.)
+fn middle_bits(ring: &Middle, boundary_deg: f64, thr: f64, margin: f64) -> Option<u16> {
+    let splat = f64x2::splat;
+    let (above, below) = (splat(thr + margin), splat(thr - margin));
+    let first = ceil_i64((boundary_deg + EDGE_CLEARANCE) / 5.0);
+    let last = floor_i64((boundary_deg + 30.0 - EDGE_CLEARANCE) / 5.0);
+    if !(-2..=4).contains(&first) || !(first + 3..=first + 4).contains(&last) {
+        return None;
+    }
+    let element = |j: i64| {
+        let (e, crossed) = match j {
+            ..0 => (j + HALF as i64, true),
+            0..36 => (j, false),
+            _ => (j - HALF as i64, true),
+        };
+        let e = e as usize;
+        let v = match e % 3 {
+            0 => ring.first[e / 3],
+            k => ring.rest[2 * (e / 3) + k - 1],
+        };
+        if crossed {
+            let [a, b] = v.to_array();
+            f64x2::new([b, a])
+        } else {
+            v
+        }
+    };
+    let mut bits = [0u16; 2];
+    for q in 0..6 {
+        let (mut least, mut most) = (splat(f64::MAX), splat(f64::MIN));
+        for j in first + 6 * q..=last + 6 * q {
+            let v = element(j);
+            least = least.fast_min(v);
+            most = most.fast_max(v);
+        }
+        let (bright, dark) = (least.cmp_gt(above), most.cmp_lt(below));
+        if (bright | dark).move_mask() != 3 {
+            return None;
+        }
+        let bit = bright.move_mask() as u16;
+        bits = [bits[0] << 1 | (bit & 1), bits[1] << 1 | bit >> 1];
+    }
+    Some(bits[0] << 6 | bits[1])
+}
+
+/// Whether the ring in `f` plainly carries the code of canonical value
+/// `value`: tracking mode's check of an identity it predicted, with a
+/// third of [`read`]'s samples ([`plain_value`]). `false` says nothing
+/// about the ring: read it then.
+pub(crate) fn confirms<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    centre: Option<f64>,
+    params: &CodeParams,
+    value: u16,
+    tables: &RingTables,
+) -> bool {
+    plain_value(plane, f, centre, params, tables) == Some(value)
+}
+
+/// The canonical value a ring plainly carries, judged on its middle
+/// alone: the dot's and the gap's levels and the gap's darkness judged as
+/// [`read`] judges them, the phase found the same way on the ring's
+/// middle, and every sample of the middle clear of a sector boundary on
+/// its sector's side of the threshold, the sample margin clear of it
+/// ([`middle_bits`]). `None` where any of that fails, or where the ring
+/// is not clear of the window's edges (where [`read`] samples one at a
+/// time): no inner and outer circles, no quiet zone were looked at, so
+/// `None` is no verdict on the ring, and a value is only to be compared
+/// with one expected.
+fn plain_value<P: Pixel>(
+    plane: &Plane<P>,
+    f: &RingFrame,
+    centre: Option<f64>,
+    params: &CodeParams,
+    tables: &RingTables,
+) -> Option<u16> {
+    let plane = &Sampler::<P, true>::new(plane, f);
+    let cells = plane.cells.as_ref()?;
+    let Levels {
+        bright,
+        dark,
+        gap_max,
+    } = levels(plane, f, centre, tables)?;
+    let contrast = bright - dark;
+    // (A NaN level leaves a NaN threshold: no sector is clear of it.)
+    if contrast < params.min_contrast || gap_max > dark + params.dark_tolerance * contrast {
+        return None;
+    }
+    let mut first = [f64x2::ZERO; HALF / 3];
+    let mut rest = [f64x2::ZERO; 2 * HALF / 3];
+    samples_at(cells, f, &tables.phase_first, &mut first);
+    samples_at(cells, f, &tables.phase_rest, &mut rest);
+    let ring = Middle {
+        first: &first,
+        rest: &rest,
+    };
+    let boundary = phase_of(&ring, params.min_contrast)?;
+    let thr = dark + 0.5 * contrast;
+    let margin = params.sample_margin * contrast;
+    // (No ring, or a full one: no code.)
+    middle_bits(&ring, boundary / DEG, thr, margin)
+        .filter(|&raw| raw != 0 && raw != codes::MASK)
+        .map(codes::canonical)
+}
+
 /// Reads the ring around a dot.
 pub fn read<P: Pixel>(
     plane: &Plane<P>,
@@ -845,28 +1019,13 @@ fn read_with<P: Pixel, const FAST: bool>(
         bright: 0.0,
         dark: 0.0,
     };
-    // Bright level: the dot's centre and eight points at 0.3 r.
     let plane = &Sampler::<P, FAST>::new(plane, f);
-    let Some(mut bright) = centre.or_else(|| plane.at(f.col, f.row)) else {
-        return out;
-    };
-    if let Some(cells) = &plane.cells {
-        circle(cells, f, tables.bright_x2.iter().copied(), |_, v| {
-            let [a, b] = v.to_array();
-            bright += a;
-            bright += b;
-        });
-    } else {
-        for &cs in &tables.bright {
-            let (x, y) = f.point_cs(0.3, cs);
-            match plane.at(x, y) {
-                Some(v) => bright += v,
-                None => return out,
-            }
-        }
-    }
-    bright /= 9.0;
-    let Some((dark, gap_max)) = zone(plane, f, ZONE_RADII[0], &tables.gap_x2, tables) else {
+    let Some(Levels {
+        bright,
+        dark,
+        gap_max,
+    }) = levels(plane, f, centre, tables)
+    else {
         return out;
     };
     out.bright = bright;
@@ -981,9 +1140,7 @@ fn read_with<P: Pixel, const FAST: bool>(
         }
         Some(_) => {}
     }
-    // Sector boundaries: 12th harmonic of the transitions' strength.
-    let (re, im, total) = harmonic(&ring);
-    if total < params.min_contrast || (re * re + im * im).sqrt() < 0.2 * total {
+    let Some(boundary) = phase_of(&ring, params.min_contrast) else {
         // A full ring (4095) has no transitions; anything else without a
         // 30° pattern is not a code.
         out.status = if n_bright == PHASE_SAMPLES as f64 {
@@ -992,8 +1149,7 @@ fn read_with<P: Pixel, const FAST: bool>(
             CodeStatus::Uncertain(Uncertainty::NoPhase)
         };
         return out;
-    }
-    let boundary = im.atan2(re) / 12.0;
+    };
     let boundary_cs = (boundary.cos(), boundary.sin());
     // Classify: sector k is centred at boundary + 15° + 30°k.
     let base_margin = params.sector_margin * contrast;
@@ -1118,9 +1274,22 @@ mod tests {
     /// frames off their centres and of other sizes, and frames anywhere
     /// (wholly inside, near and across the window's edges, within half a
     /// pixel of them); 8 and 16 bits, the whole frame and a window.
-    #[test]
-    fn circles_two_at_a_time_read_as_one_at_a_time() {
-        use crate::testutil::{window, Drawn, Rng, Scene, View};
+    /// A frame of 15 drawn targets (a few uncoded, the others carrying
+    /// codes), tilted and turned, blurred and noisy, as 8 and 16 bits; and
+    /// ring frames to read in it: each target's own and six near it (off
+    /// centre, scaled) with its drawn code, then frames anywhere (some half
+    /// outside) and frames whose quiet zone ends just inside (or just
+    /// outside) the margin of the fast path, with none.
+    struct RingScene {
+        w: usize,
+        h: usize,
+        px8: Vec<u8>,
+        px16: Vec<u16>,
+        frames: Vec<(RingFrame, Option<u16>)>,
+    }
+
+    fn ring_scene() -> RingScene {
+        use crate::testutil::{Drawn, Rng, Scene, View};
         // (Large enough for the cells of a ring: more than 2¹⁶ pixels.)
         let (w, h) = (330usize, 210usize);
         let mut scene = Scene::new(w, h, 15.0);
@@ -1151,7 +1320,7 @@ mod tests {
                 q * (m[0] * m[0] + m[1] * m[1]),
                 q * (m[2] * m[2] + m[3] * m[3]),
             );
-            targets.push((col, row, cxx, cyy, q * (m[0] * m[2] + m[1] * m[3])));
+            targets.push((col, row, cxx, cyy, q * (m[0] * m[2] + m[1] * m[3]), code));
         }
         scene.blur(0.7);
         scene.noise(2.0, &mut rng);
@@ -1165,22 +1334,17 @@ mod tests {
             .iter()
             .map(|v| (v * 13.0).round().clamp(0.0, 4095.0) as u16)
             .collect();
-        let params = CodeParams {
-            min_contrast: 20.0,
-            min_isolation_contrast: 10.0,
-            sector_margin: 0.15,
-            sample_margin: 0.05,
-            dark_tolerance: 0.25,
-        };
-        let tables = RingTables::default();
         let mut frames = Vec::new();
-        for &(col, row, cxx, cyy, cxy) in &targets {
-            frames.push(RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap());
+        for &(col, row, cxx, cyy, cxy, code) in &targets {
+            frames.push((
+                RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap(),
+                code,
+            ));
             for _ in 0..6 {
                 let s = rng.range(0.9, 1.1);
                 let (dc, dr) = (rng.range(-0.4, 0.4), rng.range(-0.4, 0.4));
                 let f = RingFrame::from_moments(col + dc, row + dr, s * cxx, s * cyy, s * cxy);
-                frames.push(f.unwrap());
+                frames.push((f.unwrap(), code));
             }
         }
         for _ in 0..300 {
@@ -1190,7 +1354,7 @@ mod tests {
             );
             let (a, c) = (rng.range(1.0, 6.0), rng.range(1.0, 6.0));
             let b = rng.range(-0.9, 0.9) * (a * c).sqrt();
-            frames.push(RingFrame::from_moments(col, row, a, c, b).unwrap());
+            frames.push((RingFrame::from_moments(col, row, a, c, b).unwrap(), None));
         }
         // Frames whose quiet zone ends just inside (or just outside) the
         // margin of the fast path, half a pixel from the window's edges.
@@ -1214,10 +1378,121 @@ mod tests {
                     h as f64 - 1.0 - d - hy,
                 ),
             };
-            frames.push(RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap());
+            frames.push((
+                RingFrame::from_moments(col, row, cxx, cyy, cxy).unwrap(),
+                None,
+            ));
         }
+        RingScene {
+            w,
+            h,
+            px8,
+            px16,
+            frames,
+        }
+    }
+
+    /// The value a ring plainly carries on its middle is only ever the
+    /// code drawn there, and where the full reading gives a value, that
+    /// one: frames on and near every drawn target (coded, uncoded) and
+    /// anywhere else, in 8 and 16 bits, whole frames and windows. Most
+    /// coded targets read in full are confirmed this way.
+    #[test]
+    fn a_ring_plainly_carries_only_its_own_code() {
+        use crate::testutil::window;
+        let RingScene {
+            w,
+            h,
+            px8,
+            px16,
+            frames,
+        } = ring_scene();
+        let params = CodeParams {
+            min_contrast: 20.0,
+            min_isolation_contrast: 10.0,
+            sector_margin: 0.15,
+            sample_margin: 0.05,
+            dark_tolerance: 0.25,
+        };
+        let tables = RingTables::default();
+        let accepted = CodeSet::all();
+        let (mut full, mut confirmed, mut plain) = (0, 0, 0);
+        let check = |reading: Reading, value: Option<u16>, drawn: Option<u16>| {
+            if let Some(value) = value {
+                assert_eq!(Some(value), drawn);
+                if let Some(v) = reading.status.value() {
+                    assert_eq!(v, value);
+                }
+            }
+            match reading.status {
+                CodeStatus::Read { value: v, .. } => (1, (value == Some(v)) as usize),
+                _ => (0, 0),
+            }
+        };
+        for (f, drawn) in &frames {
+            let (wide8, wide16) = (Plane::whole(&px8, w, h), Plane::whole(&px16, w, h));
+            let (part8, part16) = (
+                window(&px8, w, (13, 7, 300, 190)),
+                window(&px16, w, (2, 3, 320, 200)),
+            );
+            let outcomes = [
+                check(
+                    read(&wide8, f, &params, &accepted, &tables),
+                    plain_value(&wide8, f, None, &params, &tables),
+                    *drawn,
+                ),
+                check(
+                    read(&part8, f, &params, &accepted, &tables),
+                    plain_value(&part8, f, None, &params, &tables),
+                    *drawn,
+                ),
+                check(
+                    read(&wide16, f, &params, &accepted, &tables),
+                    plain_value(&wide16, f, None, &params, &tables),
+                    *drawn,
+                ),
+                check(
+                    read(&part16, f, &params, &accepted, &tables),
+                    plain_value(&part16, f, None, &params, &tables),
+                    *drawn,
+                ),
+            ];
+            for (r, c) in outcomes {
+                full += r;
+                confirmed += c;
+            }
+            plain += [&wide8, &part8]
+                .iter()
+                .filter(|p| plain_value(p, f, None, &params, &tables).is_some())
+                .count();
+        }
+        // (The values each frame gives were checked above.)
+        assert!(
+            plain > 100 && full > 200 && 10 * confirmed >= 9 * full,
+            "{plain} {full} {confirmed}"
+        );
+    }
+
+    #[test]
+    fn circles_two_at_a_time_read_as_one_at_a_time() {
+        use crate::testutil::window;
+        let RingScene {
+            w,
+            h,
+            px8,
+            px16,
+            frames,
+        } = ring_scene();
+        let params = CodeParams {
+            min_contrast: 20.0,
+            min_isolation_contrast: 10.0,
+            sector_margin: 0.15,
+            sample_margin: 0.05,
+            dark_tolerance: 0.25,
+        };
+        let tables = RingTables::default();
         let (mut read, mut fast, mut slow, mut near) = (0, 0, 0, 0);
-        for f in &frames {
+        for (f, _) in &frames {
             for (reading, inside, edge) in [
                 read_both(&Plane::whole(&px8, w, h), f, &params, &tables),
                 read_both(&window(&px8, w, (13, 7, 300, 190)), f, &params, &tables),
@@ -1374,6 +1649,84 @@ mod tests {
     /// with blurred and noisy edges (and some flat or random ones), the
     /// code read and others, boundaries anywhere in ±15° and on the edges
     /// of the clearance and of the turn (±0, tiny, whole degrees).
+    /// [`middle_bits`] one sample at a time: each sample's sector from its
+    /// angle to the boundary (as [`phase_agrees_plain`] finds it).
+    fn middle_bits_plain(
+        ring: &[f64; PHASE_SAMPLES],
+        boundary_deg: f64,
+        thr: f64,
+        margin: f64,
+    ) -> Option<u16> {
+        let (mut bright, mut dark) = (0u16, 0u16);
+        for (j, &v) in ring.iter().enumerate() {
+            let t = j as f64 * (360.0 / PHASE_SAMPLES as f64);
+            let rel = (t - boundary_deg).rem_euclid(360.0);
+            let q = (rel / 30.0) as u32;
+            let within = rel - 30.0 * q as f64;
+            if !(EDGE_CLEARANCE..=30.0 - EDGE_CLEARANCE).contains(&within) {
+                continue;
+            }
+            let bit = 1 << (11 - q % 12);
+            if v > thr + margin {
+                bright |= bit;
+            } else if v < thr - margin {
+                dark |= bit;
+            } else {
+                return None;
+            }
+        }
+        (bright & dark == 0 && bright | dark == codes::MASK).then_some(bright)
+    }
+
+    /// The sectors' bits from the ring's middle two sectors at a time are
+    /// those one sample at a time: rings of every code at every phase,
+    /// clean, noisy (some samples inside the margin or across the
+    /// threshold) and random, boundaries anywhere in ±15° and at and next
+    /// to the steps where a sample enters or leaves a sector.
+    #[test]
+    fn middle_bits_two_sectors_at_a_time_equal_one_sample_at_a_time() {
+        use crate::testutil::Rng;
+        let mut rng = Rng::new(29);
+        let (mut read, mut unread) = (0, 0);
+        for round in 0..4000 {
+            let raw = (rng.range(0.0, 4096.0) as u16).min(codes::MASK);
+            let boundary = match round % 4 {
+                0 => rng.range(-15.0, 15.0),
+                1 => [
+                    0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
+                ][round / 4 % 12],
+                2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
+                _ => rng.range(-1.0, 1.0),
+            };
+            let ring: [f64; PHASE_SAMPLES] = std::array::from_fn(|j| {
+                let t = j as f64 * 5.0 - boundary;
+                let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
+                let lit = (raw >> (11 - sector)) & 1 == 1;
+                let level = if lit { 200.0 } else { 20.0 };
+                match round % 5 {
+                    0 => rng.range(0.0, 255.0),
+                    1 | 2 => level,
+                    _ => level + rng.range(-75.0, 75.0),
+                }
+            });
+            let (thr, margin) = ([110.0, rng.range(0.0, 255.0)][round % 2], 9.0);
+            let (first, rest) = passes(&ring);
+            let middle = Middle {
+                first: &first,
+                rest: &rest,
+            };
+            let want = middle_bits_plain(&ring, boundary, thr, margin);
+            assert_eq!(
+                middle_bits(&middle, boundary, thr, margin),
+                want,
+                "{round} {raw} {boundary}"
+            );
+            read += want.is_some() as usize;
+            unread += want.is_none() as usize;
+        }
+        assert!(read > 800 && unread > 1500, "{read} {unread}");
+    }
+
     #[test]
     fn harmonic_and_phase_check_two_at_a_time_equal_one_at_a_time() {
         use crate::testutil::Rng;

@@ -911,11 +911,7 @@ pub(crate) fn read_ring<P: Pixel>(
     o: &DetectorOptions,
     tables: &RingTables,
 ) -> Ring {
-    // (The reader's bright level starts from the centre's value.)
-    let (centre, amplitude) = dot_samples(plane, m.col, m.row);
-    let amplitude = amplitude / 5.0 - m.background;
-    let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
-    let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
+    let (centre, (cxx, cyy, cxy), frame) = ring_frame(plane, m);
     let reading = match &frame {
         Some(f) => code::read_centred(plane, f, centre, params, &o.codes, tables),
         None => Reading {
@@ -932,6 +928,35 @@ pub(crate) fn read_ring<P: Pixel>(
         moments: (cxx, cyy, cxy),
         reading,
     }
+}
+
+/// The grey value at the centre of the dot measured by `m` (`None`
+/// outside the window: see [`dot_samples`]), its deblurred moments and
+/// the sampling frame of its ring (`None`: no ellipse).
+fn ring_frame<P: Pixel>(
+    plane: &Plane<'_, P>,
+    m: &Measurement,
+) -> (Option<f64>, (f64, f64, f64), Option<RingFrame>) {
+    // (The reader's bright level starts from the centre's value.)
+    let (centre, amplitude) = dot_samples(plane, m.col, m.row);
+    let amplitude = amplitude / 5.0 - m.background;
+    let (cxx, cyy, cxy, _) = measure::deblurred(m, amplitude);
+    let frame = RingFrame::from_moments(m.col, m.row, cxx, cyy, cxy);
+    (centre, (cxx, cyy, cxy), frame)
+}
+
+/// Whether the ring around the dot measured by `m` plainly carries the
+/// code of canonical value `value` ([`code::confirms`]: `false` says
+/// nothing; read the ring then).
+pub(crate) fn confirm_ring<P: Pixel>(
+    plane: &Plane<'_, P>,
+    m: &Measurement,
+    params: &CodeParams,
+    value: u16,
+    tables: &RingTables,
+) -> bool {
+    let (centre, _, frame) = ring_frame(plane, m);
+    frame.is_some_and(|f| code::confirms(plane, &f, centre, params, value, tables))
 }
 
 /// The grey value at a dot's centre `(col, row)` (`None` outside the
