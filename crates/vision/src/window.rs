@@ -147,7 +147,11 @@ impl WindowMeasurer {
     /// for a few targets ahead of the one being measured, the fetches
     /// overlap the measurements instead of stalling them. Changes no result.
     pub fn prefetch(&self, image: &ImageView<'_>, e: &Expected) {
-        let half = e.core_half();
+        // The rows and columns a measurement reads: the blob's (its centre
+        // within the gate, about the dot's radius and a pixel of blur) and
+        // the centroid's box around it (`measure::GROW` rounded up and two
+        // more), at most the core.
+        let half = (e.gate_px + e.radius_px.max(1.0) + 1.0 + 4.0).min(e.core_half());
         // (Nothing for a position or a square past ±2³⁰, NaN or infinite
         // ones included, nor for a negative gate: no window is measured
         // there.)
