@@ -141,8 +141,8 @@ impl WindowMeasurer {
     }
 
     /// Asks the processor to fetch the cache lines that measuring `e` in
-    /// `image` will read (the core window, which holds the rows the
-    /// centroid reads), without waiting for them. Tracking mode reads small
+    /// `image` will read (the blob's rows and the centroid's box around
+    /// them), without waiting for them. Tracking mode reads small
     /// windows scattered over a frame that is mostly not in the cache: asked
     /// for a few targets ahead of the one being measured, the fetches
     /// overlap the measurements instead of stalling them. Changes no result.
