@@ -85,13 +85,22 @@ fn a_prediction_a_grid_step_off_is_refused() {
     let pitch = t
         .iter()
         .enumerate()
-        .flat_map(|(i, a)| t[i + 1..].iter().map(move |b| (a.position - b.position).norm()))
+        .flat_map(|(i, a)| {
+            t[i + 1..]
+                .iter()
+                .map(move |b| (a.position - b.position).norm())
+        })
         .fold(f64::INFINITY, f64::min);
     assert!((pitch - 32.0).abs() < 1e-9, "{pitch}");
     // Off by a grid step along and across the rows: every window catches
     // a neighbour, and the coded targets' rings refuse the prediction
     // (another id, or none confirmed).
-    for (dx, dy) in [(pitch, 0.0), (0.0, pitch), (-pitch, pitch), (0.0, -2.0 * pitch)] {
+    for (dx, dy) in [
+        (pitch, 0.0),
+        (0.0, pitch),
+        (-pitch, pitch),
+        (0.0, -2.0 * pitch),
+    ] {
         let prior = Prior {
             exterior: shifted(&full.exterior, Vector3::new(dx, dy, 0.0)),
             covariance: full.covariance,
