@@ -1279,13 +1279,16 @@ mod tests {
     /// ring frames to read in it: each target's own and six near it (off
     /// centre, scaled) with its drawn code, then frames anywhere (some half
     /// outside) and frames whose quiet zone ends just inside (or just
-    /// outside) the margin of the fast path, with none.
+    /// outside) the margin of the fast path, with none; and the reader's
+    /// parameters.
     struct RingScene {
         w: usize,
         h: usize,
         px8: Vec<u8>,
         px16: Vec<u16>,
         frames: Vec<(RingFrame, Option<u16>)>,
+        /// The reader's parameters for the scene's contrast.
+        params: CodeParams,
     }
 
     fn ring_scene() -> RingScene {
@@ -1383,12 +1386,20 @@ mod tests {
                 None,
             ));
         }
+        let params = CodeParams {
+            min_contrast: 20.0,
+            min_isolation_contrast: 10.0,
+            sector_margin: 0.15,
+            sample_margin: 0.05,
+            dark_tolerance: 0.25,
+        };
         RingScene {
             w,
             h,
             px8,
             px16,
             frames,
+            params,
         }
     }
 
@@ -1406,14 +1417,8 @@ mod tests {
             px8,
             px16,
             frames,
+            params,
         } = ring_scene();
-        let params = CodeParams {
-            min_contrast: 20.0,
-            min_isolation_contrast: 10.0,
-            sector_margin: 0.15,
-            sample_margin: 0.05,
-            dark_tolerance: 0.25,
-        };
         let tables = RingTables::default();
         let accepted = CodeSet::all();
         let (mut full, mut confirmed, mut plain) = (0, 0, 0);
@@ -1482,14 +1487,8 @@ mod tests {
             px8,
             px16,
             frames,
+            params,
         } = ring_scene();
-        let params = CodeParams {
-            min_contrast: 20.0,
-            min_isolation_contrast: 10.0,
-            sector_margin: 0.15,
-            sample_margin: 0.05,
-            dark_tolerance: 0.25,
-        };
         let tables = RingTables::default();
         let (mut read, mut fast, mut slow, mut near) = (0, 0, 0, 0);
         for (f, _) in &frames {
@@ -1649,6 +1648,28 @@ mod tests {
     /// with blurred and noisy edges (and some flat or random ones), the
     /// code read and others, boundaries anywhere in ±15° and on the edges
     /// of the clearance and of the turn (±0, tiny, whole degrees).
+    /// A sector boundary (degrees) for round `round` of a test: anywhere
+    /// in ±15°, at and next to the steps where a sample enters or leaves a
+    /// sector, or near 0.
+    fn test_boundary(round: usize, rng: &mut crate::testutil::Rng) -> f64 {
+        match round % 4 {
+            0 => rng.range(-15.0, 15.0),
+            1 => [
+                0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
+            ][round / 4 % 12],
+            2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
+            _ => rng.range(-1.0, 1.0),
+        }
+    }
+
+    /// Whether phase sample `j` (at `5 j` degrees) of a ring carrying
+    /// `raw`, its boundary at `boundary` degrees, lies in a lit sector.
+    fn lit_at(raw: u16, boundary: f64, j: usize) -> bool {
+        let t = j as f64 * 5.0 - boundary;
+        let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
+        (raw >> (11 - sector)) & 1 == 1
+    }
+
     /// [`middle_bits`] one sample at a time: each sample's sector from its
     /// angle to the boundary (as [`phase_agrees_plain`] finds it).
     fn middle_bits_plain(
@@ -1690,18 +1711,9 @@ mod tests {
         let (mut read, mut unread) = (0, 0);
         for round in 0..4000 {
             let raw = (rng.range(0.0, 4096.0) as u16).min(codes::MASK);
-            let boundary = match round % 4 {
-                0 => rng.range(-15.0, 15.0),
-                1 => [
-                    0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
-                ][round / 4 % 12],
-                2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
-                _ => rng.range(-1.0, 1.0),
-            };
+            let boundary = test_boundary(round, &mut rng);
             let ring: [f64; PHASE_SAMPLES] = std::array::from_fn(|j| {
-                let t = j as f64 * 5.0 - boundary;
-                let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
-                let lit = (raw >> (11 - sector)) & 1 == 1;
+                let lit = lit_at(raw, boundary, j);
                 let level = if lit { 200.0 } else { 20.0 };
                 match round % 5 {
                     0 => rng.range(0.0, 255.0),
@@ -1735,18 +1747,9 @@ mod tests {
         let (mut agree, mut disagree) = (0, 0);
         for round in 0..3000 {
             let raw = (rng.range(0.0, 4096.0) as u16).min(codes::MASK);
-            let boundary = match round % 4 {
-                0 => rng.range(-15.0, 15.0),
-                1 => [
-                    0.0, -0.0, 1e-300, -1e-300, 2.0, -2.0, 3.0, -3.0, 12.0, -12.0, 15.0, -15.0,
-                ][round / 4 % 12],
-                2 => (rng.range(-15.0, 15.0) as i32) as f64 + [0.0, 1e-13, -1e-13][round % 3],
-                _ => rng.range(-1.0, 1.0),
-            };
+            let boundary = test_boundary(round, &mut rng);
             let ring: [f64; PHASE_SAMPLES] = std::array::from_fn(|j| {
-                let t = j as f64 * 5.0 - boundary;
-                let sector = (t.rem_euclid(360.0) / 30.0) as usize % 12;
-                let lit = (raw >> (11 - sector)) & 1 == 1;
+                let lit = lit_at(raw, boundary, j);
                 match round % 7 {
                     0 => rng.range(0.0, 255.0),
                     1 => 40.0,
