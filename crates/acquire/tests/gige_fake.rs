@@ -12,7 +12,7 @@ use photopose_acquire::grabber::{spawn_grabber, GrabberExit};
 use photopose_acquire::ring::{Overflow, Ring};
 use photopose_acquire::source::FrameSource;
 use photopose_acquire::{ExposureSettings, GigeConfig, GigeSource, PixelDepth, Roi, Slot};
-use photopose_frame::{Image, Pixels};
+use photopose_frame::{FrameMeta, Image, Pixels};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -242,8 +242,8 @@ fn streams_mono16() {
 /// mid-exposure instant on the host's monotonic clock: increasing, before
 /// its reception, behind it by about the modelled delay (half the 2 ms
 /// exposure plus the 512×512 payload at 1 Gbit/s, 2.1 ms) within 20 ms, and
-/// spaced like the receptions (the mapping tracks the host clock) within
-/// 5 ms over the run.
+/// with the same shortest delay in both halves of the run within 5 ms (the
+/// mapping tracks the host clock).
 fn stamps_exposure_instants() {
     let _fake = FakeProcess::start();
     let config = GigeConfig {
@@ -304,12 +304,22 @@ fn stamps_exposure_instants() {
             .all(|w| w[1].exposure_mono_ns > w[0].exposure_mono_ns),
         "mapped exposure instants increase"
     );
-    let (a, b) = (metas[10], metas[metas.len() - 1]);
-    let mapped = (b.exposure_mono_ns - a.exposure_mono_ns) as f64;
-    let received = (b.host_mono_ns - a.host_mono_ns) as f64;
+    // The mapping keeps to the host clock: the shortest delay from a mapped
+    // exposure instant to its reception is the same in the run's first and
+    // second halves. (A reception the scheduler holds back only lengthens
+    // its own delay, which the shortest of each half leaves out: comparing
+    // two single frames failed once on a loaded machine, 5.2 ms apart.)
+    let shortest = |m: &[FrameMeta]| {
+        m.iter()
+            .map(|m| m.host_mono_ns - m.exposure_mono_ns)
+            .min()
+            .expect("frames")
+    };
+    let (first, second) = metas[10..].split_at(25);
+    let (a, b) = (shortest(first) as f64, shortest(second) as f64);
     assert!(
-        (mapped - received).abs() < 5e6,
-        "mapped {mapped} ns vs received {received} ns"
+        (a - b).abs() < 5e6,
+        "shortest delays {a} ns and {b} ns in the two halves"
     );
 }
 
