@@ -441,6 +441,59 @@ impl Linearised {
         Ok(normals_of(&self.trial[..self.n]))
     }
 
+    /// The residuals at `e` with the current rows' Jacobian (a chord
+    /// step's: the Jacobian is not formed again) into the trial rows, which
+    /// [`Linearised::accept_trial`] makes current; `Aᵀv` and `vᵀv` of them.
+    /// Each point's projection alone, no partials and no normal matrix.
+    /// Where the current rows were formed a small step from `e`, `A` there
+    /// differs from `A` at `e` by about that step's size relative to the
+    /// camera distance, and so does a step solved with it.
+    pub fn residuals_trial(
+        &mut self,
+        c: f64,
+        e: &Exterior,
+        obs: &[Observation],
+    ) -> Result<(Vector6<f64>, f64), GeometryError> {
+        let n = self.n;
+        let rot = e.rotation;
+        let (mut g, mut cost, mut behind) = ([f64x2::ZERO; 6], f64x2::ZERO, 0usize);
+        let mut one = |p: [f64; 8], row: &[f64; 14], trial: &mut [f64; 14]| {
+            let z = rot * (nalgebra::Vector3::new(p[0], p[1], p[2]) - e.center);
+            behind += (z.z >= 0.0) as usize;
+            let inv = 1.0 / z.z;
+            // `image + c g` as `PointJacobian::write` forms it.
+            let (mut vx, mut vy) = (p[3] + c * (z.x * inv), p[4] + c * (z.y * inv));
+            if !self.unit_weights && !self.direct {
+                (vx, vy) = (p[5] * vx + p[6] * vy, p[7] * vy);
+            }
+            trial[..12].copy_from_slice(&row[..12]);
+            (trial[12], trial[13]) = (vx, vy);
+            let v = f64x2::new([vx, vy]);
+            for (k, g) in g.iter_mut().enumerate() {
+                *g += f64x2::new([row[2 * k], row[2 * k + 1]]) * v;
+            }
+            cost += v * v;
+        };
+        let (rows, trial) = (&self.rows[..n], &mut self.trial[..n]);
+        if self.direct {
+            for ((o, row), t) in obs.iter().zip(rows).zip(trial.iter_mut()) {
+                one(point(o, [1.0, 0.0, 1.0]), row, t);
+            }
+        } else {
+            for ((p, row), t) in self.pts.iter().zip(rows).zip(trial.iter_mut()) {
+                one(*p, row, t);
+            }
+        }
+        if behind > 0 {
+            return Err(GeometryError::BehindCamera { count: behind });
+        }
+        let lanes = |v: f64x2| {
+            let [a, b] = v.to_array();
+            a + b
+        };
+        Ok((Vector6::from_fn(|k, _| lanes(g[k])), lanes(cost)))
+    }
+
     /// Makes the rows of the last trial the current ones.
     pub fn accept_trial(&mut self) {
         self.pending = None;

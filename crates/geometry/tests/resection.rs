@@ -331,9 +331,13 @@ fn uniform_weights_change_nothing_but_sigma0() {
 }
 
 /// A refinement whose first pass copies the rows formed while projecting
-/// ([`Resection::refine_from`]) gives the plain refinement's report bit for
-/// bit: several attitudes, saturated (weighted) points, a gross error that
-/// data snooping removes, a prediction a little and a lot off.
+/// ([`Resection::refine_from`]) gives the plain refinement's report: bit
+/// for bit from a prediction a little (0.3 mm) and a lot (5 mm) off, and
+/// within 1e-3 σ (the covariance within 1e-3 of its size) from the pose
+/// itself, where the first step is small and the second a chord step
+/// (measured: at most 1.6e-4 σ);
+/// several attitudes, saturated (weighted) points, a gross error that
+/// data snooping removes.
 #[test]
 fn refining_from_projected_rows_is_refining() {
     use photopose_geometry::precision::UncertainProjector;
@@ -376,8 +380,30 @@ fn refining_from_projected_rows_is_refining() {
                 v.extend([r.sigma0.to_bits(), r.rms_px.to_bits()]);
                 v
             };
-            assert_eq!(bits(&want), bits(&got), "{name} {off}");
-            assert_eq!(want, got);
+            if off > 0.0 {
+                assert_eq!(bits(&want), bits(&got), "{name} {off}");
+                assert_eq!(want, got);
+            } else {
+                let cov = &want.covariance;
+                let sigma = |i: usize| cov[(i, i)].sqrt();
+                for i in 0..3 {
+                    let d = (want.exterior.center[i] - got.exterior.center[i]).abs();
+                    assert!(d <= 1e-3 * sigma(i), "{name}: centre {i} {d}");
+                }
+                let turn = (want.exterior.rotation - got.exterior.rotation).abs().max();
+                assert!(
+                    turn <= 1e-3 * sigma(3).max(sigma(4)).max(sigma(5)),
+                    "{name}: {turn}"
+                );
+                let scale = cov.abs().max();
+                assert!((cov - got.covariance).abs().max() <= 1e-3 * scale, "{name}");
+                assert!(
+                    (want.sigma0 - got.sigma0).abs() <= 1e-6 * want.sigma0,
+                    "{name}"
+                );
+                assert_eq!(want.n_points, got.n_points, "{name}");
+                assert_eq!(want.n_rejected, got.n_rejected, "{name}");
+            }
             assert_eq!(plain.rejected_ids(), from.rejected_ids());
             snooped += want.n_rejected;
         }

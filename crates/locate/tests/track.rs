@@ -50,12 +50,12 @@ fn a_tracked_frame_gives_the_whole_frame_pose_and_ids() {
         let sigma = full.std_center();
         for k in 0..3 {
             let d = (tracked.exterior.center[k] - full.exterior.center[k]).abs();
-            assert!(d <= 0.1 * sigma[k], "axis {k}: {d} mm vs σ {}", sigma[k]);
+            assert!(d <= 1e-3 * sigma[k], "axis {k}: {d} mm vs σ {}", sigma[k]);
         }
         let dr = (tracked.exterior.rotation - full.exterior.rotation)
             .abs()
             .max();
-        assert!(dr < 0.1 * full.std_rotation_deg().max().to_radians());
+        assert!(dr < 1e-3 * full.std_rotation_deg().max().to_radians());
         assert_eq!(tracked.n_points, full.n_points);
         let mut tracked_ids = locator_ids(&locator);
         tracked_ids.sort_unstable();
