@@ -198,8 +198,8 @@ fn run_collect(tracking: bool, frames: u64) -> (Vec<serde_json::Value>, u64) {
     (lines, counters.frames_tracked.get())
 }
 
-/// Tracking mode in the daemon: most frames tracked, the same targets and
-/// poses within their σ as with tracking off.
+/// Tracking mode in the daemon: most frames tracked, the same targets (but
+/// one at most) and poses within their σ as with tracking off.
 #[test]
 fn tracked_frames_give_the_whole_frame_poses() {
     let frames = 60;
@@ -214,11 +214,18 @@ fn tracked_frames_give_the_whole_frame_poses() {
         assert_eq!(a["seq"], b["seq"]);
         assert_eq!(a["status"], "ok", "{a}");
         assert_eq!(b["status"], "ok", "{b}");
-        assert_eq!(
-            a["pose"]["n_targets"], b["pose"]["n_targets"],
-            "seq {}",
-            a["seq"]
+        // The same targets but one at most: a tracked frame segments with
+        // the threshold of the last whole-frame pass, the whole frame with
+        // its own Otsu level (see below), and a target at the edge of
+        // either (found, or kept by the data snooping) may count in one
+        // run only. Which frames are tracked depends on the workers'
+        // timing: on a loaded machine the first frames are, and this was
+        // one target (229 against 230) at frame 1 in most such runs.
+        let (na, nb) = (
+            a["pose"]["n_targets"].as_u64().unwrap(),
+            b["pose"]["n_targets"].as_u64().unwrap(),
         );
+        assert!(na.abs_diff(nb) <= 1, "seq {}: {na} vs {nb}", a["seq"]);
         for k in 0..3 {
             let (pa, pb) = (
                 a["pose"]["position_mm"][k].as_f64().unwrap(),
