@@ -210,12 +210,15 @@ impl PointJacobian {
 /// `(x, y) ← U (x, y)` for every column.
 #[inline(always)]
 fn whiten(p: &[f64; 8], row: &mut [f64; 14]) {
-    let (u00, u01, u11) = (p[5], p[6], p[7]);
     for k in 0..7 {
-        let (x, y) = (row[2 * k], row[2 * k + 1]);
-        row[2 * k] = u00 * x + u01 * y;
-        row[2 * k + 1] = u11 * y;
+        (row[2 * k], row[2 * k + 1]) = whitened(p, row[2 * k], row[2 * k + 1]);
     }
+}
+
+/// `U (x, y)` of a point's weight factor (`p[5..8]`).
+#[inline(always)]
+fn whitened(p: &[f64; 8], x: f64, y: f64) -> (f64, f64) {
+    (p[5] * x + p[6] * y, p[7] * y)
 }
 
 /// A loaded point of `o` (weight factor `u`): object point, ideal image
@@ -463,8 +466,8 @@ impl Linearised {
             let inv = 1.0 / z.z;
             // `image + c g` as `PointJacobian::write` forms it.
             let (mut vx, mut vy) = (p[3] + c * (z.x * inv), p[4] + c * (z.y * inv));
-            if !self.unit_weights && !self.direct {
-                (vx, vy) = (p[5] * vx + p[6] * vy, p[7] * vy);
+            if !self.unit_weights {
+                (vx, vy) = whitened(&p, vx, vy);
             }
             trial[..12].copy_from_slice(&row[..12]);
             (trial[12], trial[13]) = (vx, vy);

@@ -20,7 +20,7 @@ use crate::linearised::{Linearised, Normals, PointJacobian};
 use crate::precision::{std_center, std_rotation_deg, to_omega};
 use crate::rng::SplitMix64;
 use crate::rotation::cayley;
-use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3};
+use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector2, Vector3, Vector6};
 
 pub use crate::observation::{Observation, Status};
 
@@ -129,6 +129,21 @@ pub struct Resection {
 /// radians) after which a refinement from given rows takes a chord step
 /// ([`Resection::refine_from`]).
 const CHORD_STEP: f64 = 1e-4;
+
+/// `e` moved by the step `delta` of `(Xc, Yc, Zc, a, b, c)` (the rotation
+/// by its Cayley increment).
+fn stepped(e: &Exterior, delta: &Vector6<f64>) -> Exterior {
+    Exterior {
+        rotation: e.rotation * cayley(delta[3], delta[4], delta[5]),
+        center: e.center + delta.fixed_rows::<3>(0),
+    }
+}
+
+/// Whether the step `delta` moves the centre by at most `bound` of the
+/// camera distance `scale` and turns by at most `bound` radians.
+fn within(delta: &Vector6<f64>, bound: f64, scale: f64) -> bool {
+    delta.fixed_rows::<3>(0).norm() <= bound * scale && delta.fixed_rows::<3>(3).norm() <= bound
+}
 
 impl Resection {
     /// A workspace for `camera` (principal distance and pixel size are
@@ -393,17 +408,13 @@ impl Resection {
                 continue;
             };
             let delta = ch.solve(&current.g);
-            let candidate = Exterior {
-                rotation: e.rotation * cayley(delta[3], delta[4], delta[5]),
-                center: e.center + delta.fixed_rows::<3>(0),
-            };
+            let candidate = stepped(e, &delta);
             // Steps this small only move the pose by rounding noise: take
             // the step and stop, moving the residuals by the linear
             // prediction (exact to the second order of the step).
             // Gauss–Newton converges quadratically here, so after a step of
             // 1e-6 of the camera distance what remains is ~1e-12 of it.
-            let tiny = delta.fixed_rows::<3>(0).norm() <= 1e-6 * scale
-                && delta.fixed_rows::<3>(3).norm() <= 1e-6;
+            let tiny = within(&delta, 1e-6, scale);
             if tiny && lambda <= 1e-6 {
                 *e = candidate;
                 // The residuals and their cost move in the next pass that
@@ -419,18 +430,12 @@ impl Resection {
             // relative size times itself (at most 1e-4 · 1e-6 of the camera
             // distance), and the normal matrix by the first step's relative
             // size. Otherwise the candidate is evaluated in full below.
-            let small = delta.fixed_rows::<3>(0).norm() <= CHORD_STEP * scale
-                && delta.fixed_rows::<3>(3).norm() <= CHORD_STEP;
+            let small = within(&delta, CHORD_STEP, scale);
             if !first.is_empty() && it == 1 && small && lambda <= 1e-6 {
                 if let Ok((g, cost)) = self.lin.residuals_trial(c, &candidate, obs) {
                     let second = ch.solve(&g);
-                    let tiny = second.fixed_rows::<3>(0).norm() <= 1e-6 * scale
-                        && second.fixed_rows::<3>(3).norm() <= 1e-6;
-                    if tiny && cost <= current.cost * (1.0 + 1e-12) {
-                        *e = Exterior {
-                            rotation: candidate.rotation * cayley(second[3], second[4], second[5]),
-                            center: candidate.center + second.fixed_rows::<3>(0),
-                        };
+                    if within(&second, 1e-6, scale) && cost <= current.cost * (1.0 + 1e-12) {
+                        *e = stepped(&candidate, &second);
                         self.lin.accept_trial();
                         self.lin.shift_later(&second);
                         let chord = Normals { g, cost, ..current };

@@ -280,16 +280,8 @@ impl WindowMeasurer {
         let near_edge =
             e.col - edge < fc0 || e.row - edge < fr0 || e.col + edge > fc1 || e.row + edge > fr1;
         let read = near_edge || (e.coded && e.read_code);
-        let min_read =
-            (self.options.noise_factor * t.noise).max(self.options.min_contrast * max_value as f64);
-        let params = CodeParams {
-            min_contrast: min_read,
-            min_isolation_contrast: min_read,
-            sector_margin: self.options.sector_margin,
-            sample_margin: self.options.sample_margin,
-            dark_tolerance: self.options.dark_tolerance,
-        };
         if e.coded && read && !near_edge {
+            let params = self.code_params(t, max_value);
             if let Some(found) = self.confirmed(&outer_plane, blob, t, e, &params, max_value) {
                 return found;
             }
@@ -311,6 +303,7 @@ impl WindowMeasurer {
         };
         let mut code = None;
         if read {
+            let params = self.code_params(t, max_value);
             let reading = read_ring(&outer_plane, &m, &params, &self.options, &self.tables).reading;
             let outside = reading.status == CodeStatus::Uncertain(Uncertainty::OutsideImage);
             let cut = if e.coded {
@@ -332,9 +325,21 @@ impl WindowMeasurer {
         };
         WindowOutcome::Found(found_target(&m, blob, code))
     }
-}
 
-impl WindowMeasurer {
+    /// The ring reader's parameters with threshold `t` in a frame of
+    /// saturation `max_value` (formed only for a ring that is read).
+    fn code_params(&self, t: &ThresholdResult, max_value: u32) -> CodeParams {
+        let o = &self.options;
+        let min_read = (o.noise_factor * t.noise).max(o.min_contrast * max_value as f64);
+        CodeParams {
+            min_contrast: min_read,
+            min_isolation_contrast: min_read,
+            sector_margin: o.sector_margin,
+            sample_margin: o.sample_margin,
+            dark_tolerance: o.dark_tolerance,
+        }
+    }
+
     /// A coded target expected with its id, its ring read away from the
     /// frame's edges: measured as one whose ring is not read (its centre
     /// clear of the ring, where a reading leaves it too), and found with
